@@ -1,0 +1,43 @@
+"""FMI adapter of the reference trajectory: maps FMU variables to tapmp.trajectory."""
+
+from fmu_common.slave import TapmpSlave
+from tapmp.errors import require_positive
+from tapmp.interface import TRAJECTORY_VARS
+from tapmp.kinematics import inverse
+from tapmp.trajectory import TrajectoryParams, reference
+
+_OUT = tuple(v.name for v in TRAJECTORY_VARS[:9])
+
+
+class TAPMP_Trajectory(TapmpSlave):
+    """Reference of the paper: XZ circle and B sinusoid, analytic to 2nd order,
+    plus motor references by inverse kinematics. After doStep(t, h) the outputs
+    are the reference at t + h."""
+
+    VARIABLES = TRAJECTORY_VARS
+    description = "TAPMP reference trajectory (paper Section 5.2 / 6.2): XZ circle and B sinusoid"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.params = None
+
+    def setup_model(self):
+        require_positive("L_1", self.L_1)
+        self.params = TrajectoryParams(*(getattr(self, n) for n in TrajectoryParams._fields)).validated()
+        self.publish(self.time)
+
+    def step(self, t, h):
+        self.publish(t + h)
+
+    def publish(self, t):
+        ref = reference(t, self.params)
+        for name, value in zip(_OUT, ref):
+            setattr(self, name, value)
+        self.q1_d, self.q2_d, self.q3_d = inverse(ref[0], ref[1], ref[2], self.L_1)
+
+    def hidden_state(self):
+        return None if self.params is None else True
+
+    def restore_hidden_state(self, hidden):
+        if hidden:
+            self.params = TrajectoryParams(*(getattr(self, n) for n in TrajectoryParams._fields))

@@ -1,0 +1,1 @@
+"""fmpy-based master algorithm, scenarios, results and reports for the TAPMP FMUs."""

@@ -1,0 +1,161 @@
+"""Control laws: SC-DC (paper Section 4, Eq. 15-26) and the APD-DC baseline (Eq. 38-39).
+
+Units: positions [m], velocities [m/s], motor forces [N]. The command u relates to
+the motor force by K_T F = u (the closed-loop setting K_T u_1 = u_sc in the proof
+of Theorem 1), so F = u / K_T. Gains are per motor (diagonal matrices of the paper).
+"""
+
+import math
+from typing import NamedTuple
+
+from .dynamics import generalized_force
+from .errors import ModelInputError, require_finite
+from .kinematics import forward, inverse, joint_velocity, solve_transpose, task_velocity
+from .params import GAIN_NAMES, ModelParams
+
+SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
+APDDC = 1  # law: augmented PD with dynamics compensation (Eq. 38)
+VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
+VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
+
+
+class Gains(NamedTuple):
+    """Per-motor gains; each field is (motor 1, motor 2, motor 3)."""
+
+    Lambda_p: tuple[float, float, float]  # on c (SC-DC) or k_p on e (APD-DC)
+    Lambda_v: tuple[float, float, float]  # on n (SC-DC) or k_v on de (APD-DC)
+    b: tuple[float, float, float]         # coupling coefficient B = diag(b) [1/s]
+    D: tuple[float, float, float]         # D = diag(D) in n = de_c + D e_c [1/s]
+    K_T: tuple[float, float, float]       # feedforward gain, K_T F = u
+
+    def validated(self) -> "Gains":
+        """Return self if every gain is finite and >= 0 and K_T > 0 (ModelInputError otherwise)."""
+        for name, values in zip(self._fields, self):
+            for i, v in enumerate(values, start=1):
+                lo_ok = v > 0.0 if name == "K_T" else v >= 0.0
+                if not (math.isfinite(v) and lo_ok):
+                    allowed = "a finite number > 0" if name == "K_T" else "a finite number >= 0"
+                    raise ModelInputError(f"{name}{i}", v, allowed)
+        return self
+
+    @classmethod
+    def from_preset(cls, preset: dict) -> "Gains":
+        """Build from a preset dict as in tapmp.params.GAIN_PRESETS."""
+        return cls(*(tuple(float(x) for x in preset[n]) for n in GAIN_NAMES))
+
+
+def sync_errors(e1: float, e2: float, e3: float) -> tuple[float, float, float]:
+    """Synchronization errors in adjacent order, Eq. 18 [m]. They sum to zero."""
+    return e1 - e2, e2 - e3, e3 - e1
+
+
+def sync_deviation(es1: float, es2: float, es3: float) -> tuple[float, float, float]:
+    """Deviation c of the synchronization errors, Eq. 21 [m]. It sums to zero."""
+    return es1 - es3, es2 - es1, es3 - es2
+
+
+def feedforward(q, dq, dx_d, ddx_d, p: ModelParams) -> tuple[float, float, float]:
+    """Dynamics compensation u_d of Eq. 26 / 39 [N].
+
+    u_d = J^-T(x) (M(x) xdd_d + C(x, xd) xd_d + G(x)) with x = FK(q) (Eq. 1) and
+    xd = J(x)^-1 dq from the measured motor positions q [m] and rates dq [m/s];
+    dx_d, ddx_d are the desired task rates and accelerations (X, Z, B).
+    """
+    L1 = p.L_1
+    _, _, B = forward(q[0], q[1], q[2], L1)
+    dB = task_velocity(B, dq[0], dq[1], dq[2], L1)[2]
+    gX, gZ, gB = generalized_force(B, dB, ddx_d[0], ddx_d[1], ddx_d[2], dx_d[2], p)
+    return solve_transpose(B, gX, gZ, gB, L1)
+
+
+def scdc_command(e, de, c, integral_c, u_d, g: Gains) -> tuple[float, float, float]:
+    """SC-DC command u of Eq. 22-25 (one value per motor).
+
+    e, de: tracking error [m] and its rate [m/s]; c: Eq. 21 [m]; integral_c: the
+    running integral of c [m s]; u_d: Eq. 26 [N].
+    """
+    u = [0.0, 0.0, 0.0]
+    for i in range(3):
+        b = g.b[i]
+        e_c = e[i] + b * integral_c[i]  # Eq. 22
+        de_c = de[i] + b * c[i]         # Eq. 23
+        n = de_c + g.D[i] * e_c         # Eq. 24
+        u[i] = g.K_T[i] * u_d[i] + g.Lambda_v[i] * n + g.Lambda_p[i] * c[i]  # Eq. 25
+    return u[0], u[1], u[2]
+
+
+def apd_command(e, de, u_d, g: Gains) -> tuple[float, float, float]:
+    """APD-DC command of Eq. 38 with k_v = Lambda_v, k_p = Lambda_p, K_T1 = K_T (Eq. 41)."""
+    return tuple(g.K_T[i] * u_d[i] + g.Lambda_v[i] * de[i] + g.Lambda_p[i] * e[i] for i in range(3))
+
+
+class ControllerModel:
+    """The discrete-time controller: samples, computes and holds the command.
+
+    On each sample it uses q_d = IK(x_d), dq_d = J(x_d) xd_d, e = q_d - q (Eq. 15),
+    e_s (Eq. 18), c (Eq. 21). The integral of c (Eq. 22) is a right-rectangle sum
+    I_k = I_{k-1} + h c_k, so it includes the current sample. Joint velocity is the
+    backward difference (q_k - q_{k-1}) / h (velocity_source 0) or the dq inputs (1);
+    the very first sample, which has no predecessor, takes the dq inputs.
+    """
+
+    def __init__(self, params: ModelParams, gains: Gains, law: int = SCDC,
+                 velocity_source: int = VELOCITY_DIFFERENCE, force_limit: float = 0.0):
+        self.p = params.validated()
+        self.g = gains.validated()
+        if law not in (SCDC, APDDC):
+            raise ModelInputError("law", law, "0 (SC-DC) or 1 (APD-DC)")
+        if velocity_source not in (VELOCITY_DIFFERENCE, VELOCITY_INPUT):
+            raise ModelInputError("velocity_source", velocity_source,
+                                  "0 (backward difference of q) or 1 (dq inputs)")
+        if not (math.isfinite(force_limit) and force_limit >= 0.0):
+            raise ModelInputError("force_limit", force_limit, "a finite number >= 0 (0 = no limit)")
+        self.law = law
+        self.velocity_source = velocity_source
+        self.force_limit = force_limit
+        self.integral = [0.0, 0.0, 0.0]
+        self.q_prev = None
+
+    def sample(self, t: float, h: float, ref, q, dq_in, advance: bool = True):
+        """Compute the command from one sample of the inputs.
+
+        ref: (X_d, Z_d, B_d, dX_d, dZ_d, dB_d, ddX_d, ddZ_d, ddB_d) [m, rad and rates];
+        q, dq_in: measured motor positions [m] and rates [m/s]; h: sample period [s].
+        With advance=False (initialization) the state is left untouched and h unused.
+        Returns (F, u, e, e_s) as four 3-tuples: F [N], u [K_T N], e and e_s [m].
+        """
+        for name, v in zip(("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d"), ref):
+            require_finite(name, v, t)
+        for name, v in zip(("q1", "q2", "q3", "dq1", "dq2", "dq3"), (*q, *dq_in)):
+            require_finite(name, v, t)
+        L1 = self.p.L_1
+        X_d, Z_d, B_d = ref[0], ref[1], ref[2]
+        q_d = inverse(X_d, Z_d, B_d, L1)
+        dq_d = joint_velocity(B_d, ref[3], ref[4], ref[5], L1)
+        if self.velocity_source == VELOCITY_DIFFERENCE and self.q_prev is not None and advance:
+            qp = self.q_prev
+            dq = ((q[0] - qp[0]) / h, (q[1] - qp[1]) / h, (q[2] - qp[2]) / h)
+        else:
+            dq = dq_in
+        e = (q_d[0] - q[0], q_d[1] - q[1], q_d[2] - q[2])          # Eq. 15
+        de = (dq_d[0] - dq[0], dq_d[1] - dq[1], dq_d[2] - dq[2])
+        e_s = sync_errors(*e)                                      # Eq. 18
+        u_d = feedforward(q, dq, ref[3:6], ref[6:9], self.p)       # Eq. 26
+        if self.law == SCDC:
+            c = sync_deviation(*e_s)                               # Eq. 21
+            integral = self.integral
+            if advance:
+                integral = [integral[i] + h * c[i] for i in range(3)]
+            u = scdc_command(e, de, c, integral, u_d, self.g)
+        else:
+            integral = self.integral
+            u = apd_command(e, de, u_d, self.g)
+        if advance:
+            self.integral = integral
+            self.q_prev = tuple(q)
+        K_T = self.g.K_T
+        F = [u[i] / K_T[i] for i in range(3)]
+        lim = self.force_limit
+        if lim > 0.0:
+            F = [min(max(f, -lim), lim) for f in F]
+        return tuple(F), tuple(u), e, e_s

@@ -1,0 +1,43 @@
+"""Error types shared by the model core, the FMU adapters and the orchestrator."""
+
+import math
+
+
+class ModelInputError(ValueError):
+    """A value given to the model is outside what the model allows.
+
+    The message always names the variable, the value and what is allowed.
+    """
+
+    def __init__(self, name: str, value, allowed: str, time: float | None = None):
+        self.name = name
+        self.value = value
+        self.allowed = allowed
+        self.time = time
+        at = "" if time is None else f" at t = {time:.6g} s"
+        super().__init__(f"{name} = {value!r}{at} is invalid: allowed is {allowed}")
+
+
+class KinematicDomainError(ModelInputError):
+    """A pose or a set of motor positions lies outside the kinematic domain (Eq. 1)."""
+
+
+def require_finite(name: str, value: float, time: float | None = None) -> float:
+    """Return ``value`` if it is a finite float, else raise :class:`ModelInputError`."""
+    if not math.isfinite(value):
+        raise ModelInputError(name, value, "a finite number", time)
+    return value
+
+
+def require_positive(name: str, value: float) -> float:
+    """Return ``value`` if finite and > 0, else raise :class:`ModelInputError`."""
+    if not (math.isfinite(value) and value > 0.0):
+        raise ModelInputError(name, value, "a finite number > 0")
+    return value
+
+
+def require_nonnegative(name: str, value: float) -> float:
+    """Return ``value`` if finite and >= 0, else raise :class:`ModelInputError`."""
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ModelInputError(name, value, "a finite number >= 0")
+    return value

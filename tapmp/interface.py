@@ -1,0 +1,156 @@
+"""FMU interfaces: every variable's name, causality, unit and description, defined once.
+
+The FMU adapters register these, the build step writes units and model structure
+from them, the SSP writer takes the connections from here and the docs list them.
+Defaults come from the model's own parameter tuples, so nothing is typed twice.
+"""
+
+from typing import NamedTuple
+
+from .params import GAIN_NAMES, PAPER_MODEL, GAIN_PRESETS
+from .plant import PlantConfig
+from .trajectory import TrajectoryParams
+
+PLANT = "TAPMP_Plant"
+CONTROLLER = "TAPMP_Controller"
+TRAJECTORY = "TAPMP_Trajectory"
+FMU_NAMES = (TRAJECTORY, CONTROLLER, PLANT)
+# Element names in the SSP system, per model.
+ELEMENT = {TRAJECTORY: "trajectory", CONTROLLER: "controller", PLANT: "plant"}
+
+
+class Var(NamedTuple):
+    """One FMI scalar variable."""
+
+    name: str
+    causality: str          # "input", "output" or "parameter"
+    unit: str               # a key of UNITS, "" for dimensionless integers
+    description: str
+    start: float = 0.0
+    type: str = "Real"      # "Real" or "Integer"
+    variability: str = ""   # "" = continuous (in/out), "fixed" or "tunable" (parameters)
+
+
+# SI base-unit exponents of every unit used, for modelDescription UnitDefinitions.
+UNITS = {
+    "m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s2": {"m": 1, "s": -2},
+    "rad": {"rad": 1}, "rad/s": {"rad": 1, "s": -1}, "rad/s2": {"rad": 1, "s": -2},
+    "N": {"kg": 1, "m": 1, "s": -2}, "kg": {"kg": 1}, "kg.m2": {"kg": 1, "m": 2},
+    "N.s/m": {"kg": 1, "s": -1}, "N/m": {"kg": 1, "s": -2}, "1/s": {"s": -1},
+    "Hz": {"s": -1}, "1": {},
+}
+
+_AXES = (("X", "m", "platform displacement along X"), ("Z", "m", "platform displacement along Z"),
+         ("B", "rad", "platform rotation about Y"))
+_RATE = {"m": "m/s", "rad": "rad/s"}
+_ACC = {"m": "m/s2", "rad": "rad/s2"}
+
+_MODEL_DOC = {
+    "m_p": ("kg", "platform mass"), "m_1": ("kg", "left auxiliary block (mover 1) mass"),
+    "m_2": ("kg", "middle auxiliary block (mover 2) mass"),
+    "m_3": ("kg", "right auxiliary block (mover 3) mass"),
+    "I_y": ("kg.m2", "platform moment of inertia about Y"), "L_1": ("m", "platform width"),
+    "g": ("m/s2", "gravitational acceleration"),
+}
+
+
+def _model_params(whose: str, variability: str) -> list[Var]:
+    return [Var(n, "parameter", _MODEL_DOC[n][0], f"{whose} {_MODEL_DOC[n][1]} (paper Section 5.1)",
+                getattr(PAPER_MODEL, n), variability=variability) for n in PAPER_MODEL._fields]
+
+
+def _pose(suffix: str, causality: str, what: str) -> list[Var]:
+    out = []
+    for order, units in ((0, None), (1, _RATE), (2, _ACC)):
+        for axis, unit, desc in _AXES:
+            prefix = ("", "d", "dd")[order]
+            kind = ("", "rate of ", "acceleration of ")[order]
+            out.append(Var(f"{prefix}{axis}{suffix}", causality, units[unit] if units else unit,
+                           f"{what} {kind}{desc}"))
+    return out
+
+
+_CFG = PlantConfig()
+_PLANT_CFG_DOC = {
+    "encoder_resolution": ("m", "encoder (grating ruler) resolution of the measured q; 0 = no quantization"),
+    "c_v1": ("N.s/m", "viscous friction coefficient of mover 1"),
+    "c_v2": ("N.s/m", "viscous friction coefficient of mover 2"),
+    "c_v3": ("N.s/m", "viscous friction coefficient of mover 3"),
+    "F_c1": ("N", "Coulomb friction force of mover 1"), "F_c2": ("N", "Coulomb friction force of mover 2"),
+    "F_c3": ("N", "Coulomb friction force of mover 3"),
+    "v_s": ("m/s", "velocity scale of the tanh-smoothed Coulomb friction"),
+    "force_limit": ("N", "motor force saturation |F_i| <= force_limit; 0 = no saturation"),
+    "k_pull": ("N/m", "mutual pulling stiffness between adjacent movers (change of gap q2-q1, q3-q2); 0 = off"),
+}
+
+PLANT_VARS: tuple[Var, ...] = tuple(
+    [Var(f"F{i}", "input", "N", f"force command of motor {i}") for i in (1, 2, 3)]
+    + [Var(f"q{i}", "output", "m", f"measured (encoder-quantized) position of motor {i}") for i in (1, 2, 3)]
+    + [Var(f"q{i}_true", "output", "m", f"true position of motor {i}") for i in (1, 2, 3)]
+    + [Var(f"dq{i}", "output", "m/s", f"velocity of motor {i}") for i in (1, 2, 3)]
+    + [v for v in _pose("", "output", "platform")[:6]]
+    + _model_params("plant", "fixed")
+    + [Var(f"{a}0", "parameter", u, f"initial {d}", variability="fixed") for a, u, d in _AXES]
+    + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d}", variability="fixed") for a, u, d in _AXES]
+    + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _PLANT_CFG_DOC.items()]
+    + [Var("substeps", "parameter", "", "RK4 integration steps per communication step (>= 1)",
+           _CFG.substeps, type="Integer", variability="fixed")]
+)
+
+_GAIN_DOC = {
+    "Lambda_p": ("N/m", "SC-DC Lambda_p on c (Eq. 25); APD-DC k_p on e (Eq. 38)"),
+    "Lambda_v": ("N.s/m", "SC-DC Lambda_v on n (Eq. 25); APD-DC k_v on de (Eq. 38)"),
+    "b": ("1/s", "coupling coefficient b of B = diag(b) (Eq. 22)"),
+    "D": ("1/s", "D of n = de_c + D e_c (Eq. 24)"),
+    "K_T": ("1", "feedforward gain; force command F = u / K_T"),
+}
+_DEFAULT_GAINS = GAIN_PRESETS["default"]
+
+CONTROLLER_VARS: tuple[Var, ...] = tuple(
+    _pose("_d", "input", "desired")
+    + [Var(f"q{i}", "input", "m", f"measured position of motor {i}") for i in (1, 2, 3)]
+    + [Var(f"dq{i}", "input", "m/s", f"measured velocity of motor {i} (used if velocity_source = 1)")
+       for i in (1, 2, 3)]
+    + [Var(f"F{i}", "output", "N", f"force command of motor {i}, F = u / K_T, held over the step")
+       for i in (1, 2, 3)]
+    + [Var(f"u{i}", "output", "N", f"control command u of motor {i} (Eq. 25 or 38), K_T F = u")
+       for i in (1, 2, 3)]
+    + [Var(f"e{i}", "output", "m", f"tracking error e = q_d - q of motor {i} (Eq. 15)") for i in (1, 2, 3)]
+    + [Var(f"es{i}", "output", "m", f"synchronization error of motor {i} (Eq. 18)") for i in (1, 2, 3)]
+    + [Var(f"{n}{i}", "parameter", _GAIN_DOC[n][0], f"{_GAIN_DOC[n][1]}, motor {i}",
+           _DEFAULT_GAINS[n][i - 1], variability="tunable") for n in GAIN_NAMES for i in (1, 2, 3)]
+    + [Var("law", "parameter", "", "control law: 0 = SC-DC (Eq. 25), 1 = APD-DC (Eq. 38)", 0,
+           type="Integer", variability="tunable"),
+       Var("velocity_source", "parameter", "",
+           "joint velocity: 0 = backward difference of q, 1 = dq inputs", 0,
+           type="Integer", variability="tunable"),
+       Var("force_limit", "parameter", "N", "force command limit |F_i| <= force_limit; 0 = no limit",
+           0.0, variability="tunable")]
+    + _model_params("controller nominal", "fixed")
+)
+
+_TP = TrajectoryParams()
+_TRAJ_DOC = {
+    "X_c": ("m", "circle centre X"), "Z_c": ("m", "circle centre Z"), "radius": ("m", "circle radius"),
+    "f_xz": ("Hz", "circle frequency"), "phase_xz": ("rad", "circle phase (0 = top of the circle)"),
+    "B_amplitude": ("rad", "B sinusoid amplitude"), "f_B": ("Hz", "B sinusoid frequency"),
+    "phase_B": ("rad", "B sinusoid phase"), "B_offset": ("rad", "B sinusoid offset"),
+}
+
+TRAJECTORY_VARS: tuple[Var, ...] = tuple(
+    _pose("_d", "output", "desired")
+    + [Var(f"q{i}_d", "output", "m", f"desired position of motor {i} (inverse kinematics, Eq. 2)")
+       for i in (1, 2, 3)]
+    + [Var(n, "parameter", u, d, getattr(_TP, n), variability="fixed") for n, (u, d) in _TRAJ_DOC.items()]
+    + [Var("L_1", "parameter", "m", "platform width used for q_d", PAPER_MODEL.L_1, variability="fixed")]
+)
+
+VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECTORY_VARS}
+
+# (source model, source variable, destination model, destination variable)
+CONNECTIONS: tuple[tuple[str, str, str, str], ...] = tuple(
+    [(TRAJECTORY, v.name, CONTROLLER, v.name) for v in TRAJECTORY_VARS[:9]]
+    + [(PLANT, f"q{i}", CONTROLLER, f"q{i}") for i in (1, 2, 3)]
+    + [(PLANT, f"dq{i}", CONTROLLER, f"dq{i}") for i in (1, 2, 3)]
+    + [(CONTROLLER, f"F{i}", PLANT, f"F{i}") for i in (1, 2, 3)]
+)
