@@ -1,0 +1,140 @@
+"""Command-line tool ``tapmp`` (also ``python -m orchestrator``)."""
+
+import argparse
+import shlex
+import sys
+import traceback
+from pathlib import Path
+
+from . import build as build_mod
+from .master import CoSimulationError
+from .results import OutputExistsError, run_scenario
+from .scenario import ScenarioError, load
+
+DEFAULT_SSP = build_mod.DEFAULT_BUILD_DIR / build_mod.SSP_NAME
+
+
+def _progress_bar(desc: str, enabled: bool):
+    """A tqdm bar that appears only for runs longer than a second."""
+    if not enabled:
+        return None, lambda: None
+    from tqdm import tqdm
+    bar = tqdm(total=None, desc=desc, unit="step", delay=1.0, mininterval=0.5, leave=False)
+
+    def update(done, total):
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+    return update, bar.close
+
+
+def _run_one(scenario, ssp, out, overwrite, progress, label):
+    update, close = _progress_bar(label, progress)
+    try:
+        return run_scenario(scenario, ssp, out, overwrite, update)
+    finally:
+        close()
+
+
+def cmd_build(args) -> int:
+    build_mod.build_all(Path(args.out))
+    return 0
+
+
+def cmd_run(args) -> int:
+    scenario = load(args.scenario, args.set)
+    out = Path(args.out or scenario.output)
+    m = _run_one(scenario, Path(args.ssp), out, args.overwrite, not args.no_progress, scenario.name)
+    print(f"{scenario.name} ({scenario.law}): results in {out}")
+    print("tracking MAE [um]: " + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]))
+    print("sync MAE [um]:     " + ", ".join(f"{v:.4f}" for v in m["sync_mae_um"]))
+    return 0
+
+
+def compare_runs(scenario):
+    """The three runs of `tapmp compare`: SC-DC, APD-DC (Eq. 41) and APD-DC with matched stiffness."""
+    g = scenario.gain_values()
+    matched = dict(scenario.gain_overrides, Lambda_p=[v * d for v, d in zip(g.Lambda_v, g.D)])
+    return {"sc-dc": scenario.with_changes(law="sc-dc"),
+            "apd-dc": scenario.with_changes(law="apd-dc"),
+            "apd-dc-matched": scenario.with_changes(law="apd-dc", gain_overrides=matched)}
+
+
+def cmd_compare(args) -> int:
+    from .plots import plot
+    from .report import write_comparison
+
+    scenario = load(args.scenario, args.set)
+    out = Path(args.out or scenario.output)
+    results = {}
+    for name, sc in compare_runs(scenario).items():
+        results[name] = _run_one(sc, Path(args.ssp), out / name, args.overwrite,
+                                 not args.no_progress, f"{scenario.name} {name}")
+    command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    text = write_comparison(out / "comparison.md", scenario, results, command)
+    plot(out)
+    print(text)
+    print(f"results, figures and comparison.md in {out}")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from .plots import plot
+    for path in plot(Path(args.result_dir)):
+        print(f"wrote {path}")
+    return 0
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="tapmp", description=(
+        "Co-simulate the TAPMP (three-axis parallel motion platform) FMUs: build them, run "
+        "scenarios, compare SC-DC with APD-DC, plot results."))
+    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    b = sub.add_parser("build", help="build the three FMUs and TAPMP.ssp",
+                       description="Build TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu and TAPMP.ssp.")
+    b.add_argument("--out", default=str(build_mod.DEFAULT_BUILD_DIR), help="output folder (default: build/)")
+    b.set_defaults(func=cmd_build)
+
+    def scenario_args(sp):
+        sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+        sp.add_argument("--out", help="output folder (overrides the scenario's 'output')")
+        sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
+        sp.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
+        sp.add_argument("--overwrite", action="store_true", help="replace results in an existing output folder")
+        sp.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    r = sub.add_parser("run", help="run one scenario", description="Co-simulate one scenario and write "
+                       "results.csv, run.json and metrics.json into its output folder.")
+    scenario_args(r)
+    r.set_defaults(func=cmd_run)
+    c = sub.add_parser("compare", help="run a scenario with SC-DC and with APD-DC",
+                       description="Run the scenario with SC-DC, APD-DC (Eq. 41) and APD-DC with matched "
+                       "stiffness; write comparison.md and figures and print the tables.")
+    scenario_args(c)
+    c.set_defaults(func=cmd_compare)
+    pl = sub.add_parser("plot", help="plot a run or a comparison",
+                        description="Write the figures (cf. paper Fig. 4-7) of a result folder as PNG.")
+    pl.add_argument("result_dir", help="a run folder or a comparison folder")
+    pl.set_defaults(func=cmd_plot)
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted: the results so far are in the output folder", file=sys.stderr)
+        return 130
+    except (ScenarioError, CoSimulationError, OutputExistsError, FileNotFoundError, ValueError) as err:
+        if args.debug:
+            traceback.print_exc()
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

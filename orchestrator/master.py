@@ -1,0 +1,251 @@
+"""The master algorithm: co-simulates the FMUs of an SSP system on fmpy's FMU2Slave.
+
+Life cycle: extract, instantiate, apply parameters, setupExperiment, enter
+initialization, propagate outputs through the connections in dependency order
+(each FMU's inputs are set from its sources, then it leaves initialization),
+then step at a fixed communication step h where the time of step k is t0 + k h
+(never accumulated), then terminate and free every instance and remove every
+extracted folder, also when a step fails.
+
+Orderings of one macro step from t to t + h:
+* ``gauss-seidel`` (default): controller, plant, trajectory. Each FMU's inputs are
+  set from the latest outputs of its sources just before it steps, so the plant
+  integrates with the command the controller computed from the measurement at t:
+  a sampled loop whose only delay is the zero-order hold of the servo cycle.
+* ``jacobi``: every FMU's inputs are set from the outputs at t, then all step.
+  The plant runs with the command of the previous sample: one extra step of delay
+  (0.1 ms) in the feedback path. This is what libcosim's fixed-step master does.
+"""
+
+import shutil
+import tempfile
+import zipfile
+from ctypes import byref
+from pathlib import Path
+
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.ssp.ssd import read_ssd
+
+ORDERINGS = {"gauss-seidel": ("controller", "plant", "trajectory"),
+             "jacobi": ("trajectory", "controller", "plant")}
+# Initialization propagates in the order of the signal flow.
+INIT_ORDER = ("trajectory", "controller", "plant")
+_STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
+
+
+class CoSimulationError(RuntimeError):
+    """A failure of the co-simulation, with where and when it happened."""
+
+    def __init__(self, message: str, element: str | None = None, time: float | None = None,
+                 log: list[str] | None = None):
+        self.element = element
+        self.time = time
+        self.log = log or []
+        super().__init__(message)
+
+
+class _Unit:
+    """One FMU instance in the system and its cached outputs."""
+
+    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
+        self.name = name
+        self.md = read_model_description(str(fmu_path))
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.log = log
+        extract(str(fmu_path), unzipdir=str(unzip_dir))
+        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzip_dir),
+                               modelIdentifier=self.md.coSimulation.modelIdentifier,
+                               instanceName=name)
+        self.outputs = [v.name for v in self.md.modelVariables if v.causality == "output"]
+        self.output_vrs = [self.vars[n].valueReference for n in self.outputs]
+        self.values = [0.0] * len(self.outputs)
+        self.inputs = []  # (source unit, index in source.values, destination value reference)
+        self.instantiated = False
+
+    def read_outputs(self) -> None:
+        self.values = self.slave.getReal(self.output_vrs)
+
+    def apply_inputs(self) -> None:
+        if self.inputs:
+            self.slave.setReal([vr for _, _, vr in self.inputs],
+                               [src.values[i] for src, i, _ in self.inputs])
+
+    def set_parameter(self, name: str, value) -> None:
+        var = self.vars.get(name)
+        if var is None or var.causality != "parameter":
+            allowed = sorted(v.name for v in self.vars.values() if v.causality == "parameter")
+            raise CoSimulationError(f"{self.name}.{name} is not a parameter of {self.md.modelName}: "
+                                    f"allowed are {', '.join(allowed)}", self.name)
+        if var.type == "Integer":
+            if int(value) != value:
+                raise CoSimulationError(f"{self.name}.{name} = {value!r} is invalid: allowed is an integer",
+                                        self.name)
+            self.slave.setInteger([var.valueReference], [int(value)])
+        else:
+            self.slave.setReal([var.valueReference], [float(value)])
+
+
+class CoSimulation:
+    """A running co-simulation of an SSP system; use as a context manager.
+
+    ``parameters`` maps element name -> {parameter name: value}. After entering,
+    :attr:`columns` names the recorded values and :meth:`row` returns them.
+    """
+
+    def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
+                 step_size: float = 1e-4, ordering: str = "gauss-seidel"):
+        if ordering not in ORDERINGS:
+            raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
+                                    f"{', '.join(ORDERINGS)}")
+        if not step_size > 0.0:
+            raise CoSimulationError(f"step_size = {step_size!r} is invalid: allowed is a number > 0")
+        self.ssp_path = Path(ssp_path)
+        self.parameters = parameters
+        self.t0 = float(start_time)
+        self.h = float(step_size)
+        self.ordering = ordering
+        self.units: dict[str, _Unit] = {}
+        self.log: list[str] = []
+        self.tmp = None
+        self.k = 0
+        self.guids = {}
+
+    # --- setup ---------------------------------------------------------------------
+    def _logger(self, env, instance, status, category, message):
+        self.log.append(f"[{_STATUS[status] if 0 <= status < 6 else status}] "
+                        f"{instance.decode(errors='replace')}: {message.decode(errors='replace')}")
+
+    def __enter__(self):
+        try:
+            self._open()
+        except BaseException:  # never leave an instance or a folder behind
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def _open(self):
+        if not self.ssp_path.is_file():
+            raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
+        self.tmp = Path(tempfile.mkdtemp(prefix="tapmp_cosim_"))
+        try:
+            ssd = read_ssd(str(self.ssp_path))
+            with zipfile.ZipFile(self.ssp_path) as z:
+                z.extractall(self.tmp / "ssp")
+        except Exception as err:
+            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err}") from err
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        from fmpy.logging import addLoggerProxy
+        addLoggerProxy(byref(self.callbacks))
+        for comp in ssd.system.elements:
+            fmu = self.tmp / "ssp" / comp.source
+            try:
+                unit = _Unit(comp.name, fmu, self.tmp / comp.name, self.log)
+            except Exception as err:
+                raise CoSimulationError(f"cannot load FMU {comp.source} of element {comp.name}: {err}",
+                                        comp.name) from err
+            self.units[comp.name] = unit
+            self.guids[comp.name] = unit.md.guid
+        missing = set(INIT_ORDER) - set(self.units)
+        if missing:
+            raise CoSimulationError(f"SSP system lacks the element(s) {', '.join(sorted(missing))}")
+        for c in ssd.system.connections:
+            src, dst = self.units[c.startElement], self.units[c.endElement]
+            dst.inputs.append((src, src.outputs.index(c.startConnector),
+                               dst.vars[c.endConnector].valueReference))
+        unknown = set(self.parameters) - set(self.units)
+        if unknown:
+            raise CoSimulationError(f"parameters given for unknown element(s) {', '.join(sorted(unknown))}: "
+                                    f"allowed are {', '.join(self.units)}")
+        for name in INIT_ORDER:
+            unit = self.units[name]
+            self._call(unit, lambda u=unit: u.slave.instantiate(callbacks=self.callbacks, loggingOn=True),
+                       "instantiate")
+            unit.instantiated = True
+            for pname, value in self.parameters.get(name, {}).items():
+                self._call(unit, lambda u=unit, p=pname, v=value: u.set_parameter(p, v),
+                           f"set parameter {pname}")
+            self._call(unit, lambda u=unit: u.slave.setupExperiment(startTime=self.t0), "setupExperiment")
+            self._call(unit, unit.slave.enterInitializationMode, "enterInitializationMode")
+        for name in INIT_ORDER:
+            unit = self.units[name]
+            self._call(unit, unit.read_outputs, "getReal")
+        for name in INIT_ORDER:  # dependency order: sources leave initialization first
+            unit = self.units[name]
+            self._call(unit, unit.apply_inputs, "setReal")
+            self._call(unit, unit.slave.exitInitializationMode, "exitInitializationMode")
+            self._call(unit, unit.read_outputs, "getReal")
+        self.columns = ["time"] + [f"{n}.{o}" for n in INIT_ORDER for o in self.units[n].outputs]
+        self._row_units = [self.units[n] for n in INIT_ORDER]
+        self._step_units = [self.units[n] for n in ORDERINGS[self.ordering]]
+
+    def _call(self, unit: _Unit, action, what: str, t: float | None = None):
+        try:
+            return action()
+        except CoSimulationError:
+            raise
+        except (FMICallException, Exception) as err:
+            when = "" if t is None else f" at t = {t:.6g} s"
+            detail = [m for m in self.log if f"] {unit.name}:" in m]
+            reason = detail[-1] if detail else str(err)
+            raise CoSimulationError(f"{unit.name}: {what} failed{when}: {reason}", unit.name, t,
+                                    list(self.log)) from err
+
+    # --- stepping ------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        """Current communication point t0 + k h [s]."""
+        return self.t0 + self.k * self.h
+
+    def row(self) -> list[float]:
+        """Time and every FMU's outputs at the current communication point."""
+        out = [self.time]
+        for unit in self._row_units:
+            out.extend(unit.values)
+        return out
+
+    def step(self) -> None:
+        """One macro step from t0 + k h to t0 + (k + 1) h."""
+        t, h = self.time, self.h
+        if self.ordering == "gauss-seidel":
+            for unit in self._step_units:
+                self._call(unit, unit.apply_inputs, "setReal", t)
+                self._call(unit, lambda: unit.slave.doStep(t, h), "doStep", t)
+                self._call(unit, unit.read_outputs, "getReal", t)
+        else:
+            for unit in self._step_units:
+                self._call(unit, unit.apply_inputs, "setReal", t)
+            for unit in self._step_units:
+                self._call(unit, lambda: unit.slave.doStep(t, h), "doStep", t)
+            for unit in self._step_units:
+                self._call(unit, unit.read_outputs, "getReal", t)
+        self.k += 1
+
+    # --- teardown ------------------------------------------------------------------
+    def close(self) -> None:
+        """Terminate and free every instance and delete the extracted files; idempotent."""
+        for unit in self.units.values():
+            if unit.instantiated:
+                try:
+                    unit.slave.terminate()
+                except Exception:
+                    pass  # an instance in error state may refuse; it is freed regardless
+                try:
+                    unit.slave.freeInstance()
+                except Exception:
+                    pass
+                unit.instantiated = False
+        self.units = {}
+        if self.tmp is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            self.tmp = None
+

@@ -1,0 +1,218 @@
+"""Scenarios: one TOML file each, validated before anything runs.
+
+Top-level keys: name, description, law ("sc-dc" or "apd-dc"), gains (a preset of
+tapmp.params.GAIN_PRESETS), stop_time, start_time, step, ordering, output,
+start_on_trajectory. Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
+number or a list of three), [trajectory], [plant] and [controller] with the
+parameters of the respective FMU (names as in its modelDescription.xml).
+"""
+
+import copy
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tapmp.control import Gains
+from tapmp.errors import ModelInputError
+from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
+from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
+from tapmp.plant import PlantConfig
+from tapmp.trajectory import TrajectoryParams, reference
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+LAWS = {"sc-dc": 0, "apd-dc": 1}
+ORDERINGS = ("gauss-seidel", "jacobi")
+_TOP = {"name": str, "description": str, "law": str, "gains": str, "stop_time": float,
+        "start_time": float, "step": float, "ordering": str, "output": str,
+        "start_on_trajectory": bool}
+_TABLES = {"gain_overrides", "trajectory", "plant", "controller"}
+# Parameters a scenario may set per section; the controller's gains, law and the
+# plant's initial state are set through the scenario's own keys instead.
+_SECTION_PARAMS = {
+    "trajectory": {v.name: v for v in VARIABLES[TRAJECTORY] if v.causality == "parameter"},
+    "plant": {v.name: v for v in VARIABLES[PLANT] if v.causality == "parameter"},
+    "controller": {v.name: v for v in VARIABLES[CONTROLLER] if v.causality == "parameter"
+                   and not v.name[:-1] in GAIN_NAMES and v.name != "law"},
+}
+
+
+class ScenarioError(ValueError):
+    """A scenario file or value is invalid; the message names the key and what is allowed."""
+
+
+@dataclass
+class Scenario:
+    """A validated scenario."""
+
+    name: str
+    description: str = ""
+    law: str = "sc-dc"
+    gains: str = "default"
+    gain_overrides: dict = field(default_factory=dict)
+    start_time: float = 0.0
+    stop_time: float = 2.5
+    step: float = 1e-4
+    ordering: str = "gauss-seidel"
+    output: str = "results"
+    start_on_trajectory: bool = True
+    trajectory: dict = field(default_factory=dict)
+    plant: dict = field(default_factory=dict)
+    controller: dict = field(default_factory=dict)
+    source: str = ""
+
+    @property
+    def n_steps(self) -> int:
+        """Number of macro steps from start_time to stop_time."""
+        return int(round((self.stop_time - self.start_time) / self.step))
+
+    def gain_values(self) -> Gains:
+        """The preset with the overrides applied."""
+        preset = dict(GAIN_PRESETS[self.gains])
+        for k, v in self.gain_overrides.items():
+            preset[k] = tuple(v)
+        return Gains.from_preset(preset)
+
+    def with_changes(self, **changes) -> "Scenario":
+        """A copy with top-level fields replaced (and validated again)."""
+        new = copy.deepcopy(self)
+        for k, v in changes.items():
+            setattr(new, k, v)
+        return validate(new)
+
+    def parameters(self) -> dict:
+        """FMU parameters by SSP element name, ready for the master algorithm."""
+        traj = dict(self.trajectory)
+        plant = dict(self.plant)
+        if self.start_on_trajectory:
+            tp = TrajectoryParams(*(traj.get(n, d) for n, d in zip(TrajectoryParams._fields,
+                                                                    TrajectoryParams())))
+            ref = reference(self.start_time, tp)
+            for name, value in zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), ref[:6]):
+                plant[name] = value
+        ctrl = dict(self.controller)
+        ctrl["law"] = LAWS[self.law]
+        for name, values in zip(GAIN_NAMES, self.gain_values()):
+            for i, v in enumerate(values, start=1):
+                ctrl[f"{name}{i}"] = v
+        if "L_1" in self.controller and "L_1" not in traj:
+            traj["L_1"] = self.controller["L_1"]  # q_d is the controller's view of the reference
+        return {"trajectory": traj, "controller": ctrl, "plant": plant}
+
+    def to_dict(self) -> dict:
+        """The resolved scenario as plain data (for run.json)."""
+        d = {k: copy.deepcopy(getattr(self, k)) for k in self.__dataclass_fields__}
+        d["gain_values"] = self.gain_values()._asdict()
+        d["n_steps"] = self.n_steps
+        return d
+
+
+def _check_type(key: str, value, kind):
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if kind is int and isinstance(value, float) and value.is_integer():
+        return int(value)
+    if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
+        raise ScenarioError(f"{key} = {value!r} has the wrong type: allowed is {kind.__name__}")
+    return value
+
+
+def validate(s: Scenario) -> Scenario:
+    """Check every value of a scenario; raise ScenarioError naming the key."""
+    if s.law not in LAWS:
+        raise ScenarioError(f"law = {s.law!r} is invalid: allowed are {', '.join(LAWS)}")
+    if s.gains not in GAIN_PRESETS:
+        raise ScenarioError(f"gains = {s.gains!r} is invalid: allowed are {', '.join(sorted(GAIN_PRESETS))}")
+    if s.ordering not in ORDERINGS:
+        raise ScenarioError(f"ordering = {s.ordering!r} is invalid: allowed are {', '.join(ORDERINGS)}")
+    if not (math.isfinite(s.step) and s.step > 0.0):
+        raise ScenarioError(f"step = {s.step!r} is invalid: allowed is a number > 0 [s]")
+    if not (math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time):
+        raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: allowed is a number > start_time "
+                            f"= {s.start_time!r} [s]")
+    for k, v in s.gain_overrides.items():
+        if k not in GAIN_NAMES:
+            raise ScenarioError(f"gain_overrides.{k} is unknown: allowed are {', '.join(GAIN_NAMES)}")
+        vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+        if not (isinstance(vals, list) and len(vals) == 3):
+            raise ScenarioError(f"gain_overrides.{k} = {v!r} is invalid: allowed is a number or a list of 3 numbers")
+        s.gain_overrides[k] = [_check_type(f"gain_overrides.{k}", x, float) for x in vals]
+    for section in ("trajectory", "plant", "controller"):
+        table = getattr(s, section)
+        allowed = _SECTION_PARAMS[section]
+        for k, v in table.items():
+            if k not in allowed:
+                raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
+            table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
+    def _model(table, kind):
+        return kind(*(table.get(n, d) for n, d in zip(kind._fields, kind())))
+    checks = (("gain_overrides", lambda: s.gain_values().validated()),
+              ("controller", lambda: _model(s.controller, ModelParams).validated()),
+              ("plant", lambda: _model(s.plant, ModelParams).validated()),
+              ("plant", lambda: _model(s.plant, PlantConfig).validated()),
+              ("trajectory", lambda: _model(s.trajectory, TrajectoryParams).validated()))
+    for section, check in checks:
+        try:
+            check()
+        except ModelInputError as err:
+            raise ScenarioError(f"{section}.{err}") from None
+    vs = s.controller.get("velocity_source", 0)
+    if vs not in (0, 1):
+        raise ScenarioError(f"controller.velocity_source = {vs!r} is invalid: allowed are 0 or 1")
+    if s.controller.get("force_limit", 0.0) < 0.0:
+        raise ScenarioError(f"controller.force_limit = {s.controller['force_limit']!r} is invalid: "
+                            "allowed is a number >= 0")
+    return s
+
+
+def from_dict(data: dict, source: str = "") -> Scenario:
+    """Build and validate a scenario from parsed TOML data."""
+    kwargs = {"source": source}
+    for key, value in data.items():
+        if key in _TOP:
+            kwargs[key] = _check_type(key, value, _TOP[key])
+        elif key in _TABLES:
+            if not isinstance(value, dict):
+                raise ScenarioError(f"{key} must be a table ([{key}])")
+            kwargs[key] = dict(value)
+        else:
+            raise ScenarioError(f"{key} is unknown: allowed are {', '.join([*_TOP, *sorted(_TABLES)])}")
+    if "name" not in kwargs:
+        kwargs["name"] = Path(source).stem if source else "scenario"
+    return validate(Scenario(**kwargs))
+
+
+def parse_override(text: str) -> tuple[list[str], object]:
+    """Parse a --set KEY=VALUE string; VALUE is TOML (a bare word is taken as a string)."""
+    if "=" not in text:
+        raise ScenarioError(f"--set {text!r} is invalid: allowed is KEY=VALUE, e.g. plant.k_pull=0")
+    key, raw = text.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.strip().split("."), value
+
+
+def load(path, overrides: list[str] = ()) -> Scenario:
+    """Read, override (``--set`` strings) and validate a scenario TOML file."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ScenarioError(f"scenario file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"scenario file {path} is not valid TOML: {err}") from None
+    for text in overrides:
+        keys, value = parse_override(text)
+        node = data
+        for k in keys[:-1]:
+            node = node.setdefault(k, {})
+            if not isinstance(node, dict):
+                raise ScenarioError(f"--set {text!r}: {k} is not a table")
+        node[keys[-1]] = value
+    return from_dict(data, str(path))
