@@ -8,8 +8,12 @@ Bad input never reaches the model and never crashes the host: a non-finite value
 is refused by the setter, an invalid parameter or pose raises ModelInputError in
 the model; either way the instance logs one message at fmi2Error level (category
 logStatusError) naming the variable, the value, the time and what is allowed,
-and every later doStep is refused. (pythonfmu's binary reports a refused doStep
-as fmi2Discard; the message is the same.)
+the FMI call that met it fails, and every later doStep is refused.
+
+What status code the host sees is decided by pythonfmu 0.7's binary, not here: a
+refused doStep (do_step returns False) is reported as fmi2Discard, and a refused
+setReal or initialization (the exception is re-raised) as fmi2Fatal with the
+message in the log. Neither is fmi2OK, so no host carries on with a bad value.
 """
 
 import math
@@ -81,11 +85,13 @@ class TapmpSlave(Fmi2Slave):
         if self.error is None:
             self.error = msg
 
-    def _guard(self, action, t: float) -> bool:
+    def _guard(self, action, t: float, reraise: bool = False) -> bool:
         try:
             action()
         except ModelInputError as err:
             self.fail(err, t)
+            if reraise:  # the FMI call itself must fail, not only log
+                raise
             return False
         return True
 
@@ -94,11 +100,11 @@ class TapmpSlave(Fmi2Slave):
         self.time = float(start_time)
 
     def enter_initialization_mode(self):
-        self._guard(self.setup_model, self.time)
+        self._guard(self.setup_model, self.time, reraise=True)
 
     def exit_initialization_mode(self):
-        if self._guard(self.setup_model, self.time):
-            self._guard(self.initial_outputs, self.time)
+        self._guard(self.setup_model, self.time, reraise=True)
+        self._guard(self.initial_outputs, self.time, reraise=True)
         self.retune = False
 
     def do_step(self, current_time, step_size):
@@ -117,9 +123,10 @@ class TapmpSlave(Fmi2Slave):
 
     def set_real(self, vrs, values):
         for vr, value in zip(vrs, values):
-            if not math.isfinite(value):
-                self.fail(ModelInputError(self._names[vr], value, "a finite number"), self.time)
-                continue  # refused: the previous value stays
+            if not math.isfinite(value):  # refused: the previous value stays
+                err = ModelInputError(self._names[vr], value, "a finite number", self.time)
+                self.fail(err, self.time)
+                raise err
             setattr(self, self._names[vr], value)
             if vr in self._tunable:
                 self.retune = True

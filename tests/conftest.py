@@ -1,0 +1,82 @@
+"""Shared fixtures: the FMUs are built once per test session, for real, with pythonfmu."""
+
+from ctypes import byref
+from pathlib import Path
+
+import pytest
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.logging import addLoggerProxy
+
+from orchestrator.build import build_all
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session")
+def built(tmp_path_factory):
+    """Paths of the three FMUs and TAPMP.ssp, built into a temporary folder."""
+    return build_all(tmp_path_factory.mktemp("fmus"), log=lambda *_: None)
+
+
+class LoadedFMU:
+    """One FMU instance through fmpy, with its log messages collected."""
+
+    def __init__(self, path, tmp_path, name="inst"):
+        self.md = read_model_description(str(path))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.types = {v.name: v.type for v in self.md.modelVariables}
+        self.messages = []
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(byref(self.callbacks))
+        unzip = extract(str(path), unzipdir=str(tmp_path / f"{name}_unzip"))
+        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=unzip,
+                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.slave.instantiate(callbacks=self.callbacks, loggingOn=True)
+
+    def _log(self, env, instance, status, category, message):
+        self.messages.append((status, message.decode()))
+
+    def set(self, **values):
+        for k, v in values.items():
+            if self.types[k] == "Integer":
+                self.slave.setInteger([self.vr[k]], [int(v)])
+            else:
+                self.slave.setReal([self.vr[k]], [float(v)])
+
+    def get(self, *names):
+        return self.slave.getReal([self.vr[n] for n in names])
+
+    def init(self, t0=0.0, **params):
+        self.set(**params)
+        self.slave.setupExperiment(startTime=t0)
+        self.slave.enterInitializationMode()
+        self.slave.exitInitializationMode()
+
+    def errors(self):
+        return [m for s, m in self.messages if s >= 3]
+
+    def close(self):
+        try:
+            self.slave.terminate()
+        except Exception:
+            pass
+        self.slave.freeInstance()
+
+
+@pytest.fixture
+def load_fmu(tmp_path):
+    """Factory: load_fmu(path) -> LoadedFMU; every instance is freed after the test."""
+    loaded = []
+
+    def make(path, name="inst"):
+        fmu = LoadedFMU(path, tmp_path, f"{name}{len(loaded)}")
+        loaded.append(fmu)
+        return fmu
+    yield make
+    for fmu in loaded:
+        fmu.close()
