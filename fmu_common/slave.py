@@ -8,12 +8,14 @@ Bad input never reaches the model and never crashes the host: a non-finite value
 is refused by the setter, an invalid parameter or pose raises ModelInputError in
 the model; either way the instance logs one message at fmi2Error level (category
 logStatusError) naming the variable, the value, the time and what is allowed,
-the FMI call that met it fails, and every later doStep is refused.
+and every later doStep is refused, so no NaN or stale value travels on.
 
 What status code the host sees is decided by pythonfmu 0.7's binary, not here: a
-refused doStep (do_step returns False) is reported as fmi2Discard, and a refused
-setReal or initialization (the exception is re-raised) as fmi2Fatal with the
-message in the log. Neither is fmi2OK, so no host carries on with a bad value.
+refused doStep (do_step returns False) is reported as fmi2Discard. Nothing is ever
+raised out of this class on purpose: pythonfmu 0.7 turns a Python exception into
+fmi2Fatal and its exception path corrupts the interpreter (the host segfaults at
+garbage collection, reproduced here), so a refused setReal or initialization
+returns with the error logged and the next doStep fails.
 """
 
 import math
@@ -81,17 +83,15 @@ class TapmpSlave(Fmi2Slave):
         msg = str(err)
         if isinstance(err, ModelInputError) and err.time is None:
             msg = f"{msg} (at t = {t:.6g} s)"
-        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error, "logStatusError")
+        self.log(msg, Fmi2Status.error, "logStatusError")
         if self.error is None:
             self.error = msg
 
-    def _guard(self, action, t: float, reraise: bool = False) -> bool:
+    def _guard(self, action, t: float) -> bool:
         try:
             action()
         except ModelInputError as err:
             self.fail(err, t)
-            if reraise:  # the FMI call itself must fail, not only log
-                raise
             return False
         return True
 
@@ -100,16 +100,16 @@ class TapmpSlave(Fmi2Slave):
         self.time = float(start_time)
 
     def enter_initialization_mode(self):
-        self._guard(self.setup_model, self.time, reraise=True)
+        self._guard(self.setup_model, self.time)
 
     def exit_initialization_mode(self):
-        self._guard(self.setup_model, self.time, reraise=True)
-        self._guard(self.initial_outputs, self.time, reraise=True)
+        if self.error is None and self._guard(self.setup_model, self.time):
+            self._guard(self.initial_outputs, self.time)
         self.retune = False
 
     def do_step(self, current_time, step_size):
         if self.error is not None:
-            self.log(f"{self.instance_name}: doStep at t = {current_time:.6g} s refused after "
+            self.log(f"doStep at t = {current_time:.6g} s refused after "
                      f"an earlier error: {self.error}", Fmi2Status.error, "logStatusError")
             return False
         if not (math.isfinite(step_size) and step_size > 0.0):
@@ -124,9 +124,8 @@ class TapmpSlave(Fmi2Slave):
     def set_real(self, vrs, values):
         for vr, value in zip(vrs, values):
             if not math.isfinite(value):  # refused: the previous value stays
-                err = ModelInputError(self._names[vr], value, "a finite number", self.time)
-                self.fail(err, self.time)
-                raise err
+                self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
+                continue
             setattr(self, self._names[vr], value)
             if vr in self._tunable:
                 self.retune = True

@@ -189,16 +189,24 @@ class CoSimulation:
         self._step_units = [self.units[n] for n in ORDERINGS[self.ordering]]
 
     def _call(self, unit: _Unit, action, what: str, t: float | None = None):
+        """Run one FMI call; a failed call or an error it logged raises CoSimulationError."""
+        n_log = len(self.log)
         try:
-            return action()
+            result = action()
         except CoSimulationError:
             raise
         except (FMICallException, Exception) as err:
-            when = "" if t is None else f" at t = {t:.6g} s"
-            detail = [m for m in self.log if f"] {unit.name}:" in m]
-            reason = detail[-1] if detail else str(err)
-            raise CoSimulationError(f"{unit.name}: {what} failed{when}: {reason}", unit.name, t,
-                                    list(self.log)) from err
+            self._fail(unit, what, t, err)
+        if len(self.log) > n_log and any(m.startswith(("[ERROR]", "[FATAL]")) for m in self.log[n_log:]):
+            self._fail(unit, what, t, None)  # pythonfmu may return OK after the FMU logged an error
+        return result
+
+    def _fail(self, unit: _Unit, what: str, t: float | None, err):
+        when = "" if t is None else f" at t = {t:.6g} s"
+        detail = [m for m in self.log if m.startswith(("[ERROR]", "[FATAL]"))]
+        reason = detail[0] if detail else str(err)
+        raise CoSimulationError(f"{unit.name}: {what} failed{when}: {reason}", unit.name, t,
+                                list(self.log)) from err
 
     # --- stepping ------------------------------------------------------------------
     @property

@@ -129,9 +129,8 @@ class PlantModel:
             s = [a + dt / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
                  for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4)]
         if not (abs(s[2]) < HALF_PI and all(map(math.isfinite, s))):
-            raise KinematicDomainError(
-                "plant state (X, Z, B, dX, dZ, dB)", tuple(s),
-                f"finite values with |B| < pi/2 rad (reached at t = {t + h:.6g} s)")
+            raise KinematicDomainError("plant state (X, Z, B, dX, dZ, dB)", tuple(s),
+                                       "finite values with |B| < pi/2 rad", t + h)
         self.state = s
 
     def joint_positions(self) -> tuple[float, float, float]:

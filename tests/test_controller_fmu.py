@@ -1,0 +1,110 @@
+"""TAPMP_Controller.fmu and TAPMP_Trajectory.fmu through fmpy."""
+
+import math
+
+import pytest
+from fmpy.fmi1 import FMICallException
+
+from tapmp.control import ControllerModel, Gains
+from tapmp.interface import CONTROLLER, TRAJECTORY
+from tapmp.kinematics import inverse
+from tapmp.params import PAPER_MODEL, gain_preset
+from tapmp.trajectory import TrajectoryParams, reference
+
+REF = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d")
+OUTS = tuple(f"{n}{i}" for n in ("F", "u", "e", "es") for i in (1, 2, 3))
+
+
+def inputs(k):
+    t = k * 1e-4
+    ref = reference(t, TrajectoryParams())
+    q = inverse(*ref[:3], 0.09)
+    q = (q[0] + 1e-6 * math.sin(30 * t), q[1] - 2e-6 * math.cos(20 * t), q[2] + 5e-7)
+    return ref, q, (0.01, 0.02, -0.01)
+
+
+@pytest.mark.parametrize("law", [0, 1])
+def test_controller_fmu_reproduces_the_plain_controller(built, load_fmu, law):
+    fmu = load_fmu(built[CONTROLLER])
+    ref, q, dq = inputs(0)
+    fmu.set(law=law, **dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=dq[0], dq2=dq[1], dq3=dq[2])
+    fmu.init()
+    model = ControllerModel(PAPER_MODEL, Gains.from_preset(gain_preset("default")), law)
+    F0 = model.sample(0.0, 1e-4, ref, q, dq, advance=False)[0]
+    assert fmu.get("F1", "F2", "F3") == pytest.approx(F0, rel=1e-12)
+    worst = 0.0
+    for k in range(200):
+        ref, q, dq = inputs(k)
+        fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=dq[0], dq2=dq[1], dq3=dq[2])
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+        F, u, e, es = model.sample(k * 1e-4, 1e-4, ref, q, dq)
+        got = fmu.get(*OUTS)
+        worst = max(worst, max(abs(a - b) / max(1.0, abs(b)) for a, b in zip(got, (*F, *u, *e, *es))))
+    assert worst <= 1e-12
+
+
+def test_controller_rollback_restores_integral_and_previous_sample(built, load_fmu):
+    fmu = load_fmu(built[CONTROLLER])
+    fmu.init()
+    for k in range(30):
+        ref, q, dq = inputs(k)
+        fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2])
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+    state = fmu.slave.getFMUstate()
+
+    def run():
+        out = []
+        for k in range(30, 80):
+            ref, q, dq = inputs(k)
+            fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2])
+            fmu.slave.doStep(k * 1e-4, 1e-4)
+            out.append(fmu.get(*OUTS))
+        return out
+    first = run()
+    fmu.slave.setFMUstate(state)
+    assert run() == first
+
+
+def test_retuned_gain_takes_effect_at_the_next_sample(built, load_fmu):
+    fmu = load_fmu(built[CONTROLLER])
+    fmu.init(law=1, velocity_source=1)
+    ref, q, dq = inputs(5)
+    fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=0.0, dq2=0.0, dq3=0.0)
+    fmu.slave.doStep(0.0, 1e-4)
+    u_before, e1 = fmu.get("u1", "e1")
+    fmu.set(Lambda_p1=1000.0)
+    fmu.slave.doStep(1e-4, 1e-4)
+    u_after = fmu.get("u1")[0]
+    assert u_after - u_before == pytest.approx((1000.0 - 300.0) * e1, rel=1e-9)
+
+
+@pytest.mark.parametrize("name,value,allowed", [
+    ("K_T2", 0.0, "K_T2 = 0.0 is invalid: allowed is a finite number > 0"),
+    ("Lambda_v1", -1.0, "Lambda_v1 = -1.0 is invalid: allowed is a finite number >= 0"),
+    ("law", 3, "law = 3 is invalid: allowed is 0 (SC-DC) or 1 (APD-DC)"),
+    ("velocity_source", -1, "velocity_source = -1 is invalid"),
+    ("q2", 0.06, "allowed is |value| < 1"),
+    ("dq3", float("inf"), "dq3 = inf at t = 0 s is invalid: allowed is a finite number")])
+def test_bad_input_is_an_error_with_a_clear_message(built, load_fmu, name, value, allowed):
+    fmu = load_fmu(built[CONTROLLER])
+    fmu.set(**{name: value})
+    fmu.slave.setupExperiment(startTime=0.0)
+    fmu.slave.enterInitializationMode()
+    fmu.slave.exitInitializationMode()
+    with pytest.raises(FMICallException):
+        fmu.slave.doStep(0.0, 1e-4)
+    text = "\n".join(fmu.errors())
+    assert allowed in text and "t = 0 s" in text, text
+    assert all(math.isfinite(v) for v in fmu.get(*OUTS))
+
+
+def test_trajectory_fmu_outputs_the_reference_at_the_end_of_each_step(built, load_fmu):
+    fmu = load_fmu(built[TRAJECTORY])
+    fmu.init(f_B=0.18)
+    tp = TrajectoryParams(f_B=0.18)
+    assert fmu.get(*REF) == pytest.approx(reference(0.0, tp), abs=1e-15)
+    for k in range(50):
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+    r = reference(49 * 1e-4 + 1e-4, tp)
+    assert fmu.get(*REF) == pytest.approx(r, rel=1e-12, abs=1e-15)
+    assert fmu.get("q1_d", "q2_d", "q3_d") == pytest.approx(inverse(*r[:3], 0.09), rel=1e-12, abs=1e-15)

@@ -1,0 +1,102 @@
+"""TAPMP_Plant.fmu through fmpy: same numbers as the plain model, rollback, bad input."""
+
+import math
+import zipfile
+
+import pytest
+from fmpy.fmi1 import FMICallException
+
+from tapmp.interface import PLANT
+from tapmp.params import PAPER_MODEL
+from tapmp.plant import PlantConfig, PlantModel
+
+OUTS = ("q1", "q2", "q3", "q1_true", "q2_true", "q3_true", "dq1", "dq2", "dq3", "X", "Z", "B", "dX", "dZ", "dB")
+
+
+def forces(k):
+    return 30.0 * math.sin(0.01 * k), 18.0 + 5.0 * math.cos(0.02 * k), -20.0 * math.sin(0.013 * k)
+
+
+def test_fmu_bundles_the_model_package_and_declares_units(built):
+    with zipfile.ZipFile(built[PLANT]) as z:
+        names = z.namelist()
+        md = z.read("modelDescription.xml").decode()
+    assert "resources/tapmp/dynamics.py" in names and "resources/fmu_common/slave.py" in names
+    assert '<Unit name="N">' in md and 'canGetAndSetFMUstate="true"' in md
+    assert 'stepSize="0.0001"' in md and "<InitialUnknowns>" in md
+
+
+def test_fmu_reproduces_the_plain_model(built, load_fmu):
+    params = dict(X0=1e-3, Z0=-2e-3, B0=0.02, dX0=0.01, dB0=0.1, k_pull=300.0, substeps=2)
+    fmu = load_fmu(built[PLANT])
+    fmu.init(**params)
+    cfg = PlantConfig(k_pull=300.0, substeps=2)
+    model = PlantModel(PAPER_MODEL, cfg, (1e-3, -2e-3, 0.02), (0.01, 0.0, 0.1))
+    worst = 0.0
+    for k in range(300):
+        F = forces(k)
+        fmu.set(F1=F[0], F2=F[1], F3=F[2])
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+        model.step(k * 1e-4, 1e-4, *F)
+        expected = (*model.measured_positions(), *model.joint_positions(), *model.joint_velocities(), *model.state)
+        worst = max(worst, max(abs(a - b) for a, b in zip(fmu.get(*OUTS), expected)))
+    assert worst <= 1e-12
+
+
+def test_state_rollback_replays_bit_identically(built, load_fmu):
+    fmu = load_fmu(built[PLANT])
+    fmu.init(dX0=0.02, dB0=0.2)
+    for k in range(20):
+        fmu.set(F1=forces(k)[0], F2=forces(k)[1], F3=forces(k)[2])
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+    state = fmu.slave.getFMUstate()
+
+    def run():
+        out = []
+        for k in range(20, 60):
+            F = forces(k)
+            fmu.set(F1=F[0], F2=F[1], F3=F[2])
+            fmu.slave.doStep(k * 1e-4, 1e-4)
+            out.append(fmu.get(*OUTS))
+        return out
+
+    first = run()
+    fmu.slave.setFMUstate(state)
+    assert run() == first
+    fmu.slave.freeFMUstate(state)
+
+
+def test_non_finite_force_is_refused_with_name_value_and_time(built, load_fmu):
+    fmu = load_fmu(built[PLANT])
+    fmu.init()
+    fmu.slave.doStep(0.0, 1e-4)
+    before = fmu.get("q1_true", "X")
+    fmu.set(F1=float("nan"))
+    assert any("F1 = nan at t = 0.0001 s is invalid: allowed is a finite number" in m
+               for m in fmu.errors()), fmu.messages
+    assert fmu.get("q1_true", "X") == before  # no NaN reached the outputs
+    with pytest.raises(FMICallException):
+        fmu.slave.doStep(1e-4, 1e-4)          # the instance refuses to go on
+
+
+@pytest.mark.parametrize("name,value,allowed", [
+    ("m_p", -1.0, "a finite number > 0"), ("I_y", 0.0, "a finite number > 0"), ("L_1", 0.0, "a finite number > 0"),
+    ("c_v2", -0.5, "a finite number >= 0"), ("encoder_resolution", -1e-7, "a finite number >= 0"),
+    ("substeps", 0, "an integer >= 1"), ("B0", 1.6, "|B0| < pi/2 rad")])
+def test_invalid_parameter_fails_initialization_with_a_clear_message(built, load_fmu, name, value, allowed):
+    fmu = load_fmu(built[PLANT])
+    fmu.init(**{name: value})
+    with pytest.raises(FMICallException):
+        fmu.slave.doStep(0.0, 1e-4)  # refused after the error
+    text = "\n".join(fmu.errors())
+    assert f"{name} = {value!r}" in text and allowed in text and "t = 0 s" in text, text
+
+
+def test_leaving_the_kinematic_domain_fails_the_step_and_keeps_finite_outputs(built, load_fmu):
+    fmu = load_fmu(built[PLANT])
+    fmu.init(B0=1.5, dB0=200.0, force_limit=0.0)
+    with pytest.raises(FMICallException):
+        fmu.slave.doStep(0.0, 1e-3)
+    text = "\n".join(fmu.errors())
+    assert "|B| < pi/2" in text and "t = 0.001 s" in text, text
+    assert all(math.isfinite(v) for v in fmu.get(*OUTS))
