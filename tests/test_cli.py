@@ -1,0 +1,66 @@
+"""The tapmp command line: run, compare, plot, errors and exit codes (real FMUs)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from orchestrator.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
+
+
+def test_run_writes_results_run_info_and_metrics(built, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.02",
+                 "--no-progress"]) == 0
+    header = (out / "results.csv").read_text().splitlines()
+    assert len(header) == 202 and header[0].split(",")[:2] == ["time", "trajectory.X_d"]
+    assert "plant.q1_true" in header[0] and "controller.es3" in header[0]
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "completed" and run["ordering"] == "gauss-seidel" and run["step"] == 1e-4
+    assert set(run["guids"]) == {"trajectory", "controller", "plant"} and run["versions"]["fmpy"] == "0.3.32"
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert len(metrics["tracking_mae_um"]) == 3 and metrics["samples"] == 201
+    assert "tracking MAE [um]" in capsys.readouterr().out
+
+
+def test_existing_results_are_not_overwritten_without_flag(built, tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["run", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.001", "--no-progress"]
+    assert main(args) == 0
+    before = (out / "results.csv").read_text()
+    assert main(args + ["--set", "plant.k_pull=0"]) == 2
+    assert "already holds results" in capsys.readouterr().err
+    assert (out / "results.csv").read_text() == before
+    assert main(args + ["--overwrite"]) == 0
+
+
+def test_compare_writes_three_runs_comparison_and_figures(built, tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.05",
+                 "--no-progress"]) == 0
+    for run in ("sc-dc", "apd-dc", "apd-dc-matched"):
+        assert (out / run / "metrics.json").is_file()
+    text = (out / "comparison.md").read_text()
+    assert "paper: Table 1" in text and "| paper: SC-DC (proposed) | 3.160 |" in text
+    matched = json.loads((out / "apd-dc-matched" / "run.json").read_text())["scenario"]["gain_values"]
+    assert matched["Lambda_p"] == pytest.approx([0.36 * 900] * 3)
+    for fig in ("fig4_trajectory", "fig5_tracking_errors", "fig6_sync_errors", "fig7_axis_errors"):
+        assert (out / f"{fig}.png").stat().st_size > 10000
+    assert "ours: SC-DC (proposed)" in capsys.readouterr().out
+
+
+def test_bad_scenario_gives_one_line_and_exit_code_2(tmp_path, capsys):
+    assert main(["run", PAPER, "--set", "step=-1", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: step = -1.0 is invalid") and "Traceback" not in err
+
+
+@pytest.mark.parametrize("cmd", [[], ["build"], ["run"], ["compare"], ["plot"]])
+def test_every_command_has_help(cmd):
+    res = subprocess.run([sys.executable, "-m", "orchestrator", *cmd, "--help"], capture_output=True, text=True)
+    assert res.returncode == 0 and "usage: tapmp" in res.stdout
