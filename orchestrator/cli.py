@@ -78,6 +78,23 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def cmd_reproduce(args) -> int:
+    from .plots import plot
+    from .report import write_reproduction
+
+    tables = {}
+    for name in ("paper_simulation", "paper_experiment"):
+        scenario = load(Path(args.scenarios) / f"{name}.toml")
+        out = Path(args.results) / name
+        results = {run: _run_one(sc, Path(args.ssp), out / run, True, not args.no_progress, f"{name} {run}")
+                   for run, sc in compare_runs(scenario).items()}
+        plot(out)
+        tables[name] = (scenario, results)
+    write_reproduction(Path(args.out), tables, "tapmp reproduce " + " ".join(sys.argv[2:]))
+    print(f"wrote {args.out}")
+    return 0
+
+
 def cmd_plot(args) -> int:
     from .plots import plot
     for path in plot(Path(args.result_dir)):
@@ -115,6 +132,15 @@ def parser() -> argparse.ArgumentParser:
                        "stiffness; write comparison.md and figures and print the tables.")
     scenario_args(c)
     c.set_defaults(func=cmd_compare)
+    rp = sub.add_parser("reproduce", help="write docs/paper-reproduction.md",
+                        description="Run `compare` on both paper scenarios and write the paper-reproduction "
+                        "page: our Tables 1-6 beside the paper's and what differs.")
+    rp.add_argument("--out", default="docs/paper-reproduction.md", help="page to write")
+    rp.add_argument("--scenarios", default="scenarios", help="folder with paper_simulation.toml, paper_experiment.toml")
+    rp.add_argument("--results", default="results", help="folder for the runs (overwritten)")
+    rp.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
+    rp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    rp.set_defaults(func=cmd_reproduce)
     pl = sub.add_parser("plot", help="plot a run or a comparison",
                         description="Write the figures (cf. paper Fig. 4-7) of a result folder as PNG.")
     pl.add_argument("result_dir", help="a run folder or a comparison folder")
