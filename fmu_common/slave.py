@@ -10,11 +10,12 @@ the model; either way the instance logs one message at fmi2Error level (category
 logStatusError) naming the variable, the value, the time and what is allowed,
 and every later doStep is refused, so no NaN or stale value travels on.
 
-Nothing is ever raised out of this class on purpose: pythonfmu 0.7 turns a Python
-exception into fmi2Fatal and its exception path corrupts the interpreter (the host
-segfaults at garbage collection, reproduced here). Instead the error is logged and
-the FMU's binary, our shim in front of pythonfmu's (fmi2_status_shim.c), returns
-fmi2Error from the call during which the instance logged it.
+What status code the host sees is decided by pythonfmu 0.7's binary, not here: a
+refused doStep (do_step returns False) is reported as fmi2Discard. Nothing is ever
+raised out of this class on purpose: pythonfmu 0.7 turns a Python exception into
+fmi2Fatal and its exception path corrupts the interpreter (the host segfaults at
+garbage collection, reproduced here), so a refused setReal or initialization
+returns with the error logged and the next doStep fails.
 """
 
 import math

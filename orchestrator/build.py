@@ -3,15 +3,9 @@ write the SSP system TAPMP.ssp.
 
 pythonfmu 0.7 writes no units and no initial unknowns; :func:`complete_model_description`
 adds them from the variable tables in ``tapmp.interface`` (one source of truth).
-On Linux the FMU's binary is our status shim (fmu_common/fmi2_status_shim.c, compiled
-with the system C compiler) in front of pythonfmu's, which then ships as
-``<model>_pythonfmu.so``: pythonfmu alone cannot return fmi2Error.
 """
 
-import os
-import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 import zipfile
@@ -68,38 +62,13 @@ def complete_model_description(xml: bytes, model: str) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-SHIM_SOURCE = ROOT / "fmu_common" / "fmi2_status_shim.c"
-
-
-def compile_shim(out: Path) -> Path:
-    """Compile the fmi2 status shim into ``out`` (a .so) with the system C compiler."""
-    import fmpy
-
-    headers = Path(fmpy.__file__).parent / "c-code"
-    cc = os.environ.get("CC", "cc")
-    cmd = [cc, "-shared", "-fPIC", "-O2", f"-I{headers}", str(SHIM_SOURCE), "-o", str(out), "-ldl"]
-    try:
-        subprocess.run(cmd, check=True, capture_output=True, text=True)
-    except FileNotFoundError:
-        raise RuntimeError(f"no C compiler '{cc}' found: the FMU build needs one (set CC)") from None
-    except subprocess.CalledProcessError as err:
-        raise RuntimeError(f"compiling {SHIM_SOURCE} failed:\n{err.stderr}") from None
-    return out
-
-
-def _rewrite(fmu: Path, model: str, shim: Path | None) -> None:
-    """Complete modelDescription.xml and put the shim in front of pythonfmu's Linux binary."""
+def _rewrite_member(fmu: Path, member: str, transform) -> None:
+    """Replace one member of a zip archive by ``transform(old_bytes)``, atomically."""
     tmp = fmu.with_suffix(".tmp")
-    linux_bin = f"binaries/linux64/{model}.so"
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
         for item in src.infolist():
             data = src.read(item)
-            if item.filename == "modelDescription.xml":
-                data = complete_model_description(data, model)
-            elif item.filename == linux_bin and shim is not None:
-                dst.writestr(f"binaries/linux64/{model}_pythonfmu.so", data)
-                data = shim.read_bytes()
-            dst.writestr(item, data)
+            dst.writestr(item, transform(data) if item.filename == member else data)
     tmp.replace(fmu)
 
 
@@ -117,10 +86,10 @@ def build_fmu(model: str, out_dir: Path) -> Path:
             dest = Path(tmp) / pkg.name
             shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
             staged.append(dest)
-        fmu = Path(FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
-                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True))
-        shim = compile_shim(Path(tmp) / "shim.so") if platform.system() == "Linux" else None
-        _rewrite(fmu, model, shim)
+        fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
+                                   canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+    fmu = Path(fmu)
+    _rewrite_member(fmu, "modelDescription.xml", lambda b: complete_model_description(b, model))
     return fmu
 
 
