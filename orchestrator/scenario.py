@@ -41,6 +41,11 @@ _SECTION_PARAMS = {
 }
 
 
+def model_tuple(kind, table: dict):
+    """A tapmp parameter NamedTuple of ``kind`` with the values of ``table`` over its defaults."""
+    return kind(*(table.get(n, d) for n, d in zip(kind._fields, kind())))
+
+
 class ScenarioError(ValueError):
     """A scenario file or value is invalid; the message names the key and what is allowed."""
 
@@ -89,9 +94,7 @@ class Scenario:
         traj = dict(self.trajectory)
         plant = dict(self.plant)
         if self.start_on_trajectory:
-            tp = TrajectoryParams(*(traj.get(n, d) for n, d in zip(TrajectoryParams._fields,
-                                                                    TrajectoryParams())))
-            ref = reference(self.start_time, tp)
+            ref = reference(self.start_time, model_tuple(TrajectoryParams, traj))
             for name, value in zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), ref[:6]):
                 plant[name] = value
         ctrl = dict(self.controller)
@@ -148,13 +151,11 @@ def validate(s: Scenario) -> Scenario:
             if k not in allowed:
                 raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
-    def _model(table, kind):
-        return kind(*(table.get(n, d) for n, d in zip(kind._fields, kind())))
     checks = (("gain_overrides", lambda: s.gain_values().validated()),
-              ("controller", lambda: _model(s.controller, ModelParams).validated()),
-              ("plant", lambda: _model(s.plant, ModelParams).validated()),
-              ("plant", lambda: _model(s.plant, PlantConfig).validated()),
-              ("trajectory", lambda: _model(s.trajectory, TrajectoryParams).validated()))
+              ("controller", lambda: model_tuple(ModelParams, s.controller).validated()),
+              ("plant", lambda: model_tuple(ModelParams, s.plant).validated()),
+              ("plant", lambda: model_tuple(PlantConfig, s.plant).validated()),
+              ("trajectory", lambda: model_tuple(TrajectoryParams, s.trajectory).validated()))
     for section, check in checks:
         try:
             check()

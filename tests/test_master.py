@@ -9,7 +9,7 @@ import pytest
 
 from orchestrator.master import CoSimulation, CoSimulationError
 from orchestrator.results import run_scenario
-from orchestrator.scenario import load
+from orchestrator.scenario import load, model_tuple
 from tapmp.closed_loop import simulate
 from tapmp.control import ControllerModel
 from tapmp.params import ModelParams
@@ -25,14 +25,12 @@ def plain_loop(scenario):
     par = scenario.parameters()
     pl, ct, tr = par["plant"], par["controller"], par["trajectory"]
 
-    def pick(kind, table):
-        return kind(*(table.get(n, d) for n, d in zip(kind._fields, kind())))
-    plant = PlantModel(pick(ModelParams, pl), pick(PlantConfig, pl),
+    plant = PlantModel(model_tuple(ModelParams, pl), model_tuple(PlantConfig, pl),
                        tuple(pl[k] for k in ("X0", "Z0", "B0")), tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
-    ctrl = ControllerModel(pick(ModelParams, ct), scenario.gain_values(), ct["law"],
+    ctrl = ControllerModel(model_tuple(ModelParams, ct), scenario.gain_values(), ct["law"],
                            ct.get("velocity_source", 0), ct.get("force_limit", 0.0))
     rows = []
-    simulate(plant, ctrl, pick(TrajectoryParams, tr), scenario.start_time, scenario.n_steps, scenario.step,
+    simulate(plant, ctrl, model_tuple(TrajectoryParams, tr), scenario.start_time, scenario.n_steps, scenario.step,
              scenario.ordering, lambda t, ref, F, q, qt: rows.append((t, *F, *q, *qt)))
     return np.array(rows)
 
