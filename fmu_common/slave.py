@@ -1,51 +1,74 @@
-"""Shared FMI 2.0 co-simulation plumbing for the TAPMP FMUs, on top of pythonfmu.
+"""Shared FMI 2.0 co-simulation plumbing for the TAPMP FMUs.
 
 A model adapter subclasses :class:`TapmpSlave`, names its variable table (from
-``tapmp.interface``) and implements four hooks: ``setup_model`` (build the model
-from the parameters), ``step``, ``hidden_state`` and ``restore_hidden_state``.
+``tapmp.interface``) and implements the hooks ``setup_model`` (build the model from
+the parameters), ``step``, ``hidden_state`` and ``restore_hidden_state``.
 
-Bad input never reaches the model and never crashes the host: a non-finite value
-is refused by the setter, an invalid parameter or pose raises ModelInputError in
-the model; either way the instance logs one message at fmi2Error level (category
-logStatusError) naming the variable, the value, the time and what is allowed,
-and every later doStep is refused, so no NaN or stale value travels on.
+pythonfmu's ``Fmi2Slave`` is the base class so that ``pythonfmu build`` writes the
+modelDescription; at run time the FMU's own binary (``fmu_common/native``) drives the
+``fmi2_*`` methods below. Every variable's value lives in one of two arrays indexed by
+value reference, ``reals`` (float64) and ``ints`` (int32), which the binary reads and
+writes directly: getReal, getInteger and setReal of an input never enter Python. The
+adapters see the same values as attributes (``self.F1``), generated per variable.
 
-What status code the host sees is decided by pythonfmu 0.7's binary, not here: a
-refused doStep (do_step returns False) is reported as fmi2Discard. Nothing is ever
-raised out of this class on purpose: pythonfmu 0.7 turns a Python exception into
-fmi2Fatal and its exception path corrupts the interpreter (the host segfaults at
-garbage collection, reproduced here), so a refused setReal or initialization
-returns with the error logged and the next doStep fails.
+Bad input never reaches the model and never crashes the host: the call that receives it
+returns fmi2Error after logging one message (category logStatusError) naming the
+variable, the value, the time and what is allowed, and every later doStep is refused
+with fmi2Error too, so no NaN or stale value travels on. Nothing is raised to the binary
+on purpose; should a bug raise anyway, the binary logs it and returns fmi2Error.
 """
 
+import json
 import math
+from array import array
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
-from pythonfmu.enums import Fmi2Status
 
 from tapmp.errors import ModelInputError
 
-_HIDDEN = "__hidden__"
-_META = "__meta__"
+OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
+LOGS_PENDING = 8  # or-ed into a returned status when log records wait in the queue
+# Variable kinds, one byte per value reference, for the binary.
+KIND = {("Real", "input"): "i", ("Real", "parameter"): "p", ("Real", "output"): "o",
+        ("Integer", "parameter"): "I"}
+# Modes of the FMI 2.0 co-simulation state machine that matter for setting values.
+INSTANTIATED, INITIALIZATION, STEPPING, TERMINATED = "instantiated", "initialization", "step", "terminated"
+
+
+def _real(vr):
+    return property(lambda self: self.reals[vr], lambda self, x: self.reals.__setitem__(vr, x))
+
+
+def _integer(vr):
+    return property(lambda self: self.ints[vr], lambda self, x: self.ints.__setitem__(vr, x))
 
 
 class TapmpSlave(Fmi2Slave):
-    """Maps a ``tapmp.interface`` variable table onto attributes and the model hooks."""
+    """Maps a ``tapmp.interface`` variable table onto value arrays and the model hooks."""
 
     VARIABLES = ()
     author = "TAPMP co-simulation project"
     license = "MIT"
 
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        for vr, v in enumerate(cls.VARIABLES):  # value reference = index in the table
+            setattr(cls, v.name, _real(vr) if v.type == "Real" else _integer(vr))
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        table = self.VARIABLES
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=2.5, step_size=1e-4)
-        self.time = 0.0
-        self.error = None       # first error message; the instance refuses to step after it
-        self.retune = False     # a tunable parameter changed since the last step
-        self._names = []
-        for v in self.VARIABLES:
-            setattr(self, v.name, v.start)
+        self.reals = array("d", [float(v.start) if v.type == "Real" else 0.0 for v in table])
+        self.ints = array("i", [int(v.start) if v.type == "Integer" else 0 for v in table])
+        self.kinds = "".join(KIND[v.type, v.causality] for v in table).encode()
+        self._names = [v.name for v in table]
+        self._tunable = frozenset(i for i, v in enumerate(table) if v.variability == "tunable")
+        self._records = []
+        self.logging_on = False
+        self._clear()
+        for v in table:
             kind = Real if v.type == "Real" else Integer
             kw = {"causality": Fmi2Causality[v.causality], "description": v.description}
             if v.causality == "parameter":
@@ -55,8 +78,12 @@ class TapmpSlave(Fmi2Slave):
             else:
                 kw["variability"] = Fmi2Variability.discrete
             self.register_variable(kind(v.name, **kw))
-            self._names.append(v.name)
-        self._tunable = {i for i, v in enumerate(self.VARIABLES) if v.variability == "tunable"}
+
+    def _clear(self):
+        self.time = 0.0
+        self.mode = INSTANTIATED
+        self.error = None       # first error message; the instance refuses to step after it
+        self.retune = False     # a tunable parameter changed since the last step
 
     # --- hooks for the model adapters -------------------------------------------
     def setup_model(self) -> None:
@@ -77,82 +104,147 @@ class TapmpSlave(Fmi2Slave):
     def restore_hidden_state(self, hidden) -> None:
         """Inverse of :meth:`hidden_state`; called after the variables are restored."""
 
-    # --- error reporting -----------------------------------------------------------
-    def fail(self, err: Exception, t: float) -> None:
-        """Log ``err`` at fmi2Error level, with the time, and refuse further steps."""
+    # --- logging and errors ----------------------------------------------------------
+    def log(self, msg: str, status=OK, category: str = "logAll", debug: bool = False):
+        """Queue a log record for the FMI logger (errors always reach it)."""
+        self._records.append((int(status), category, str(msg)))
+
+    def _status(self, status: int) -> int:
+        return status | LOGS_PENDING if self._records else status
+
+    def fmi2_take_logs(self):
+        records, self._records = self._records, []
+        return records
+
+    def fail(self, err: Exception, t: float) -> int:
+        """Log ``err`` at fmi2Error level, with the time, refuse further steps; fmi2Error."""
         msg = str(err)
         if isinstance(err, ModelInputError) and err.time is None:
             msg = f"{msg} (at t = {t:.6g} s)"
-        self.log(msg, Fmi2Status.error, "logStatusError")
+        self.log(msg, ERROR, "logStatusError")
         if self.error is None:
             self.error = msg
+        return self._status(ERROR)
 
-    def _guard(self, action, t: float) -> bool:
+    def _guard(self, action) -> int:
         try:
             action()
         except ModelInputError as err:
-            self.fail(err, t)
-            return False
-        return True
+            return self.fail(err, self.time)
+        return self._status(OK)
 
-    # --- FMI entry points ----------------------------------------------------------
-    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+    # --- FMI entry points, called by the binary; each returns a status code -----------
+    def fmi2_setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        if not math.isfinite(start_time):
+            return self.fail(ModelInputError("startTime", start_time, "a finite number"), 0.0)
         self.time = float(start_time)
+        return self._status(OK)
 
-    def enter_initialization_mode(self):
-        self._guard(self.setup_model, self.time)
+    def fmi2_enter_initialization_mode(self):
+        self.mode = INITIALIZATION
+        return self._guard(self.setup_model) if self.error is None else self._status(ERROR)
 
-    def exit_initialization_mode(self):
-        if self.error is None and self._guard(self.setup_model, self.time):
-            self._guard(self.initial_outputs, self.time)
+    def fmi2_exit_initialization_mode(self):
+        self.mode = STEPPING
         self.retune = False
+        if self.error is not None:
+            return self._status(ERROR)
 
-    def do_step(self, current_time, step_size):
+        def init():
+            self.setup_model()
+            self.initial_outputs()
+        return self._guard(init)
+
+    def fmi2_do_step(self, current_time, step_size):
         if self.error is not None:
             self.log(f"doStep at t = {current_time:.6g} s refused after "
-                     f"an earlier error: {self.error}", Fmi2Status.error, "logStatusError")
-            return False
+                     f"an earlier error: {self.error}", ERROR, "logStatusError")
+            return self._status(ERROR)
         if not (math.isfinite(step_size) and step_size > 0.0):
-            self.fail(ModelInputError("communicationStepSize", step_size, "a finite number > 0"),
-                      current_time)
-            return False
-        if not self._guard(lambda: self.step(current_time, step_size), current_time):
-            return False
+            return self.fail(ModelInputError("communicationStepSize", step_size, "a finite number > 0"),
+                             current_time)
+        try:
+            self.step(current_time, step_size)
+        except ModelInputError as err:
+            return self.fail(err, current_time)
         self.time = current_time + step_size
-        return True
+        return LOGS_PENDING if self._records else OK
 
-    def set_real(self, vrs, values):
-        for vr, value in zip(vrs, values):
-            if not math.isfinite(value):  # refused: the previous value stays
-                self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
-                continue
-            setattr(self, self._names[vr], value)
-            if vr in self._tunable:
-                self.retune = True
+    def fmi2_terminate(self):
+        self.mode = TERMINATED
+        return self._status(OK)
 
-    def set_integer(self, vrs, values):
-        for vr, value in zip(vrs, values):
-            setattr(self, self._names[vr], int(value))
-            if vr in self._tunable:
-                self.retune = True
+    def fmi2_reset(self):
+        for vr, v in enumerate(self.VARIABLES):
+            if v.type == "Real":
+                self.reals[vr] = float(v.start)
+            else:
+                self.ints[vr] = int(v.start)
+        self._clear()
+        self.restore_hidden_state(None)
+        return self._status(OK)
 
+    def _settable(self, vr, value) -> int:
+        """OK if variable vr may be set now, else the logged error."""
+        v = self.VARIABLES[vr]
+        if v.causality == "output":
+            return self.fail(ModelInputError(v.name, value, "no value: it is an output"), self.time)
+        if v.variability == "fixed" and self.mode not in (INSTANTIATED, INITIALIZATION):
+            return self.fail(ModelInputError(v.name, value, "no change after initialization: "
+                                             "it is a fixed parameter"), self.time)
+        return OK
+
+    def fmi2_reject_input(self, vr, value):
+        return self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
+
+    def fmi2_set_real(self, vr, value):
+        status = self._settable(vr, value)
+        if status != OK:
+            return status
+        if not math.isfinite(value):  # refused: the previous value stays
+            return self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
+        self.reals[vr] = value
+        self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
+        return self._status(OK)
+
+    def fmi2_set_integer(self, vr, value):
+        status = self._settable(vr, value)
+        if status != OK:
+            return status
+        self.ints[vr] = value
+        self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
+        return self._status(OK)
+
+    # --- FMU state: all values plus the model's hidden state ---------------------------
+    def fmi2_get_state(self):
+        return (self.reals.tolist(), self.ints.tolist(),
+                [self.time, self.mode, self.error, self.retune], self.hidden_state())
+
+    def fmi2_set_state(self, state):
+        reals, ints, meta, hidden = state
+        self.reals[:] = array("d", reals)  # in place: the binary holds these buffers
+        self.ints[:] = array("i", ints)
+        self.time, self.mode, self.error, self.retune = meta
+        self.restore_hidden_state(hidden)
+        return self._status(OK)
+
+    def fmi2_serialize(self, state) -> bytes:
+        # json keeps floats exact (shortest repr round-trips) and, unlike pickle, is safe to load.
+        return json.dumps({"model": type(self).__name__, "state": state}).encode()
+
+    def fmi2_deserialize(self, data: bytes):
+        doc = json.loads(data.decode())
+        if doc.get("model") != type(self).__name__:
+            raise ValueError(f"serialized FMU state of {doc.get('model')!r}, "
+                             f"not of {type(self).__name__!r}")
+        return tuple(doc["state"])
+
+    # --- pythonfmu's Python-level accessors (used by `pythonfmu build` for start values) -
     def get_real(self, vrs):
-        names = self._names
-        return [float(getattr(self, names[vr])) for vr in vrs]
+        return [self.reals[vr] for vr in vrs]
 
     def get_integer(self, vrs):
-        names = self._names
-        return [int(getattr(self, names[vr])) for vr in vrs]
+        return [self.ints[vr] for vr in vrs]
 
-    # --- FMU state: registered variables plus the model's hidden state -------------
-    def _get_fmu_state(self):
-        state = {name: getattr(self, name) for name in self._names}
-        state[_META] = [self.time, self.error, self.retune]
-        state[_HIDDEN] = self.hidden_state()
-        return state
-
-    def _set_fmu_state(self, state):
-        for name in self._names:
-            setattr(self, name, state[name])
-        self.time, self.error, self.retune = state[_META]
-        self.restore_hidden_state(state[_HIDDEN])
+    def do_step(self, current_time, step_size):
+        return self.fmi2_do_step(current_time, step_size) & 7 == OK

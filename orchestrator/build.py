@@ -1,12 +1,21 @@
-"""Build the TAPMP FMUs with pythonfmu, complete their modelDescription.xml, and
-write the SSP system TAPMP.ssp.
+"""Build the TAPMP FMUs with pythonfmu, complete their modelDescription.xml, give them
+their own binary, and write the SSP system TAPMP.ssp.
 
 pythonfmu 0.7 writes no units and no initial unknowns; :func:`complete_model_description`
 adds them from the variable tables in ``tapmp.interface`` (one source of truth).
+
+pythonfmu 0.7's binary cannot return fmi2Error (a Python exception becomes fmi2Fatal and
+corrupts the host interpreter), needs libpython already in the host process, and costs
+a Python call per getReal/setReal. So the FMUs ship the binary in ``fmu_common/native``
+instead, compiled here with the C compiler ($CC, default gcc): see :func:`compile_binaries`.
 """
 
+import os
 import shutil
+import site
+import subprocess
 import sys
+import sysconfig
 import tempfile
 import zipfile
 from pathlib import Path
@@ -21,6 +30,10 @@ SCRIPTS = {
     TRAJECTORY: ROOT / "fmu_controller" / "TAPMP_Trajectory.py",
 }
 BUNDLED_PACKAGES = (ROOT / "tapmp", ROOT / "fmu_common")
+NATIVE = ROOT / "fmu_common" / "native"
+PLATFORM = "linux64"
+BINDING = "tapmp_fmi2_python.so"     # name the front binary loads (fmi2_front.c BACKEND)
+PYTHON_ENV = "python-env.txt"        # read by both binaries (python_env.h)
 DEFAULT_BUILD_DIR = ROOT / "build"
 SSP_NAME = "TAPMP.ssp"
 
@@ -62,18 +75,84 @@ def complete_model_description(xml: bytes, model: str) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def _rewrite_member(fmu: Path, member: str, transform) -> None:
-    """Replace one member of a zip archive by ``transform(old_bytes)``, atomically."""
+class BuildError(RuntimeError):
+    """Building an FMU failed; the message says which step and why."""
+
+
+def python_env() -> str:
+    """The python-env.txt text: the Python an FMU starts when its host has none.
+
+    Records this interpreter's shared libpython, its prefix (home) and the
+    site-packages that hold numpy, so a C host on this machine needs nothing else.
+    """
+    lines = ["# Python used by this FMU when the host process has none (written at build time).",
+             "# Edit for another machine, or set TAPMP_LIBPYTHON / PYTHONHOME / PYTHONPATH."]
+    libdir, soname = sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME")
+    candidates = [Path(libdir or "", soname or ""),
+                  Path(sysconfig.get_config_var("LIBPL") or "", soname or ""),
+                  Path("/usr/lib", sysconfig.get_config_var("MULTIARCH") or "", soname or "")]
+    lib = next((p for p in candidates if soname and ".so" in soname and p.is_file()), None)
+    lines.append(f"libpython={lib}" if lib else
+                 f"# no shared libpython found for {sys.executable}: set TAPMP_LIBPYTHON")
+    lines.append(f"home={sys.base_prefix}")
+    import numpy
+    paths = [*site.getsitepackages(), str(Path(numpy.__file__).resolve().parent.parent)]
+    lines += [f"path={p}" for p in dict.fromkeys(paths)]
+    return "\n".join(lines) + "\n"
+
+
+def _compile(cc: str, args: list[str]) -> None:
+    try:
+        proc = subprocess.run([cc, *args], capture_output=True, text=True)
+    except FileNotFoundError:
+        raise BuildError(f"C compiler {cc!r} not found: the FMU binaries are compiled at build "
+                         "time; install gcc or set CC") from None
+    if proc.returncode != 0:
+        raise BuildError(f"compiling the FMU binary failed ({cc} {' '.join(args)}):\n{proc.stderr}")
+
+
+def compile_binaries(dest: Path) -> tuple[Path, Path]:
+    """Compile the FMI front (no Python dependency) and the Python binding into dest.
+
+    Returns (front, binding). The binding is built against this interpreter's headers
+    and deliberately not linked to libpython: in a Python host it uses the host's, in a
+    C host the front loads the recorded one first (RTLD_GLOBAL).
+    """
+    import fmpy
+
+    cc = os.environ.get("CC", "gcc")
+    fmi_headers = Path(fmpy.__file__).parent / "c-code"
+    common = ["-shared", "-fPIC", "-O2", "-Wall", "-fvisibility=hidden", f"-I{fmi_headers}",
+              f"-I{NATIVE}"]
+    front, binding = dest / "front.so", dest / BINDING
+    # The front's fmi2 functions are its only exports (default visibility in fmi2Functions.h).
+    _compile(cc, [*common, "-o", str(front), str(NATIVE / "fmi2_front.c"), "-ldl", "-lpthread"])
+    _compile(cc, [*common, f"-I{sysconfig.get_paths()['include']}", "-Wl,-z,nodelete",
+                  "-o", str(binding), str(NATIVE / "fmi2_python.c"), "-lpthread"])
+    return front, binding
+
+
+def _rewrite_fmu(fmu: Path, transform: dict, add: dict) -> None:
+    """Rewrite a zip archive atomically: members in ``transform`` map old bytes to new,
+    pythonfmu's binaries are dropped, and ``add`` (name -> bytes) is appended."""
     tmp = fmu.with_suffix(".tmp")
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
         for item in src.infolist():
+            if item.filename.startswith("binaries/") or item.filename in add:
+                continue
             data = src.read(item)
-            dst.writestr(item, transform(data) if item.filename == member else data)
+            dst.writestr(item, transform[item.filename](data) if item.filename in transform else data)
+        for name, data in add.items():
+            info = zipfile.ZipInfo(name, date_time=(2024, 1, 1, 0, 0, 0))
+            info.external_attr = 0o755 << 16
+            info.compress_type = zipfile.ZIP_DEFLATED
+            dst.writestr(info, data)
     tmp.replace(fmu)
 
 
-def build_fmu(model: str, out_dir: Path) -> Path:
-    """Build one FMU into out_dir with pythonfmu and complete its modelDescription."""
+def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = None) -> Path:
+    """Build one FMU into out_dir with pythonfmu, complete its modelDescription and
+    install the binaries from :func:`compile_binaries` (compiled here if not given)."""
     from pythonfmu import FmuBuilder
 
     script = SCRIPTS[model]
@@ -84,12 +163,18 @@ def build_fmu(model: str, out_dir: Path) -> Path:
         staged = []
         for pkg in BUNDLED_PACKAGES:
             dest = Path(tmp) / pkg.name
-            shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "native"))
             staged.append(dest)
         fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True)
-    fmu = Path(fmu)
-    _rewrite_member(fmu, "modelDescription.xml", lambda b: complete_model_description(b, model))
+        if binaries is None:
+            binaries = compile_binaries(Path(tmp))
+        fmu = Path(fmu)
+        front, binding = binaries
+        where = f"binaries/{PLATFORM}/"
+        _rewrite_fmu(fmu, {"modelDescription.xml": lambda b: complete_model_description(b, model)},
+                     {f"{where}{model}.so": front.read_bytes(), f"{where}{BINDING}": binding.read_bytes(),
+                      f"{where}{PYTHON_ENV}": python_env().encode()})
     return fmu
 
 
@@ -100,9 +185,11 @@ def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {}
-    for model in (PLANT, CONTROLLER, TRAJECTORY):
-        paths[model] = build_fmu(model, out_dir)
-        log(f"built {paths[model]}")
+    with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:
+        binaries = compile_binaries(Path(tmp))
+        for model in (PLANT, CONTROLLER, TRAJECTORY):
+            paths[model] = build_fmu(model, out_dir, binaries)
+            log(f"built {paths[model]}")
     paths["ssp"] = write_ssp(out_dir / SSP_NAME, paths)
     log(f"wrote {paths['ssp']}")
     return paths

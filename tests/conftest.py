@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.logging import addLoggerProxy
@@ -57,6 +58,16 @@ class LoadedFMU:
         self.slave.enterInitializationMode()
         self.slave.exitInitializationMode()
 
+    def statuses(self, **values):
+        """Set values, initialize and do one step; the fmi2Status of each call, in order
+        (fmpy raises FMICallException for a status above fmi2Warning)."""
+        calls = {"set": lambda: self.set(**values),
+                 "setupExperiment": lambda: self.slave.setupExperiment(startTime=0.0),
+                 "enterInitializationMode": self.slave.enterInitializationMode,
+                 "exitInitializationMode": self.slave.exitInitializationMode,
+                 "doStep": lambda: self.slave.doStep(0.0, 1e-4)}
+        return {name: call_status(call) for name, call in calls.items()}
+
     def errors(self):
         return [m for s, m in self.messages if s >= 3]
 
@@ -66,6 +77,15 @@ class LoadedFMU:
         except Exception:
             pass
         self.slave.freeInstance()
+
+
+def call_status(call) -> int:
+    """The fmi2Status of an fmpy call: 0 (or 1) if it returned, else the raised status."""
+    try:
+        call()
+    except FMICallException as err:
+        return err.status
+    return 0
 
 
 @pytest.fixture

@@ -3,7 +3,6 @@
 import math
 
 import pytest
-from fmpy.fmi1 import FMICallException
 
 from tapmp.control import ControllerModel, Gains
 from tapmp.interface import CONTROLLER, TRAJECTORY
@@ -78,21 +77,20 @@ def test_retuned_gain_takes_effect_at_the_next_sample(built, load_fmu):
     assert u_after - u_before == pytest.approx((1000.0 - 300.0) * e1, rel=1e-9)
 
 
-@pytest.mark.parametrize("name,value,allowed", [
-    ("K_T2", 0.0, "K_T2 = 0.0 is invalid: allowed is a finite number > 0"),
-    ("Lambda_v1", -1.0, "Lambda_v1 = -1.0 is invalid: allowed is a finite number >= 0"),
-    ("law", 3, "law = 3 is invalid: allowed is 0 (SC-DC) or 1 (APD-DC)"),
-    ("velocity_source", -1, "velocity_source = -1 is invalid"),
-    ("q2", 0.06, "allowed is |value| < 1"),
-    ("dq3", float("inf"), "dq3 = inf at t = 0 s is invalid: allowed is a finite number")])
-def test_bad_input_is_an_error_with_a_clear_message(built, load_fmu, name, value, allowed):
+@pytest.mark.parametrize("name,value,fails_in,allowed", [
+    ("K_T2", 0.0, "enterInitializationMode", "K_T2 = 0.0 is invalid: allowed is a finite number > 0"),
+    ("Lambda_v1", -1.0, "enterInitializationMode",
+     "Lambda_v1 = -1.0 is invalid: allowed is a finite number >= 0"),
+    ("law", 3, "enterInitializationMode", "law = 3 is invalid: allowed is 0 (SC-DC) or 1 (APD-DC)"),
+    ("velocity_source", -1, "enterInitializationMode", "velocity_source = -1 is invalid"),
+    ("q2", 0.06, "exitInitializationMode", "allowed is |value| < 1"),
+    ("dq3", float("inf"), "set", "dq3 = inf at t = 0 s is invalid: allowed is a finite number")])
+def test_bad_input_is_fmi2Error_at_the_call_that_receives_it(built, load_fmu, name, value, fails_in, allowed):
     fmu = load_fmu(built[CONTROLLER])
-    fmu.set(**{name: value})
-    fmu.slave.setupExperiment(startTime=0.0)
-    fmu.slave.enterInitializationMode()
-    fmu.slave.exitInitializationMode()
-    with pytest.raises(FMICallException):
-        fmu.slave.doStep(0.0, 1e-4)
+    statuses = fmu.statuses(**{name: value})
+    first = next(call for call, status in statuses.items() if status != 0)
+    assert (first, statuses[first]) == (fails_in, 3), statuses
+    assert statuses["doStep"] == 3, statuses  # and the instance refuses to go on
     text = "\n".join(fmu.errors())
     assert allowed in text and "t = 0 s" in text, text
     assert all(math.isfinite(v) for v in fmu.get(*OUTS))
