@@ -76,6 +76,7 @@ class PlantModel:
         q1, q2, q3 = inverse(pose0[0], pose0[1], pose0[2], self.p.L_1)
         self.gap12_0 = q2 - q1
         self.gap23_0 = q3 - q2
+        self._rhs = self._make_rhs()
 
     def joint_forces(self, F1: float, F2: float, F3: float, q, dq) -> tuple[float, float, float]:
         """Net force on each mover [N]: saturated command - friction + pulling."""
@@ -115,23 +116,97 @@ class PlantModel:
         Raises ModelInputError for non-finite forces and KinematicDomainError when the
         pose leaves |B| < pi/2 or the state stops being finite.
         """
-        for name, v in (("F1", F1), ("F2", F2), ("F3", F3)):
-            require_finite(name, v, t)
+        if not (math.isfinite(F1) and math.isfinite(F2) and math.isfinite(F3)):
+            for name, v in (("F1", F1), ("F2", F2), ("F3", F3)):
+                require_finite(name, v, t)
+        lim = self.cfg.force_limit
+        if lim > 0.0:  # the held command saturates once; joint_forces would redo it per stage
+            F1 = min(max(F1, -lim), lim)
+            F2 = min(max(F2, -lim), lim)
+            F3 = min(max(F3, -lim), lim)
         n = self.cfg.substeps
         dt = h / n
-        s = self.state
-        f = self.derivatives
-        for _ in range(n):
-            k1 = f(s, F1, F2, F3)
-            k2 = f([a + 0.5 * dt * b for a, b in zip(s, k1)], F1, F2, F3)
-            k3 = f([a + 0.5 * dt * b for a, b in zip(s, k2)], F1, F2, F3)
-            k4 = f([a + dt * b for a, b in zip(s, k3)], F1, F2, F3)
-            s = [a + dt / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
-                 for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4)]
-        if not (abs(s[2]) < HALF_PI and all(map(math.isfinite, s))):
+        hdt = 0.5 * dt
+        dt6 = dt / 6.0
+        f = self._rhs
+        X, Z, B, dX, dZ, dB = self.state
+        for _ in range(n):  # classic RK4, unrolled on scalars (no per-stage lists)
+            k1 = f(X, Z, B, dX, dZ, dB, F1, F2, F3)
+            k2 = f(X + hdt * k1[0], Z + hdt * k1[1], B + hdt * k1[2],
+                   dX + hdt * k1[3], dZ + hdt * k1[4], dB + hdt * k1[5], F1, F2, F3)
+            k3 = f(X + hdt * k2[0], Z + hdt * k2[1], B + hdt * k2[2],
+                   dX + hdt * k2[3], dZ + hdt * k2[4], dB + hdt * k2[5], F1, F2, F3)
+            k4 = f(X + dt * k3[0], Z + dt * k3[1], B + dt * k3[2],
+                   dX + dt * k3[3], dZ + dt * k3[4], dB + dt * k3[5], F1, F2, F3)
+            X = X + dt6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+            Z = Z + dt6 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+            B = B + dt6 * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+            dX = dX + dt6 * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+            dZ = dZ + dt6 * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+            dB = dB + dt6 * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+        s = [X, Z, B, dX, dZ, dB]
+        if not (abs(B) < HALF_PI and math.isfinite(X + Z + dX + dZ + dB)):
             raise KinematicDomainError("plant state (X, Z, B, dX, dZ, dB)", tuple(s),
                                        "finite values with |B| < pi/2 rad", t + h)
         self.state = s
+
+    def _make_rhs(self):
+        """The right-hand side of :meth:`derivatives` fused into one closure on scalars.
+
+        Profiled: the composed version (inverse, joint_velocity, joint_forces,
+        task_acceleration) evaluates cos/sin six times and builds a dozen tuples per
+        call, two thirds of the plant's step time. This computes the same expressions
+        in the same order, with forces already saturated, so results are bit-identical
+        (tests/test_plant_model.py checks it against :meth:`derivatives`).
+        """
+        p, c = self.p, self.cfg
+        L1, m1, m3, mpg = p.L_1, p.m_1, p.m_3, p.m_p * p.g
+        M11 = p.m_p + p.m_1 + p.m_2 + p.m_3
+        M12 = S3 * (m1 - m3)
+        M22 = p.m_p + (m1 + m3) / 3.0
+        I_y = p.I_y
+        cv1, cv2, cv3, Fc1, Fc2, Fc3, vs = c.c_v1, c.c_v2, c.c_v3, c.F_c1, c.F_c2, c.F_c3, c.v_s
+        k_pull, g12, g23 = c.k_pull, self.gap12_0, self.gap23_0
+        cos, sin, tanh = math.cos, math.sin, math.tanh
+
+        def rhs(X, Z, B, dX, dZ, dB, F1, F2, F3):
+            cB = cos(B)
+            sB = sin(B)
+            a1 = L1 * (S3 * cB + sB)                     # rotation_column (Eq. 4)
+            a3 = L1 * (S3 * cB - sB)
+            dq1 = dX + S3 * dZ + a1 * dB                 # joint_velocity (Eq. 3)
+            dq3 = dX - S3 * dZ + a3 * dB
+            F1 -= cv1 * dq1 + Fc1 * tanh(dq1 / vs)       # joint_forces: friction
+            F2 -= cv2 * dX + Fc2 * tanh(dX / vs)
+            F3 -= cv3 * dq3 + Fc3 * tanh(dq3 / vs)
+            if k_pull:                                   # joint_forces: mutual pulling
+                q1 = X + S3 * Z + L1 * (1.0 - cB + S3 * sB)   # inverse (Eq. 2)
+                q3 = X - S3 * Z - L1 * (1.0 - cB - S3 * sB)
+                p12 = k_pull * (X - q1 - g12)
+                p23 = k_pull * (q3 - X - g23)
+                F1 += p12
+                F2 += p23 - p12
+                F3 -= p23
+            d1 = L1 * (cB - S3 * sB)                     # rotation_column_dB
+            d3 = -L1 * (S3 * sB + cB)
+            w1 = m1 * d1 * dB * dB                       # coriolis_times (C xd)
+            w3 = m3 * d3 * dB * dB
+            r1 = F1 + F2 + F3 - (w1 + w3)                # J^T F - C xd - G (Eq. 11, 14)
+            r2 = S3 * (F1 - F3) - S3 * (w1 - w3) - mpg
+            r3 = a1 * F1 + a3 * F3 - (a1 * w1 + a3 * w3)
+            M13 = m1 * a1 + m3 * a3                      # mass_matrix (exact, Eq. 12)
+            M23 = S3 * (m1 * a1 - m3 * a3)
+            M33 = I_y + m1 * a1 * a1 + m3 * a3 * a3
+            A11 = M22 * M33 - M23 * M23                  # solve_sym3 (adjugate)
+            A12 = M13 * M23 - M12 * M33
+            A13 = M12 * M23 - M13 * M22
+            A22 = M11 * M33 - M13 * M13
+            A23 = M12 * M13 - M11 * M23
+            A33 = M11 * M22 - M12 * M12
+            det = M11 * A11 + M12 * A12 + M13 * A13
+            return (dX, dZ, dB, (A11 * r1 + A12 * r2 + A13 * r3) / det,
+                    (A12 * r1 + A22 * r2 + A23 * r3) / det, (A13 * r1 + A23 * r2 + A33 * r3) / det)
+        return rhs
 
     def joint_positions(self) -> tuple[float, float, float]:
         """True motor positions q [m] (Eq. 2)."""
