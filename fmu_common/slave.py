@@ -85,6 +85,23 @@ class TapmpSlave(Fmi2Slave):
         self.error = None       # first error message; the instance refuses to step after it
         self.retune = False     # a tunable parameter changed since the last step
 
+    @classmethod
+    def block(cls, first: str, count: int) -> slice:
+        """Slice of ``reals`` for ``count`` variables stored contiguously from ``first``.
+
+        The adapters read inputs and publish outputs as blocks (one C-level copy
+        instead of a property call per variable); this checks the layout once.
+        """
+        names = [v.name for v in cls.VARIABLES]
+        start = names.index(first)
+        if any(v.type != "Real" for v in cls.VARIABLES[start:start + count]) or start + count > len(names):
+            raise ValueError(f"{count} Real variables from {first} are not contiguous in {cls.__name__}")
+        return slice(start, start + count)
+
+    def publish_block(self, where: slice, values) -> None:
+        """Write ``values`` (a sequence of floats) to the variables of ``where``."""
+        self.reals[where] = array("d", values)
+
     # --- hooks for the model adapters -------------------------------------------
     def setup_model(self) -> None:
         """Build the model from the current parameter values and publish outputs."""

@@ -29,14 +29,9 @@ class TAPMP_Controller(TapmpSlave):
         self.model = self._build()
 
     def _sample(self, t, h, advance):
-        ref = (self.X_d, self.Z_d, self.B_d, self.dX_d, self.dZ_d, self.dB_d,
-               self.ddX_d, self.ddZ_d, self.ddB_d)
-        F, u, e, es = self.model.sample(t, h, ref, (self.q1, self.q2, self.q3),
-                                        (self.dq1, self.dq2, self.dq3), advance)
-        self.F1, self.F2, self.F3 = F
-        self.u1, self.u2, self.u3 = u
-        self.e1, self.e2, self.e3 = e
-        self.es1, self.es2, self.es3 = es
+        r = self.reals
+        F, u, e, es = self.model.sample(t, h, r[_REF], r[_Q], r[_DQ], advance)
+        self.publish_block(_OUTPUTS, (*F, *u, *e, *es))
 
     def initial_outputs(self):
         self._sample(self.time, 0.0, advance=False)
@@ -62,3 +57,9 @@ class TAPMP_Controller(TapmpSlave):
         self.model = self._build()
         self.model.integral = [float(v) for v in hidden[0]]
         self.model.q_prev = None if hidden[1] is None else tuple(float(v) for v in hidden[1])
+
+
+_REF = TAPMP_Controller.block("X_d", 9)     # X_d, Z_d, B_d and their rates and accelerations
+_Q = TAPMP_Controller.block("q1", 3)
+_DQ = TAPMP_Controller.block("dq1", 3)
+_OUTPUTS = TAPMP_Controller.block("F1", 12)  # F1..F3, u1..u3, e1..e3, es1..es3

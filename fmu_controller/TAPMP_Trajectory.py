@@ -6,8 +6,6 @@ from tapmp.interface import TRAJECTORY_VARS
 from tapmp.kinematics import inverse
 from tapmp.trajectory import TrajectoryParams, reference
 
-_OUT = tuple(v.name for v in TRAJECTORY_VARS[:9])
-
 
 class TAPMP_Trajectory(TapmpSlave):
     """Reference of the paper: XZ circle and B sinusoid, analytic to 2nd order,
@@ -31,9 +29,7 @@ class TAPMP_Trajectory(TapmpSlave):
 
     def publish(self, t):
         ref = reference(t, self.params)
-        for name, value in zip(_OUT, ref):
-            setattr(self, name, value)
-        self.q1_d, self.q2_d, self.q3_d = inverse(ref[0], ref[1], ref[2], self.L_1)
+        self.publish_block(_OUTPUTS, (*ref, *inverse(ref[0], ref[1], ref[2], self.L_1)))
 
     def hidden_state(self):
         return None if self.params is None else True
@@ -41,3 +37,6 @@ class TAPMP_Trajectory(TapmpSlave):
     def restore_hidden_state(self, hidden):
         if hidden:
             self.params = TrajectoryParams(*(getattr(self, n) for n in TrajectoryParams._fields))
+
+
+_OUTPUTS = TAPMP_Trajectory.block("X_d", 12)  # the reference (9 values), then q1_d..q3_d

@@ -26,15 +26,14 @@ class TAPMP_Plant(TapmpSlave):
         self.publish()
 
     def step(self, t, h):
-        self.model.step(t, h, self.F1, self.F2, self.F3)
+        F1, F2, F3 = self.reals[_FORCES]
+        self.model.step(t, h, F1, F2, F3)
         self.publish()
 
     def publish(self):
         m = self.model
-        self.q1, self.q2, self.q3 = m.measured_positions()
-        self.q1_true, self.q2_true, self.q3_true = m.joint_positions()
-        self.dq1, self.dq2, self.dq3 = m.joint_velocities()
-        self.X, self.Z, self.B, self.dX, self.dZ, self.dB = m.state
+        self.publish_block(_OUTPUTS, (*m.measured_positions(), *m.joint_positions(),
+                                      *m.joint_velocities(), *m.state))
 
     def hidden_state(self):
         return None if self.model is None else list(self.model.state)
@@ -46,3 +45,8 @@ class TAPMP_Plant(TapmpSlave):
         self.setup_model()
         self.model.state = [float(v) for v in hidden]
         self.publish()
+
+
+_FORCES = TAPMP_Plant.block("F1", 3)
+# q1..q3 (measured), q1_true..q3_true, dq1..dq3, X, Z, B, dX, dZ, dB, in table order
+_OUTPUTS = TAPMP_Plant.block("q1", 15)
