@@ -150,12 +150,15 @@ def _rewrite_fmu(fmu: Path, transform: dict, add: dict) -> None:
     tmp.replace(fmu)
 
 
-def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = None) -> Path:
+def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = None,
+              script: Path | None = None) -> Path:
     """Build one FMU into out_dir with pythonfmu, complete its modelDescription and
-    install the binaries from :func:`compile_binaries` (compiled here if not given)."""
+    install the binaries from :func:`compile_binaries` (compiled here if not given).
+
+    ``script`` replaces the model's adapter (the benchmark's pass-through FMUs)."""
     from pythonfmu import FmuBuilder
 
-    script = SCRIPTS[model]
+    script = Path(script) if script else SCRIPTS[model]
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
     with tempfile.TemporaryDirectory(prefix="tapmp_build_") as tmp:
@@ -173,7 +176,7 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
         front, binding = binaries
         where = f"binaries/{PLATFORM}/"
         _rewrite_fmu(fmu, {"modelDescription.xml": lambda b: complete_model_description(b, model)},
-                     {f"{where}{model}.so": front.read_bytes(), f"{where}{BINDING}": binding.read_bytes(),
+                     {f"{where}{script.stem}.so": front.read_bytes(), f"{where}{BINDING}": binding.read_bytes(),
                       f"{where}{PYTHON_ENV}": python_env().encode()})
     return fmu
 

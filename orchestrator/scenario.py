@@ -106,6 +106,21 @@ class Scenario:
             traj["L_1"] = self.controller["L_1"]  # q_d is the controller's view of the reference
         return {"trajectory": traj, "controller": ctrl, "plant": plant}
 
+    def plain_models(self):
+        """(PlantModel, ControllerModel, TrajectoryParams) with this scenario's parameters,
+        for the FMI-free loop ``tapmp.closed_loop.simulate`` (same values the FMUs get)."""
+        from tapmp.control import ControllerModel
+        from tapmp.plant import PlantModel
+
+        par = self.parameters()
+        pl, ct, tr = par["plant"], par["controller"], par["trajectory"]
+        plant = PlantModel(model_tuple(ModelParams, pl), model_tuple(PlantConfig, pl),
+                           tuple(pl[k] for k in ("X0", "Z0", "B0")),
+                           tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
+        ctrl = ControllerModel(model_tuple(ModelParams, ct), self.gain_values(), ct["law"],
+                               ct.get("velocity_source", 0), ct.get("force_limit", 0.0))
+        return plant, ctrl, model_tuple(TrajectoryParams, tr)
+
     def to_dict(self) -> dict:
         """The resolved scenario as plain data (for run.json)."""
         d = {k: copy.deepcopy(getattr(self, k)) for k in self.__dataclass_fields__}

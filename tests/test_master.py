@@ -9,12 +9,8 @@ import pytest
 
 from orchestrator.master import CoSimulation, CoSimulationError
 from orchestrator.results import run_scenario
-from orchestrator.scenario import load, model_tuple
+from orchestrator.scenario import load
 from tapmp.closed_loop import simulate
-from tapmp.control import ControllerModel
-from tapmp.params import ModelParams
-from tapmp.plant import PlantConfig, PlantModel
-from tapmp.trajectory import TrajectoryParams
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
@@ -22,15 +18,9 @@ PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 def plain_loop(scenario):
     """The same closed loop from the model functions alone (no FMI)."""
-    par = scenario.parameters()
-    pl, ct, tr = par["plant"], par["controller"], par["trajectory"]
-
-    plant = PlantModel(model_tuple(ModelParams, pl), model_tuple(PlantConfig, pl),
-                       tuple(pl[k] for k in ("X0", "Z0", "B0")), tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
-    ctrl = ControllerModel(model_tuple(ModelParams, ct), scenario.gain_values(), ct["law"],
-                           ct.get("velocity_source", 0), ct.get("force_limit", 0.0))
+    plant, ctrl, traj = scenario.plain_models()
     rows = []
-    simulate(plant, ctrl, model_tuple(TrajectoryParams, tr), scenario.start_time, scenario.n_steps, scenario.step,
+    simulate(plant, ctrl, traj, scenario.start_time, scenario.n_steps, scenario.step,
              scenario.ordering, lambda t, ref, F, q, qt: rows.append((t, *F, *q, *qt)))
     return np.array(rows)
 

@@ -1,0 +1,184 @@
+"""Co-simulation speed on the paper scenario, in one process so the ratios hold on a noisy
+machine (issue 7). Run from the repository root:
+
+    .venv/bin/python benchmarks/bench_cosim.py [--stop-time 2.5] [--repeat 3] [--json PATH]
+
+Measures, per ordering, microseconds per macro step and the real-time factor (wall time /
+simulated time) of
+  * full:           the three TAPMP FMUs through the orchestrator's master loop;
+  * floor:          the same loop, the same FMI calls and values, against pass-through
+                    FMUs with the same interfaces whose doStep does nothing, built with
+                    this project's FMU binary;
+  * floor-pythonfmu the same pass-through FMUs on pythonfmu 0.7's own binary (the floor
+                    this project started from);
+  * plain:          the FMI-free closed loop (tapmp.closed_loop) with the same models;
+plus `tapmp run` end to end (results.csv written every step) and the peak memory.
+Each configuration runs --repeat times, interleaved; the table shows the fastest run.
+"""
+
+import argparse
+import json
+import platform
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from orchestrator import build  # noqa: E402
+from orchestrator.master import CoSimulation  # noqa: E402
+from orchestrator.results import run_scenario  # noqa: E402
+from orchestrator.scenario import load  # noqa: E402
+from orchestrator.ssp import write_ssp  # noqa: E402
+from tapmp.closed_loop import simulate  # noqa: E402
+from tapmp.interface import FMU_NAMES  # noqa: E402
+
+OWN_FLOOR = '''
+from fmu_common.slave import TapmpSlave
+from tapmp.interface import VARIABLES
+
+
+class {name}(TapmpSlave):
+    """Pass-through floor: the interface of {model}, a doStep that does nothing."""
+    VARIABLES = VARIABLES["{model}"]
+
+    def setup_model(self):
+        pass
+
+    def step(self, t, h):
+        pass
+'''
+
+PYTHONFMU_FLOOR = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from tapmp.interface import VARIABLES
+
+
+class {name}(Fmi2Slave):
+    """Pass-through floor on pythonfmu's binary: the interface of {model}, an empty doStep."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        for v in VARIABLES["{model}"]:
+            setattr(self, v.name, v.start)
+            kw = dict(causality=Fmi2Causality[v.causality])
+            if v.causality == "parameter":
+                kw["variability"] = Fmi2Variability[v.variability]
+            elif v.type == "Real":
+                kw["variability"] = Fmi2Variability.continuous
+            self.register_variable((Real if v.type == "Real" else Integer)(v.name, **kw))
+
+    def do_step(self, current_time, step_size):
+        return True
+'''
+
+
+def build_systems(tmp: Path, log) -> dict[str, Path]:
+    """SSP files of the real system and of the two pass-through floors."""
+    from pythonfmu import FmuBuilder
+
+    systems = {"full": build.build_all(tmp / "full", log=lambda *_: None)["ssp"]}
+    binaries = build.compile_binaries(tmp)
+    # Own class names: pythonfmu's binary imports the adapter module by name, so a
+    # floor FMU named TAPMP_Plant would run the real plant already imported.
+    for kind, template, prefix in (("floor", OWN_FLOOR, "Floor_"), ("floor-pythonfmu", PYTHONFMU_FLOOR, "PyFloor_")):
+        out = tmp / kind
+        out.mkdir()
+        fmus = {}
+        for model in FMU_NAMES:
+            script = tmp / f"{kind}-src" / model / f"{prefix}{model}.py"
+            script.parent.mkdir(parents=True)
+            script.write_text(template.format(model=model, name=prefix + model))
+            if kind == "floor":
+                fmus[model] = build.build_fmu(model, out, binaries, script)
+            else:
+                fmus[model] = Path(FmuBuilder.build_FMU(script, dest=out, project_files=[ROOT / "tapmp"]))
+        systems[kind] = write_ssp(out / "TAPMP.ssp", fmus)
+        log(f"built the {kind} system")
+    return systems
+
+
+def time_loop(ssp: Path, scenario) -> float:
+    """Wall seconds of the master loop (steps and row recording, no file output)."""
+    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
+                      scenario.ordering) as sim:
+        start = time.perf_counter()
+        for _ in range(scenario.n_steps):
+            sim.step()
+            sim.row()
+        return time.perf_counter() - start
+
+
+def time_plain(scenario) -> float:
+    plant, ctrl, traj = scenario.plain_models()
+    start = time.perf_counter()
+    simulate(plant, ctrl, traj, scenario.start_time, scenario.n_steps, scenario.step, scenario.ordering)
+    return time.perf_counter() - start
+
+
+def time_run(ssp: Path, scenario, out: Path) -> float:
+    start = time.perf_counter()
+    run_scenario(scenario, ssp, out, overwrite=True)
+    return time.perf_counter() - start
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--stop-time", type=float, default=2.5, help="simulated seconds (default 2.5)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per configuration (default 3)")
+    ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "cosim.json"))
+    args = ap.parse_args(argv)
+    base = load(ROOT / "scenarios" / "paper_simulation.toml", [f"stop_time={args.stop_time}"])
+    sim_time = base.stop_time - base.start_time
+    with tempfile.TemporaryDirectory(prefix="tapmp_bench_") as tmp:
+        tmp = Path(tmp)
+        systems = build_systems(tmp, log=lambda m: print(m, file=sys.stderr))
+        configs = []
+        for ordering in ("gauss-seidel", "jacobi"):
+            sc = base.with_changes(ordering=ordering)
+            for kind in ("full", "floor", "floor-pythonfmu"):
+                configs.append((kind, ordering, lambda s=systems[kind], sc=sc: time_loop(s, sc)))
+            configs.append(("plain", ordering, lambda sc=sc: time_plain(sc)))
+        configs.append(("tapmp run (csv)", "gauss-seidel",
+                        lambda: time_run(systems["full"], base, tmp / "run")))
+        best = {}
+        for r in range(args.repeat):
+            for kind, ordering, fn in configs:
+                wall = fn()
+                key = (kind, ordering)
+                best[key] = min(best.get(key, wall), wall)
+                print(f"run {r + 1}/{args.repeat} {kind:16s} {ordering:12s} {wall:7.3f} s", file=sys.stderr)
+    n = base.n_steps
+    rows = [{"config": k, "ordering": o, "wall_s": w, "us_per_step": w / n * 1e6,
+             "real_time_factor": w / sim_time} for (k, o), w in best.items()]
+    ratios = {o: best[("full", o)] / best[("floor", o)] for o in ("gauss-seidel", "jacobi")}
+    ratios_pythonfmu = {o: best[("full", o)] / best[("floor-pythonfmu", o)] for o in ("gauss-seidel", "jacobi")}
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    report = {
+        "machine": {"cpus": __import__("os").cpu_count(), "python": platform.python_version(),
+                    "platform": platform.platform(), "processor": platform.processor()},
+        "scenario": "paper_simulation", "simulated_s": sim_time, "steps": n, "repeat": args.repeat,
+        "rows": rows, "full_over_floor": ratios, "full_over_floor_pythonfmu": ratios_pythonfmu,
+        "peak_rss_mib": peak_mib,
+    }
+    print(f"\npaper scenario, {sim_time:g} s simulated = {n} macro steps of {base.step:g} s; "
+          f"best of {args.repeat}")
+    print(f"{'configuration':18s} {'ordering':13s} {'us/step':>9s} {'wall s':>8s} {'RTF':>7s}")
+    for row in rows:
+        print(f"{row['config']:18s} {row['ordering']:13s} {row['us_per_step']:9.1f} "
+              f"{row['wall_s']:8.3f} {row['real_time_factor']:7.3f}")
+    for o in ratios:
+        print(f"full / floor ({o}): {ratios[o]:.2f}   full / pythonfmu floor: {ratios_pythonfmu[o]:.2f}")
+    print(f"peak memory (max RSS of this process): {peak_mib:.0f} MiB")
+    path = Path(args.json)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
