@@ -17,6 +17,7 @@ Orderings of one macro step from t to t + h:
   (0.1 ms) in the feedback path. This is what libcosim's fixed-step master does.
 """
 
+import math
 import shutil
 import tempfile
 import zipfile
@@ -45,6 +46,23 @@ class CoSimulationError(RuntimeError):
         self.time = time
         self.log = log or []
         super().__init__(message)
+
+
+class DivergenceError(CoSimulationError):
+    """An output left the envelope or stopped being finite: the run is diverging."""
+
+    def __init__(self, message: str, element: str, time: float, signal: str, value: float,
+                 log: list[str] | None = None):
+        self.signal = signal
+        self.value = value
+        super().__init__(message, element, time, log)
+
+
+HINT = ("hint: gains unstable at this step size? `tapmp check` tells before a run; "
+        "use stable gains or a smaller step")
+# Envelope signals per limit name (see orchestrator.scenario.LIMITS): (element, output, unit).
+ENVELOPE = {"motor_travel": [("plant", f"q{i}_true", "m") for i in (1, 2, 3)],
+            "platform_angle": [("plant", "B", "rad")]}
 
 
 class _Unit:
@@ -127,10 +145,13 @@ class CoSimulation:
 
     ``parameters`` maps element name -> {parameter name: value}. After entering,
     :attr:`columns` names the recorded values and :meth:`row` returns them.
+    Every step checks that every output is finite and that the signals of ENVELOPE
+    stay within ``limits`` ({"motor_travel": m, "platform_angle": rad}, 0 = off);
+    a breach raises DivergenceError naming the time, the signal and the value.
     """
 
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
-                 step_size: float = 1e-4, ordering: str = "gauss-seidel"):
+                 step_size: float = 1e-4, ordering: str = "gauss-seidel", limits: dict | None = None):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -146,6 +167,11 @@ class CoSimulation:
         self.tmp = None
         self.k = 0
         self.guids = {}
+        self.limits = dict(limits or {})
+        unknown = set(self.limits) - set(ENVELOPE)
+        if unknown:
+            raise CoSimulationError(f"limits {', '.join(sorted(unknown))} unknown: allowed are "
+                                    f"{', '.join(ENVELOPE)}")
 
     # --- setup ---------------------------------------------------------------------
     def _logger(self, env, instance, status, category, message):
@@ -222,6 +248,14 @@ class CoSimulation:
         self.columns = ["time"] + [f"{n}.{o}" for n in INIT_ORDER for o in self.units[n].outputs]
         self._row_units = [self.units[n] for n in INIT_ORDER]
         self._step_units = [self.units[n] for n in ORDERINGS[self.ordering]]
+        self._envelope = []  # (outputs array, index, signal, limit, unit, limit name)
+        for key, limit in self.limits.items():
+            for element, output, unit_name in ENVELOPE[key]:
+                unit = self.units.get(element)
+                if limit > 0.0 and unit is not None and output in unit.outputs:
+                    self._envelope.append((unit.out, unit.outputs.index(output),
+                                           f"{element}.{output}", float(limit), unit_name, key))
+        self._check_outputs(self.t0)
 
     def _call(self, unit: _Unit, action, what: str, t: float | None = None):
         """Run one FMI call; a failed call (an exception or a returned status above
@@ -289,6 +323,24 @@ class CoSimulation:
                 if unit.read_outputs() > 1:
                     self._step_failed(unit, t, n_log)
         self.k += 1
+        self._check_outputs(t + h)
+
+    def _check_outputs(self, t: float) -> None:
+        """Raise DivergenceError if an output is not finite or leaves the envelope."""
+        for unit in self._row_units:
+            if not math.isfinite(sum(unit.out)):  # one sum per unit on the fast path
+                for name, value in zip(unit.outputs, unit.out):
+                    if not math.isfinite(value):
+                        raise DivergenceError(f"{unit.name}.{name} = {value!r} at t = {t:.6g} s is not "
+                                              f"finite: the co-simulation diverged; {HINT}",
+                                              unit.name, t, f"{unit.name}.{name}", value, list(self.log))
+        for out, i, signal, limit, unit_name, key in self._envelope:
+            value = out[i]
+            if not -limit <= value <= limit:
+                raise DivergenceError(f"{signal} = {value:.6g} {unit_name} at t = {t:.6g} s is outside the "
+                                      f"envelope |{signal}| <= {limit:g} {unit_name} (limits.{key}): the "
+                                      f"closed loop is diverging; {HINT}", signal.split(".")[0], t, signal,
+                                      value, list(self.log))
 
     def _step_failed(self, unit: _Unit, t: float, n_log: int) -> None:
         """Raise for a failed step of ``unit`` (or return if it only logged non-errors)."""

@@ -1,15 +1,20 @@
 """Run a scenario through the master algorithm and write its result folder.
 
 A result folder holds results.csv (streamed while the run goes), run.json (the
-resolved scenario, FMU GUIDs, versions, step, ordering, wall time, exit status)
-and metrics.json. JSON files are written atomically (temporary file + rename).
+resolved scenario, FMU GUIDs, versions, step, ordering, wall time, status, exit code
+and the reason of a failure) and metrics.json. JSON files are written atomically
+(temporary file + rename). Memory stays bounded: rows go to disk and into the
+streaming metrics in blocks of BLOCK steps, whatever the simulated time.
 """
 
 import csv
 import json
 import os
 import platform
+import signal
+import threading
 import time
+from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
 
@@ -19,7 +24,8 @@ from . import metrics
 from .master import CoSimulation
 from .scenario import Scenario
 
-FLUSH_EVERY = 1000  # rows between flushes of results.csv
+BLOCK = 1000  # steps between flushes of results.csv and metric updates
+EXIT_CODES = {"completed": 0, "failed": 2, "interrupted": 130}  # as the `tapmp` command exits
 
 
 class OutputExistsError(RuntimeError):
@@ -57,51 +63,95 @@ def prepare_output(out: Path, overwrite: bool) -> Path:
     return out
 
 
+class _StopRequest:
+    """Set by SIGINT; the run loop stops at the next step boundary (never inside an FMU)."""
+
+    def __init__(self):
+        self.signal = None
+
+    def __call__(self, signum, frame):
+        self.signal = signum
+
+
+@contextmanager
+def _sigint_stops(stop: _StopRequest):
+    """Route SIGINT to ``stop`` for the duration (main thread only; elsewhere a no-op).
+
+    A plain KeyboardInterrupt could be raised inside an FMU's Python code, which would
+    turn it into a failed FMI call; a flag checked between steps ends the run cleanly.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = False,
                  progress=None) -> dict:
     """Run one scenario; write results.csv, run.json, metrics.json into ``out``.
 
-    ``progress(n_done, n_total)`` is called now and then. Returns the metrics.
-    On a failure the rows so far stay in results.csv, run.json records the reason,
-    and CoSimulationError is raised.
+    ``progress(n_done, n_total)`` is called every BLOCK steps. Returns the metrics,
+    computed from every step (results.csv keeps every ``scenario.record_every``-th
+    step and the last). On a failure the rows so far stay in results.csv (flushed, so
+    it is valid CSV), run.json records the status, exit code and reason, and the
+    error is raised again (CoSimulationError, or KeyboardInterrupt after SIGINT).
     """
     out = prepare_output(out, overwrite)
     info = {"scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
-            "ordering": scenario.ordering, "versions": versions(), "status": "running"}
+            "ordering": scenario.ordering, "record_every": scenario.record_every,
+            "versions": versions(), "status": "running"}
     write_json(out / "run.json", info)
-    n = scenario.n_steps
+    n, every = scenario.n_steps, scenario.record_every
     start = time.perf_counter()
-    columns = None
+    stop = _StopRequest()
+    sim = None
     try:
-        with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                          scenario.ordering) as sim, \
+        with _sigint_stops(stop), \
+                CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
+                             scenario.ordering, scenario.limit_values()) as sim, \
                 open(out / "results.csv", "w", newline="") as f:
             info["guids"] = sim.guids
-            columns = sim.columns
             writer = csv.writer(f)
-            writer.writerow(columns)
-            writer.writerow(sim.row())
+            writer.writerow(sim.columns)
+            stats = metrics.ErrorStatistics(sim.columns)
+            block = [sim.row()]
+            writer.writerow(block[0])
             try:
-                for k in range(n):
+                for k in range(1, n + 1):
                     sim.step()
-                    writer.writerow(sim.row())
-                    if (k + 1) % FLUSH_EVERY == 0:
+                    row = sim.row()
+                    block.append(row)
+                    if k % every == 0 or k == n:
+                        writer.writerow(row)
+                    if len(block) == BLOCK:
+                        stats.add(block)
+                        block = []
                         f.flush()
                         if progress:
-                            progress(k + 1, n)
+                            progress(k, n)
+                    if stop.signal is not None:
+                        raise KeyboardInterrupt(f"interrupted by SIGINT at t = {sim.time:.6g} s")
             finally:
                 f.flush()
+        stats.add(block)
         if progress:
             progress(n, n)
     except BaseException as err:
-        info.update(status="failed" if not isinstance(err, KeyboardInterrupt) else "interrupted",
-                    error=str(err) or type(err).__name__, wall_time_s=time.perf_counter() - start,
-                    failed_at_s=getattr(err, "time", None))
+        status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+        info.update(status=status, exit_code=EXIT_CODES[status], error=str(err) or type(err).__name__,
+                    wall_time_s=time.perf_counter() - start,
+                    failed_at_s=getattr(err, "time", sim.time if sim is not None else None))
+        for key in ("element", "signal", "value"):
+            if getattr(err, key, None) is not None:
+                info[f"failed_{key}"] = getattr(err, key)
         write_json(out / "run.json", info)
         raise
-    info.update(status="completed", wall_time_s=time.perf_counter() - start)
-    data = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1, ndmin=2)
-    result = metrics.compute(columns, data)
+    info.update(status="completed", exit_code=0, wall_time_s=time.perf_counter() - start)
+    result = stats.result()
     write_json(out / "metrics.json", result)
     info["real_time_factor"] = info["wall_time_s"] / (scenario.stop_time - scenario.start_time)
     write_json(out / "run.json", info)

@@ -2,9 +2,11 @@
 
 Top-level keys: name, description, law ("sc-dc" or "apd-dc"), gains (a preset of
 tapmp.params.GAIN_PRESETS), stop_time, start_time, step, ordering, output,
-start_on_trajectory. Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
+start_on_trajectory, record_every (store every Nth step in results.csv; metrics
+always use every step). Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
-parameters of the respective FMU (names as in its modelDescription.xml).
+parameters of the respective FMU (names as in its modelDescription.xml), and
+[limits] (the divergence envelope, see LIMITS).
 """
 
 import copy
@@ -29,8 +31,13 @@ LAWS = {"sc-dc": 0, "apd-dc": 1}
 ORDERINGS = ("gauss-seidel", "jacobi")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
-        "start_on_trajectory": bool}
-_TABLES = {"gain_overrides", "trajectory", "plant", "controller"}
+        "start_on_trajectory": bool, "record_every": int}
+_TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
+# The divergence envelope the master checks every step (0 switches a limit off):
+# |q_i| of every motor (true position) and |B| of the platform. The paper's motion
+# needs 20 mm of travel and 5 deg; a breach means the loop is running away.
+LIMITS = {"motor_travel": (0.05, "m", "largest |q1|, |q2|, |q3| (true motor positions)"),
+          "platform_angle": (0.35, "rad", "largest |B| of the platform")}
 # Parameters a scenario may set per section; the controller's gains, law and the
 # plant's initial state are set through the scenario's own keys instead.
 _SECTION_PARAMS = {
@@ -68,12 +75,18 @@ class Scenario:
     trajectory: dict = field(default_factory=dict)
     plant: dict = field(default_factory=dict)
     controller: dict = field(default_factory=dict)
+    limits: dict = field(default_factory=dict)
+    record_every: int = 1
     source: str = ""
 
     @property
     def n_steps(self) -> int:
         """Number of macro steps from start_time to stop_time."""
         return int(round((self.stop_time - self.start_time) / self.step))
+
+    def limit_values(self) -> dict:
+        """The divergence envelope {name: limit} with defaults from LIMITS (0 = off)."""
+        return {k: self.limits.get(k, d[0]) for k, d in LIMITS.items()}
 
     def gain_values(self) -> Gains:
         """The preset with the overrides applied."""
@@ -176,6 +189,15 @@ def validate(s: Scenario) -> Scenario:
             check()
         except ModelInputError as err:
             raise ScenarioError(f"{section}.{err}") from None
+    for k, v in s.limits.items():
+        if k not in LIMITS:
+            raise ScenarioError(f"limits.{k} is unknown: allowed are {', '.join(LIMITS)}")
+        v = s.limits[k] = _check_type(f"limits.{k}", v, float)
+        if not (math.isfinite(v) and v >= 0.0):
+            raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
+                                f"[{LIMITS[k][1]}] (0 = no limit)")
+    if s.record_every < 1:
+        raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)
     if vs not in (0, 1):
         raise ScenarioError(f"controller.velocity_source = {vs!r} is invalid: allowed are 0 or 1")
