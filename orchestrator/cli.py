@@ -152,8 +152,8 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
         return args.func(args)
-    except KeyboardInterrupt:
-        print("interrupted: the results so far are in the output folder", file=sys.stderr)
+    except KeyboardInterrupt as err:
+        print(f"{err or 'interrupted'}: the results so far are in the output folder", file=sys.stderr)
         return 130
     except (ScenarioError, CoSimulationError, OutputExistsError, FileNotFoundError, ValueError) as err:
         if args.debug:

@@ -64,3 +64,39 @@ def test_bad_scenario_gives_one_line_and_exit_code_2(tmp_path, capsys):
 def test_every_command_has_help(cmd):
     res = subprocess.run([sys.executable, "-m", "orchestrator", *cmd, "--help"], capture_output=True, text=True)
     assert res.returncode == 0 and "usage: tapmp" in res.stdout
+
+
+BAD_FILES = {
+    "malformed TOML": ('name = "x"\nstop_time = = 1\n', "is not valid TOML"),
+    "unknown key": ('name = "x"\nstop_tme = 1.0\n', "stop_tme is unknown: allowed are"),
+    "wrong type": ('name = "x"\nstop_time = "long"\n', "stop_time = 'long' has the wrong type: allowed is float"),
+    "negative step": ('name = "x"\nstep = -1e-4\n', "step = -0.0001 is invalid: allowed is a number > 0"),
+    "stop before start": ('name = "x"\nstart_time = 1.0\nstop_time = 0.5\n',
+                          "stop_time = 0.5 is invalid: allowed is a number > start_time = 1.0"),
+    "unknown limit": ('name = "x"\n[limits]\nmotor = 1.0\n', "limits.motor is unknown: allowed are motor_travel"),
+    "record_every 0": ('name = "x"\nrecord_every = 0\n', "record_every = 0 is invalid: allowed is an integer >= 1"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_FILES)
+def test_bad_scenario_files_get_one_clear_line_exit_2_and_a_traceback_only_with_debug(case, tmp_path, capsys):
+    text, message = BAD_FILES[case]
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()  # nothing was started
+    assert main(["--debug", "run", str(path), "--out", str(tmp_path / "out")]) == 2
+    assert "Traceback" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content", [None, b"this is not a zip archive"])
+def test_a_missing_or_corrupt_ssp_is_named_with_exit_2(content, tmp_path, capsys):
+    ssp = tmp_path / "TAPMP.ssp"
+    if content is not None:
+        ssp.write_bytes(content)
+    assert main(["run", PAPER, "--ssp", str(ssp), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and str(ssp) in err and "Traceback" not in err

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.master import CoSimulation, CoSimulationError
+from orchestrator.master import CoSimulation, CoSimulationError, DivergenceError
 from orchestrator.results import run_scenario
 from orchestrator.scenario import load
 from tapmp.closed_loop import simulate
@@ -88,3 +88,48 @@ def test_missing_ssp_is_a_clear_error(tmp_path):
     with pytest.raises(CoSimulationError, match="does not exist: run `tapmp build` first"):
         with CoSimulation(tmp_path / "nope.ssp", {}):
             pass
+
+
+def test_envelope_breach_stops_with_time_signal_value_and_hint(built, tmp_path):
+    sc = load(PAPER, ['gains="paper_simulation"', "plant.force_limit=0", "limits.motor_travel=0.001"])
+    with pytest.raises(DivergenceError) as info:
+        run_scenario(sc, built["ssp"], tmp_path / "run")
+    err = info.value
+    assert err.signal.startswith("plant.q") and abs(err.value) > 0.001 and err.time == pytest.approx(4e-4)
+    assert f"at t = 0.0004 s is outside the envelope |{err.signal}| <= 0.001 m (limits.motor_travel)" in str(err)
+    assert "gains unstable at this step size" in str(err)
+    rows = (tmp_path / "run" / "results.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4  # t = 0 .. 0.0003 kept; the breaching row is not written
+    run = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert (run["status"], run["failed_signal"], run["failed_value"]) == ("failed", err.signal, err.value)
+
+
+BROKEN_STEP = """
+
+
+class TAPMP_Plant(_RealPlant):
+    \"\"\"The real plant, except that q2_true is NaN after the step from t = 0.5 ms.\"\"\"
+
+    def step(self, t, h):
+        super().step(t, h)
+        if t >= 4.5e-4:
+            self.q2_true = float("nan")
+"""
+
+
+def test_a_non_finite_output_of_any_fmu_stops_the_run(built, tmp_path):
+    from orchestrator.build import SCRIPTS, build_fmu
+    from orchestrator.ssp import write_ssp
+    from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
+
+    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
+    script = tmp_path / "src" / "TAPMP_Plant.py"
+    script.parent.mkdir()
+    script.write_text(real.replace("TAPMP_Plant.block(", "_RealPlant.block(") + BROKEN_STEP)
+    broken = build_fmu(PLANT, tmp_path / "fmus", script=script)
+    ssp = write_ssp(tmp_path / "broken.ssp", {PLANT: broken, CONTROLLER: built[CONTROLLER],
+                                              TRAJECTORY: built[TRAJECTORY]})
+    with pytest.raises(DivergenceError, match=r"plant.q2_true = nan at t = 0.0006 s is not finite") as info:
+        run_scenario(load(PAPER), ssp, tmp_path / "run")
+    assert info.value.signal == "plant.q2_true"
+    assert len((tmp_path / "run" / "results.csv").read_text().splitlines()) == 1 + 6  # t = 0 .. 0.5 ms
