@@ -67,14 +67,16 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     """
     out = prepare_output(out, overwrite)
     info = {"scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
-            "ordering": scenario.ordering, "versions": versions(), "status": "running"}
+            "ordering": scenario.ordering, "clock": scenario.clock,
+            "connection_start": scenario.connection_start, "versions": versions(), "status": "running"}
     write_json(out / "run.json", info)
     n = scenario.n_steps
     start = time.perf_counter()
     columns = None
     try:
         with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                          scenario.ordering) as sim, \
+                          scenario.ordering, clock=scenario.clock,
+                          connection_start=scenario.connection_start) as sim, \
                 open(out / "results.csv", "w", newline="") as f:
             info["guids"] = sim.guids
             columns = sim.columns
