@@ -57,7 +57,8 @@ def test_fmpy_ssp_is_bit_identical_with_the_orchestrator_on_its_conventions(buil
 def test_fmpy_ssp_zero_start_is_the_difference_to_the_orchestrator(built, fmpy_run):
     """With the orchestrator's defaults (outputs propagated in Initialization Mode) the first
     plant step gets the controller's initial command instead of 0 N (~15 N on motors 1 and 3,
-    ~0 N on motor 2), which moves motors 1 and 3 by ~10 nm in 0.1 ms and, through the encoder quantization, by up to ~0.1 um later."""
+    ~0 N on motor 2), which moves motors 1 and 3 by ~10 nm in 0.1 ms and, through the
+    encoder quantization, all three by up to ~0.1 um later."""
     scenario, _, fm = fmpy_run
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi")
     F0 = ours[0, 6:]                                   # N: the initial command FMPy does not use
