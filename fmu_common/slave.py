@@ -222,6 +222,7 @@ class TapmpSlave(Fmi2Slave):
             return self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
         self.reals[vr] = value
         self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
+        self._refresh_initial_unknowns(vr)
         return self._status(OK)
 
     def fmi2_set_integer(self, vr, value):
@@ -230,7 +231,26 @@ class TapmpSlave(Fmi2Slave):
             return status
         self.ints[vr] = value
         self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
+        self._refresh_initial_unknowns(vr)
         return self._status(OK)
+
+    def _refresh_initial_unknowns(self, vr) -> None:
+        """Recompute the outputs after a parameter is set in Initialization Mode.
+
+        FMI 2.0 lets a master set parameters after fmi2EnterInitializationMode and then
+        read the outputs (initial unknowns) before fmi2ExitInitializationMode: Ecos applies
+        its parameter values and SSP parameter sets that way and propagates the outputs
+        it reads then. So the model is rebuilt at once. A combination of parameters that
+        is invalid may be a master's half-way point (one value set, the next to come):
+        the outputs keep the last valid set, and fmi2ExitInitializationMode, which builds
+        the model again, reports the error if it is still there.
+        """
+        if self.mode != INITIALIZATION or self.VARIABLES[vr].causality != "parameter" or self.error:
+            return
+        try:
+            self.setup_model()
+        except ModelInputError:
+            pass
 
     # --- FMU state: all values plus the model's hidden state ---------------------------
     def fmi2_get_state(self):

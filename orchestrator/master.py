@@ -4,8 +4,8 @@ Life cycle: extract, instantiate, apply parameters, setupExperiment, enter
 initialization, propagate outputs through the connections in dependency order
 (each FMU's inputs are set from its sources, then it leaves initialization),
 then step at a fixed communication step h where the time of step k is t0 + k h
-(never accumulated), then terminate and free every instance and remove every
-extracted folder, also when a step fails.
+(never accumulated; see ``clock`` below), then terminate and free every instance and
+remove every extracted folder, also when a step fails.
 
 Orderings of one macro step from t to t + h:
 * ``gauss-seidel`` (default): controller, plant, trajectory. Each FMU's inputs are
@@ -14,7 +14,17 @@ Orderings of one macro step from t to t + h:
   a sampled loop whose only delay is the zero-order hold of the servo cycle.
 * ``jacobi``: every FMU's inputs are set from the outputs at t, then all step.
   The plant runs with the command of the previous sample: one extra step of delay
-  (0.1 ms) in the feedback path. This is what libcosim's fixed-step master does.
+  (0.1 ms) in the feedback path. This is what libcosim's and Ecos's fixed-step
+  masters and FMPy's ``simulate_ssp`` do.
+
+Conventions of other masters, to reproduce them bit for bit (tests/test_libcosim.py,
+test_ecos.py, test_fmpy_ssp.py):
+* ``clock``: how t_k and h_k are computed (``orchestrator.clocks``): ``exact``
+  (default, t0 + k h), ``accumulated`` (FMPy, Ecos) or ``nanoseconds`` (libcosim).
+* ``connection_start``: ``propagated`` (default; also libcosim and Ecos, which iterate
+  the transfers in Initialization Mode) or ``zero``: FMPy's ``simulate_ssp``, which
+  initializes every FMU on its own and starts every connection at 0, so no output is
+  read before the first step and the first step's inputs are all 0.
 """
 
 import math
@@ -30,10 +40,13 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.ssp.ssd import read_ssd
 
+from .clocks import Clock
+
 ORDERINGS = {"gauss-seidel": ("controller", "plant", "trajectory"),
              "jacobi": ("trajectory", "controller", "plant")}
 # Initialization propagates in the order of the signal flow.
 INIT_ORDER = ("trajectory", "controller", "plant")
+CONNECTION_STARTS = ("propagated", "zero")
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
 
@@ -148,15 +161,27 @@ class CoSimulation:
     Every step checks that every output is finite and that the signals of ENVELOPE
     stay within ``limits`` ({"motor_travel": m, "platform_angle": rad}, 0 = off);
     a breach raises DivergenceError naming the time, the signal and the value.
+    ``start_time`` and ``step_size`` are in s; ``clock`` and ``connection_start`` select
+    the conventions described in the module docstring.
     """
 
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
-                 step_size: float = 1e-4, ordering: str = "gauss-seidel", limits: dict | None = None):
+                 step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
+                 limits: dict | None = None, clock: str = "exact",
+                 connection_start: str = "propagated"):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
         if not step_size > 0.0:
             raise CoSimulationError(f"step_size = {step_size!r} is invalid: allowed is a number > 0")
+        if connection_start not in CONNECTION_STARTS:
+            raise CoSimulationError(f"connection_start = {connection_start!r} is invalid: allowed are "
+                                    f"{', '.join(CONNECTION_STARTS)}")
+        try:
+            self.clock = Clock(clock, start_time, step_size)
+        except ValueError as err:
+            raise CoSimulationError(str(err)) from None
+        self.connection_start = connection_start
         self.ssp_path = Path(ssp_path)
         self.parameters = parameters
         self.t0 = float(start_time)
@@ -237,14 +262,18 @@ class CoSimulation:
                            f"set parameter {pname}")
             self._call(unit, lambda u=unit: u.slave.setupExperiment(startTime=self.t0), "setupExperiment")
             self._call(unit, unit.slave.enterInitializationMode, "enterInitializationMode")
-        for name in INIT_ORDER:
-            unit = self.units[name]
-            self._call(unit, unit.read_outputs, "getReal")
+        propagate = self.connection_start == "propagated"
+        if propagate:
+            for name in INIT_ORDER:
+                unit = self.units[name]
+                self._call(unit, unit.read_outputs, "getReal")
         for name in INIT_ORDER:  # dependency order: sources leave initialization first
             unit = self.units[name]
-            self._call(unit, unit.apply_inputs, "setReal")
+            if propagate:
+                self._call(unit, unit.apply_inputs, "setReal")
             self._call(unit, unit.slave.exitInitializationMode, "exitInitializationMode")
-            self._call(unit, unit.read_outputs, "getReal")
+            if propagate:  # else the outputs (and so the connections) stay 0 until the first step
+                self._call(unit, unit.read_outputs, "getReal")
         self.columns = ["time"] + [f"{n}.{o}" for n in INIT_ORDER for o in self.units[n].outputs]
         self._row_units = [self.units[n] for n in INIT_ORDER]
         self._step_units = [self.units[n] for n in ORDERINGS[self.ordering]]
@@ -287,8 +316,8 @@ class CoSimulation:
     # --- stepping ------------------------------------------------------------------
     @property
     def time(self) -> float:
-        """Current communication point t0 + k h [s]."""
-        return self.t0 + self.k * self.h
+        """Current communication point t_k [s] (t0 + k h on the default clock)."""
+        return self.clock.at(self.k)
 
     def row(self) -> list[float]:
         """Time and every FMU's outputs at the current communication point."""
@@ -298,13 +327,13 @@ class CoSimulation:
         return out
 
     def step(self) -> None:
-        """One macro step from t0 + k h to t0 + (k + 1) h.
+        """One macro step from t_k to t_{k+1} (t0 + k h to t0 + (k + 1) h on the default clock).
 
         The hot path: 10,000 calls per simulated second. Each FMI call is a direct
         ctypes call that returns its fmi2Status; statuses are or-ed and checked once
         per unit, and the log is only scanned when it grew.
         """
-        t, h = self.t0 + self.k * self.h, self.h
+        t, h = self.clock.at(self.k), self.clock.step(self.k)
         n_log = len(self.log)
         if self.ordering == "gauss-seidel":
             for unit in self._step_units:
@@ -323,7 +352,7 @@ class CoSimulation:
                 if unit.read_outputs() > 1:
                     self._step_failed(unit, t, n_log)
         self.k += 1
-        self._check_outputs(t + h)
+        self._check_outputs(self.clock.at(self.k))
 
     def _check_outputs(self, t: float) -> None:
         """Raise DivergenceError if an output is not finite or leaves the envelope."""

@@ -103,6 +103,7 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     out = prepare_output(out, overwrite)
     info = {"scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
             "ordering": scenario.ordering, "record_every": scenario.record_every,
+            "clock": scenario.clock, "connection_start": scenario.connection_start,
             "versions": versions(), "status": "running"}
     write_json(out / "run.json", info)
     n, every = scenario.n_steps, scenario.record_every
@@ -112,7 +113,8 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     try:
         with _sigint_stops(stop), \
                 CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                             scenario.ordering, scenario.limit_values()) as sim, \
+                             scenario.ordering, limits=scenario.limit_values(), clock=scenario.clock,
+                             connection_start=scenario.connection_start) as sim, \
                 open(out / "results.csv", "w", newline="") as f:
             info["guids"] = sim.guids
             writer = csv.writer(f)

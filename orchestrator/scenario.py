@@ -3,7 +3,9 @@
 Top-level keys: name, description, law ("sc-dc" or "apd-dc"), gains (a preset of
 tapmp.params.GAIN_PRESETS), stop_time, start_time, step, ordering, output,
 start_on_trajectory, record_every (store every Nth step in results.csv; metrics
-always use every step). Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
+always use every step), clock and connection_start (conventions of other masters, see
+orchestrator.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's).
+Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
 [limits] (the divergence envelope, see LIMITS).
@@ -22,6 +24,8 @@ from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import TrajectoryParams, reference
 
+from .clocks import CLOCKS
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -29,9 +33,10 @@ else:  # pragma: no cover
 
 LAWS = {"sc-dc": 0, "apd-dc": 1}
 ORDERINGS = ("gauss-seidel", "jacobi")
+CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
-        "start_on_trajectory": bool, "record_every": int}
+        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str}
 _TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
@@ -72,6 +77,8 @@ class Scenario:
     ordering: str = "gauss-seidel"
     output: str = "results"
     start_on_trajectory: bool = True
+    clock: str = "exact"
+    connection_start: str = "propagated"
     trajectory: dict = field(default_factory=dict)
     plant: dict = field(default_factory=dict)
     controller: dict = field(default_factory=dict)
@@ -160,6 +167,11 @@ def validate(s: Scenario) -> Scenario:
         raise ScenarioError(f"gains = {s.gains!r} is invalid: allowed are {', '.join(sorted(GAIN_PRESETS))}")
     if s.ordering not in ORDERINGS:
         raise ScenarioError(f"ordering = {s.ordering!r} is invalid: allowed are {', '.join(ORDERINGS)}")
+    if s.clock not in CLOCKS:
+        raise ScenarioError(f"clock = {s.clock!r} is invalid: allowed are {', '.join(CLOCKS)}")
+    if s.connection_start not in CONNECTION_STARTS:
+        raise ScenarioError(f"connection_start = {s.connection_start!r} is invalid: allowed are "
+                            f"{', '.join(CONNECTION_STARTS)}")
     if not (math.isfinite(s.step) and s.step > 0.0):
         raise ScenarioError(f"step = {s.step!r} is invalid: allowed is a number > 0 [s]")
     if not (math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time):

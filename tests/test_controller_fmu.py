@@ -3,6 +3,7 @@
 import math
 
 import pytest
+from conftest import call_status
 
 from tapmp.control import ControllerModel, Gains
 from tapmp.interface import CONTROLLER, TRAJECTORY
@@ -106,3 +107,31 @@ def test_trajectory_fmu_outputs_the_reference_at_the_end_of_each_step(built, loa
     r = reference(49 * 1e-4 + 1e-4, tp)
     assert fmu.get(*REF) == pytest.approx(r, rel=1e-12, abs=1e-15)
     assert fmu.get("q1_d", "q2_d", "q3_d") == pytest.approx(inverse(*r[:3], 0.09), rel=1e-12, abs=1e-15)
+
+
+def test_parameters_set_in_initialization_mode_reach_the_outputs_read_there(built, load_fmu):
+    """Ecos sets parameters after fmi2EnterInitializationMode and propagates the outputs
+    it reads before fmi2ExitInitializationMode: they must already use those parameters."""
+    fmu = load_fmu(built[TRAJECTORY])
+    fmu.slave.setupExperiment(startTime=0.0)
+    fmu.slave.enterInitializationMode()
+    default_Z = fmu.get("Z_d")[0]
+    fmu.set(Z_c=-0.02, radius=0.005)               # phase 0: the top of the circle
+    assert default_Z != pytest.approx(-0.015)
+    assert fmu.get("Z_d")[0] == pytest.approx(-0.015, abs=1e-15)
+    fmu.set(radius=-1.0)                            # invalid: outputs keep the last valid set
+    assert fmu.get("Z_d")[0] == pytest.approx(-0.015, abs=1e-15)
+    fmu.set(radius=0.004)
+    assert fmu.get("Z_d")[0] == pytest.approx(-0.016, abs=1e-15)
+    fmu.slave.exitInitializationMode()
+    assert fmu.get("Z_d")[0] == pytest.approx(-0.016, abs=1e-15) and fmu.errors() == []
+
+
+def test_invalid_parameter_set_in_initialization_mode_fails_at_exit(built, load_fmu):
+    fmu = load_fmu(built[TRAJECTORY])
+    fmu.slave.setupExperiment(startTime=0.0)
+    fmu.slave.enterInitializationMode()
+    fmu.set(radius=-1.0)
+    assert fmu.errors() == []  # maybe a master's half-way point: not an error yet
+    assert call_status(fmu.slave.exitInitializationMode) == 3
+    assert any("radius = -1" in m for m in fmu.errors())

@@ -38,6 +38,8 @@ def test_set_overrides_any_value_and_gain_scalars_apply_to_all_motors():
     ('law="pid"', r"law = 'pid' is invalid: allowed are sc-dc, apd-dc"),
     ('gains="fast"', r"gains = 'fast' is invalid: allowed are default, paper_experiment, paper_simulation"),
     ('ordering="random"', r"ordering = 'random' is invalid: allowed are gauss-seidel, jacobi"),
+    ('clock="wall"', r"clock = 'wall' is invalid: allowed are exact, accumulated, nanoseconds"),
+    ('connection_start="one"', r"connection_start = 'one' is invalid: allowed are propagated, zero"),
     ("plant.m_p=-1", r"plant.m_p = -1.0 is invalid: allowed is a finite number > 0"),
     ("plant.substeps=0", r"plant.substeps = 0 is invalid: allowed is an integer >= 1"),
     ("controller.velocity_source=2", r"velocity_source = 2 is invalid: allowed are 0 or 1"),
