@@ -72,7 +72,9 @@ def test_scdc_beats_apddc_on_every_motor(built, tmp_path):
         assert m["sc-dc"]["sync_mae_um"][i] < m["apd-dc"]["sync_mae_um"][i]
 
 
-def test_failing_step_stops_keeps_results_and_leaves_nothing_behind(built, tmp_path):
+def test_failing_step_stops_keeps_results_and_leaves_nothing_behind(built, tmp_path, monkeypatch):
+    (tmp_path / "tmp").mkdir()  # a private temp folder: other processes may co-simulate meanwhile
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
     before = set(Path(tempfile.gettempdir()).glob("tapmp_cosim_*"))
     sc = load(PAPER, ['gains="paper_simulation"', "plant.force_limit=0"])  # Eq. 40, no saturation
     with pytest.raises(CoSimulationError, match=r"plant: doStep failed at t = .* \|B\| < pi/2") as info:
