@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Build TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu and TAPMP.ssp.
+# Build TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu, TAPMP.ssp and the
+# closed-loop container TAPMP_ClosedLoop.fmu; every FMU must pass `fmpy validate`.
 # Usage: bash build_fmus.sh [OUT_DIR]   (default: build/). Needs the package installed
 # (pip install -e .); uses .venv/bin/python if present, else python3.
 set -euo pipefail

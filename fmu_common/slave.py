@@ -172,6 +172,26 @@ class TapmpSlave(Fmi2Slave):
             self.initial_outputs()
         return self._guard(init)
 
+    def fmi2_update_initial_unknowns(self):
+        """Recompute the outputs from the values set in Initialization Mode so far.
+
+        The binary calls this at the first get after a set in Initialization Mode: FMI 2.0
+        lets a master set parameters and inputs there and read the outputs (initial
+        unknowns) before fmi2ExitInitializationMode. fmpy's container runtime copies each
+        connection once that way, so the controller's F must already follow q_d and q;
+        Ecos sets parameters there. A combination that is invalid may be a master's
+        half-way point (one value set, the next to come): the outputs keep the last
+        valid values, and fmi2ExitInitializationMode, which builds the model again,
+        reports the error if it is still there.
+        """
+        if self.mode == INITIALIZATION and self.error is None:
+            try:
+                self.setup_model()
+                self.initial_outputs()
+            except ModelInputError:
+                pass
+        return self._status(OK)
+
     def fmi2_do_step(self, current_time, step_size):
         if self.error is not None:
             self.log(f"doStep at t = {current_time:.6g} s refused after "
@@ -222,7 +242,6 @@ class TapmpSlave(Fmi2Slave):
             return self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
         self.reals[vr] = value
         self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
-        self._refresh_initial_unknowns(vr)
         return self._status(OK)
 
     def fmi2_set_integer(self, vr, value):
@@ -231,26 +250,7 @@ class TapmpSlave(Fmi2Slave):
             return status
         self.ints[vr] = value
         self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
-        self._refresh_initial_unknowns(vr)
         return self._status(OK)
-
-    def _refresh_initial_unknowns(self, vr) -> None:
-        """Recompute the outputs after a parameter is set in Initialization Mode.
-
-        FMI 2.0 lets a master set parameters after fmi2EnterInitializationMode and then
-        read the outputs (initial unknowns) before fmi2ExitInitializationMode: Ecos applies
-        its parameter values and SSP parameter sets that way and propagates the outputs
-        it reads then. So the model is rebuilt at once. A combination of parameters that
-        is invalid may be a master's half-way point (one value set, the next to come):
-        the outputs keep the last valid set, and fmi2ExitInitializationMode, which builds
-        the model again, reports the error if it is still there.
-        """
-        if self.mode != INITIALIZATION or self.VARIABLES[vr].causality != "parameter" or self.error:
-            return
-        try:
-            self.setup_model()
-        except ModelInputError:
-            pass
 
     # --- FMU state: all values plus the model's hidden state ---------------------------
     def fmi2_get_state(self):

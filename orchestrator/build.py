@@ -1,5 +1,6 @@
 """Build the TAPMP FMUs with pythonfmu, complete their modelDescription.xml, give them
-their own binary, and write the SSP system TAPMP.ssp.
+their own binary, and write the SSP system TAPMP.ssp and the closed-loop container FMU
+TAPMP_ClosedLoop.fmu (orchestrator/container.py).
 
 pythonfmu 0.7 writes no units and no initial unknowns; :func:`complete_model_description`
 adds them from the variable tables in ``tapmp.interface`` (one source of truth).
@@ -182,7 +183,10 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
 
 
 def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
-    """Build the three FMUs and TAPMP.ssp into out_dir; return their paths by model name."""
+    """Build the three FMUs, TAPMP.ssp and the closed-loop container FMU into out_dir;
+    return their paths by model name (``"ssp"`` for TAPMP.ssp, ``TAPMP_ClosedLoop`` for
+    the container)."""
+    from .container import CONTAINER, build_container
     from .ssp import write_ssp
 
     out_dir = Path(out_dir).resolve()
@@ -195,4 +199,6 @@ def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
             log(f"built {paths[model]}")
     paths["ssp"] = write_ssp(out_dir / SSP_NAME, paths)
     log(f"wrote {paths['ssp']}")
+    paths[CONTAINER] = build_container(paths, out_dir)
+    log(f"built {paths[CONTAINER]}")
     return paths

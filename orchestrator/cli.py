@@ -109,8 +109,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
-    b = sub.add_parser("build", help="build the three FMUs and TAPMP.ssp",
-                       description="Build TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu and TAPMP.ssp.")
+    b = sub.add_parser("build", help="build the three FMUs, TAPMP.ssp and the container FMU",
+                       description="Build TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu, "
+                       "TAPMP.ssp and the closed-loop container FMU TAPMP_ClosedLoop.fmu.")
     b.add_argument("--out", default=str(build_mod.DEFAULT_BUILD_DIR), help="output folder (default: build/)")
     b.set_defaults(func=cmd_build)
 

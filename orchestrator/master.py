@@ -224,7 +224,8 @@ class CoSimulation:
             with zipfile.ZipFile(self.ssp_path) as z:
                 z.extractall(self.tmp / "ssp")
         except Exception as err:
-            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err}") from err
+            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
+                                    "holding SystemStructure.ssd and the FMUs)") from err
         self.callbacks = fmi2CallbackFunctions()
         self.callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
         self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
@@ -233,19 +234,21 @@ class CoSimulation:
         addLoggerProxy(byref(self.callbacks))
         for comp in ssd.system.elements:
             fmu = self.tmp / "ssp" / comp.source
+            if not fmu.is_file():
+                raise CoSimulationError(f"SSP file {self.ssp_path}: the FMU {comp.source} of element "
+                                        f"{comp.name} is missing from the archive", comp.name)
             try:
                 unit = _Unit(comp.name, fmu, self.tmp / comp.name, self.log)
             except Exception as err:
-                raise CoSimulationError(f"cannot load FMU {comp.source} of element {comp.name}: {err}",
+                raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {comp.source} of "
+                                        f"element {comp.name} (truncated or not an FMU): {err}",
                                         comp.name) from err
             self.units[comp.name] = unit
             self.guids[comp.name] = unit.md.guid
         missing = set(INIT_ORDER) - set(self.units)
         if missing:
             raise CoSimulationError(f"SSP system lacks the element(s) {', '.join(sorted(missing))}")
-        for c in ssd.system.connections:
-            src, dst = self.units[c.startElement], self.units[c.endElement]
-            dst.connect(src, c.startConnector, dst.vars[c.endConnector].valueReference)
+        self._connect(ssd.system.connections)
         for unit in self.units.values():
             unit.finish_connections()
         unknown = set(self.parameters) - set(self.units)
@@ -285,6 +288,32 @@ class CoSimulation:
                     self._envelope.append((unit.out, unit.outputs.index(output),
                                            f"{element}.{output}", float(limit), unit_name, key))
         self._check_outputs(self.t0)
+
+    def _connect(self, connections) -> None:
+        """Wire the SSP connections, output to input; reject, before any FMU is instantiated,
+        a connection that names an element or variable that does not exist, runs the wrong
+        way, or drives an input that another connection drives already."""
+        driven = {}
+        for c in connections:
+            name = f"{c.startElement}.{c.startConnector} -> {c.endElement}.{c.endConnector}"
+            where = f"SSP file {self.ssp_path}: connection {name}"
+            for element in (c.startElement, c.endElement):
+                if element not in self.units:
+                    raise CoSimulationError(f"{where}: element {element!r} does not exist: allowed are "
+                                            f"{', '.join(self.units)}")
+            src, dst = self.units[c.startElement], self.units[c.endElement]
+            for unit, var, causality in ((src, c.startConnector, "output"), (dst, c.endConnector, "input")):
+                v = unit.vars.get(var)
+                if v is None or v.causality != causality or v.type != "Real":
+                    allowed = [n for n, x in unit.vars.items() if x.causality == causality and x.type == "Real"]
+                    raise CoSimulationError(f"{where}: {unit.name} ({unit.md.modelName}) has no Real {causality} "
+                                            f"{var!r}: allowed are {', '.join(allowed)}", unit.name)
+            end = (c.endElement, c.endConnector)
+            if end in driven:
+                raise CoSimulationError(f"{where}: input {c.endElement}.{c.endConnector} is driven already "
+                                        f"by {driven[end]}: allowed is one connection per input", dst.name)
+            driven[end] = f"{c.startElement}.{c.startConnector}"
+            dst.connect(src, c.startConnector, dst.vars[c.endConnector].valueReference)
 
     def _call(self, unit: _Unit, action, what: str, t: float | None = None):
         """Run one FMI call; a failed call (an exception or a returned status above

@@ -135,3 +135,25 @@ def test_invalid_parameter_set_in_initialization_mode_fails_at_exit(built, load_
     assert fmu.errors() == []  # maybe a master's half-way point: not an error yet
     assert call_status(fmu.slave.exitInitializationMode) == 3
     assert any("radius = -1" in m for m in fmu.errors())
+
+
+def test_controller_reports_its_command_in_initialization_mode_once_inputs_are_set(built, load_fmu):
+    """fmpy's container runtime copies each connection once in Initialization Mode and then
+    leaves it: the F it passes to the plant is the one read there."""
+    fmu = load_fmu(built[CONTROLLER])
+    ref, q, dq = inputs(0)
+    fmu.slave.setupExperiment(startTime=0.0)
+    fmu.slave.enterInitializationMode()
+    model = ControllerModel(PAPER_MODEL, Gains.from_preset(gain_preset("default")), 0)
+    zero = model.sample(0.0, 1e-4, (0.0,) * 9, (0.0,) * 3, (0.0,) * 3, advance=False)[0]
+    assert fmu.get("F1", "F2", "F3") == pytest.approx(zero, rel=1e-12)  # inputs at their start, 0
+    fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=dq[0], dq2=dq[1], dq3=dq[2])
+    in_init = fmu.get("F1", "F2", "F3")
+    F0 = model.sample(0.0, 1e-4, ref, q, dq, advance=False)[0]
+    assert F0 != pytest.approx(zero, rel=1e-3)
+    assert in_init == pytest.approx(F0, rel=1e-12) and min(map(abs, F0)) > 1.0
+    fmu.set(Lambda_p1=600.0)                                     # a parameter changes it again
+    assert fmu.get("F1")[0] != pytest.approx(in_init[0], rel=1e-6)
+    fmu.set(Lambda_p1=gain_preset("default")["Lambda_p"][0])
+    fmu.slave.exitInitializationMode()
+    assert fmu.get("F1", "F2", "F3") == in_init

@@ -8,6 +8,9 @@ Initialization Mode before every FMU leaves it. So the orchestrator reproduces i
 ordering = "jacobi" and clock = "accumulated" (connections propagated, the default).
 """
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
@@ -81,3 +84,37 @@ def test_ecos_differs_from_gauss_seidel_by_the_extra_sample_of_delay(built, ecos
     gs = orchestrator_rows(built["ssp"], scenario, NAMES, "gauss-seidel", clock="accumulated")
     diff = np.abs(ec - gs).max(axis=0)
     assert np.all((diff[:3] > 1e-8) & (diff[:3] < 2e-7)), diff  # m; measured 8e-8 ... 9.4e-8
+
+
+def test_ecos_executable_runs_the_ssp_in_a_process_without_python(built, tmp_path):
+    """Ecos's own `ecos simulate` (C++, no Python in the process): the FMUs start the
+    interpreter named in their python-env.txt. Its CSV has 6 decimals, so the commands
+    (hundreds of N) are compared to 5e-7 N, which tells the orderings apart (GS: 20 N)."""
+    import shutil
+    import stat
+    import subprocess
+
+    import ecospy
+    binaries = Path(ecospy.__file__).parent / "binaries"
+    exe = tmp_path / "ecos"  # the wheel installs it without the executable bit
+    shutil.copy(binaries / "ecos", exe)
+    exe.chmod(exe.stat().st_mode | stat.S_IXUSR)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    env["LD_LIBRARY_PATH"] = str(binaries)
+    proc = subprocess.run([str(exe), "simulate", "--path", str(built["ssp"]), "--stepSize", "1e-4",
+                           "--stopTime", "0.2", "--noParallel"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    with open(tmp_path / "TAPMP.csv") as f:
+        header = [h.strip().split("[")[0].replace("::", ".") for h in f.readline().split(",")]
+    data = np.loadtxt(tmp_path / "TAPMP.csv", delimiter=",", skiprows=1)
+    names = ("controller.F1", "controller.F2", "controller.F3")
+    assert data.shape[0] == 2001 and data[-1, header.index("time")] == pytest.approx(0.2)  # t_0 ... t_2000
+    got = data[:, [header.index(n) for n in names]]
+    default = paper_scenario().with_changes(start_on_trajectory=False, trajectory={}, plant={},
+                                            controller={})
+    ours = orchestrator_rows(built["ssp"], default, names, "jacobi", clock="accumulated")
+    assert np.abs(got - ours).max() <= 5.1e-7, np.abs(got - ours).max()
+    assert np.abs(ours).max() > 100.0
+    gs = orchestrator_rows(built["ssp"], default, names, "gauss-seidel", clock="accumulated")
+    assert np.abs(got - gs).max() > 1.0

@@ -6,6 +6,12 @@
  * so fmi2GetReal, fmi2GetInteger and fmi2SetReal of inputs never enter Python; doStep,
  * parameters, initialization and FMU states call one method of the slave each.
  *
+ * Initial unknowns: in Initialization Mode a master may set inputs and parameters and read
+ * the outputs before fmi2ExitInitializationMode (fmpy's container runtime copies every
+ * connection once that way; Ecos sets parameters there). So a set in Initialization Mode
+ * marks the outputs stale, and the next get recomputes them first (one Python call,
+ * slave.fmi2_update_initial_unknowns); in Step Mode gets stay Python-free.
+ *
  * Status codes: every slave method returns an fmi2Status, plus FLAG_LOGS when it queued
  * log messages; a Python exception (a bug, never bad input) becomes fmi2Error with the
  * exception logged. Error and warning messages always reach the logger; others only with
@@ -31,6 +37,8 @@ typedef struct {
     fmi2ComponentEnvironment env;
     char *name;
     int logging_on;
+    int init_mode;              /* the slave is in Initialization Mode (see sync_mode) */
+    int stale;                  /* a value was set in Initialization Mode since the last get */
 } Instance;
 
 /* The logger's message is a printf format (FMI 2.0), so a literal '%' is passed as "%%". */
@@ -322,11 +330,26 @@ EXPORT fmi2Status tapmp_SetupExperiment(fmi2Component c, fmi2Boolean tolDefined,
     return s;
 }
 
+/* Reads the slave's mode after a call that may change it. GIL held. */
+static void sync_mode(Instance *I)
+{
+    PyObject *mode = PyObject_GetAttrString(I->slave, "mode");
+    I->init_mode = mode && PyUnicode_Check(mode) &&
+                   PyUnicode_CompareWithASCIIString(mode, "initialization") == 0;
+    I->stale = I->init_mode;
+    Py_XDECREF(mode);
+    PyErr_Clear();
+}
+
 #define SIMPLE(fn, method)                                                                     \
     EXPORT fmi2Status tapmp_##fn(fmi2Component c)                                              \
     {                                                                                          \
         Instance *I = c;                                                                       \
-        WITH_GIL(I, "fmi2" #fn, PyObject_CallMethod(I->slave, method, NULL));                  \
+        PyGILState_STATE gil = PyGILState_Ensure();                                            \
+        fmi2Status s = finish(I, PyObject_CallMethod(I->slave, method, NULL), "fmi2" #fn);     \
+        sync_mode(I);                                                                          \
+        PyGILState_Release(gil);                                                               \
+        return s;                                                                              \
     }
 SIMPLE(EnterInitializationMode, "fmi2_enter_initialization_mode")
 SIMPLE(ExitInitializationMode, "fmi2_exit_initialization_mode")
@@ -365,16 +388,28 @@ static fmi2Status bad_reference(Instance *I, const char *fn, fmi2ValueReference 
     return fmi2Error;
 }
 
+/* Recomputes the outputs after values were set in Initialization Mode. */
+static fmi2Status update_initial_unknowns(Instance *I, const char *fn)
+{
+    PyGILState_STATE gil = PyGILState_Ensure();
+    fmi2Status s = finish(I, PyObject_CallMethod(I->slave, "fmi2_update_initial_unknowns", NULL), fn);
+    PyGILState_Release(gil);
+    I->stale = 0;
+    return s;
+}
+
 EXPORT fmi2Status tapmp_GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                 fmi2Real value[])
 {
     Instance *I = c;
     const double *reals = I->reals.buf;
+    fmi2Status s = I->stale ? update_initial_unknowns(I, "fmi2GetReal") : fmi2OK;
+    if (s >= fmi2Error) return s;
     for (size_t k = 0; k < n; k++) {
         if (!is_real(I, vr[k])) return bad_reference(I, "fmi2GetReal", vr[k], "Real");
         value[k] = reals[vr[k]];
     }
-    return fmi2OK;
+    return s;
 }
 
 EXPORT fmi2Status tapmp_GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
@@ -382,12 +417,14 @@ EXPORT fmi2Status tapmp_GetInteger(fmi2Component c, const fmi2ValueReference vr[
 {
     Instance *I = c;
     const int *ints = I->ints.buf;
+    fmi2Status s = I->stale ? update_initial_unknowns(I, "fmi2GetInteger") : fmi2OK;
+    if (s >= fmi2Error) return s;
     for (size_t k = 0; k < n; k++) {
         if ((Py_ssize_t)vr[k] >= I->n || PyBytes_AS_STRING(I->kinds)[vr[k]] != 'I')
             return bad_reference(I, "fmi2GetInteger", vr[k], "Integer");
         value[k] = ints[vr[k]];
     }
-    return fmi2OK;
+    return s;
 }
 
 /* Inputs are stored here without Python (the hot path); a non-finite input is refused by
@@ -401,6 +438,7 @@ EXPORT fmi2Status tapmp_SetReal(fmi2Component c, const fmi2ValueReference vr[], 
     fmi2Status worst = fmi2OK;
     for (size_t k = 0; k < n; k++) {
         if (!is_real(I, vr[k])) return bad_reference(I, "fmi2SetReal", vr[k], "Real");
+        I->stale |= I->init_mode;
         if (PyBytes_AS_STRING(I->kinds)[vr[k]] == 'i' && isfinite(value[k])) {
             reals[vr[k]] = value[k];
             continue;
@@ -424,6 +462,7 @@ EXPORT fmi2Status tapmp_SetInteger(fmi2Component c, const fmi2ValueReference vr[
     for (size_t k = 0; k < n; k++) {
         if ((Py_ssize_t)vr[k] >= I->n || PyBytes_AS_STRING(I->kinds)[vr[k]] != 'I')
             return bad_reference(I, "fmi2SetInteger", vr[k], "Integer");
+        I->stale |= I->init_mode;
         PyGILState_STATE gil = PyGILState_Ensure();
         fmi2Status s = finish(I, PyObject_CallMethod(I->slave, "fmi2_set_integer", "Ii",
                                                      (unsigned)vr[k], (int)value[k]),
@@ -478,8 +517,11 @@ EXPORT fmi2Status tapmp_SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     Instance *I = c;
     if (!state) { log_c(I, fmi2Error, "fmi2SetFMUstate: FMUstate = NULL is invalid"); return fmi2Error; }
-    WITH_GIL(I, "fmi2SetFMUstate",
-             call_with(I, "fmi2_set_state", (PyObject *)state));
+    PyGILState_STATE gil = PyGILState_Ensure();
+    fmi2Status s = finish(I, call_with(I, "fmi2_set_state", (PyObject *)state), "fmi2SetFMUstate");
+    sync_mode(I);
+    PyGILState_Release(gil);
+    return s;
 }
 
 EXPORT fmi2Status tapmp_FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
