@@ -41,8 +41,30 @@ def cmd_build(args) -> int:
     return 0
 
 
+def warn_if_unstable(scenario) -> None:
+    """One line on stderr if the stability pre-check finds the scenario's loop unstable."""
+    from .stability import check
+    report = check(scenario)
+    if not report.stable:
+        print(f"warning: {scenario.name}: the sampled closed loop is {report.verdict} (spectral radius "
+              f"{report.spectral_radius:.4g}, stable needs < 1 - 1e-6, at h = {scenario.step:g} s, {scenario.ordering}); "
+              f"see `tapmp check`", file=sys.stderr, flush=True)
+
+
+def cmd_check(args) -> int:
+    from .stability import check
+    scenario = load(args.scenario, args.set)
+    report = check(scenario)
+    print(f"{scenario.name}: {report.summary()}")
+    if args.eigenvalues:
+        for z in report.eigenvalues:
+            print(f"  {z.real:+.6f} {z.imag:+.6f}j   |z| = {abs(z):.6f}")
+    return 0 if report.stable else 1
+
+
 def cmd_run(args) -> int:
     scenario = load(args.scenario, args.set)
+    warn_if_unstable(scenario)
     out = Path(args.out or scenario.output)
     m = _run_one(scenario, Path(args.ssp), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
@@ -127,6 +149,15 @@ def parser() -> argparse.ArgumentParser:
                        "results.csv, run.json and metrics.json into its output folder.")
     scenario_args(r)
     r.set_defaults(func=cmd_run)
+    ck = sub.add_parser("check", help="stability pre-check of a scenario's sampled loop",
+                        description="Linearize the sampled closed loop (plant about the start pose, the "
+                        "scenario's controller, step and ordering) and report the spectral radius of its "
+                        "one-step map: stable if < 1 - 1e-6. Exit code 0 if stable, 1 if not.")
+    ck.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    ck.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scenario value, e.g. --set gains='\"paper_simulation\"'")
+    ck.add_argument("--eigenvalues", action="store_true", help="list every eigenvalue")
+    ck.set_defaults(func=cmd_check)
     c = sub.add_parser("compare", help="run a scenario with SC-DC and with APD-DC",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41) and APD-DC with matched "
                        "stiffness; write comparison.md and figures and print the tables.")
