@@ -10,6 +10,7 @@ from . import build as build_mod
 from .master import CoSimulationError
 from .results import OutputExistsError, run_scenario
 from .scenario import ScenarioError, load
+from .study import StudyError
 
 DEFAULT_SSP = build_mod.DEFAULT_BUILD_DIR / build_mod.SSP_NAME
 
@@ -41,8 +42,30 @@ def cmd_build(args) -> int:
     return 0
 
 
+def warn_if_unstable(scenario) -> None:
+    """One line on stderr if the stability pre-check finds the scenario's loop unstable."""
+    from .stability import check
+    report = check(scenario)
+    if not report.stable:
+        print(f"warning: {scenario.name}: the sampled closed loop is {report.verdict} (spectral radius "
+              f"{report.spectral_radius:.4g}, stable needs < 1 - 1e-6, at h = {scenario.step:g} s, {scenario.ordering}); "
+              f"see `tapmp check`", file=sys.stderr, flush=True)
+
+
+def cmd_check(args) -> int:
+    from .stability import check
+    scenario = load(args.scenario, args.set)
+    report = check(scenario)
+    print(f"{scenario.name}: {report.summary()}")
+    if args.eigenvalues:
+        for z in report.eigenvalues:
+            print(f"  {z.real:+.6f} {z.imag:+.6f}j   |z| = {abs(z):.6f}")
+    return 0 if report.stable else 1
+
+
 def cmd_run(args) -> int:
     scenario = load(args.scenario, args.set)
+    warn_if_unstable(scenario)
     out = Path(args.out or scenario.output)
     m = _run_one(scenario, Path(args.ssp), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
@@ -95,6 +118,36 @@ def cmd_reproduce(args) -> int:
     return 0
 
 
+def cmd_study(args) -> int:
+    from .study import close_client, load_study, open_client, run_study
+    study = load_study(args.study)
+    if not Path(args.ssp).exists():  # before starting a cluster
+        raise StudyError(f"SSP file {args.ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
+                         "or tapmp build) or pass --ssp")
+    if args.workers is not None and args.workers < 1:
+        raise StudyError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+    client = open_client(args.scheduler, args.workers)
+    try:
+        command = "tapmp study " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+        s = run_study(study, Path(args.ssp), client, Path(args.out) if args.out else None, args.resume,
+                      args.overwrite, not args.no_progress, command)
+    finally:
+        close_client(client)
+    if study.tune:
+        for law, r in s["tuning"].items():
+            print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
+                  f"{r['evaluations']} evaluations); preset {r['preset']}")
+        print(f"comparison and objective plot in {Path(study.tune['write_to'])}; every evaluation in "
+              f"{s['out'] / 'study.csv'}")
+    else:
+        c = s["counts"]
+        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s): "
+              f"{c['completed']} completed, {c['failed']} failed -> {s['out'] / 'study.csv'}")
+    for f in s["figures"]:
+        print(f"wrote {f}")
+    return 0
+
+
 def cmd_plot(args) -> int:
     from .plots import plot
     for path in plot(Path(args.result_dir)):
@@ -128,6 +181,15 @@ def parser() -> argparse.ArgumentParser:
                        "results.csv, run.json and metrics.json into its output folder.")
     scenario_args(r)
     r.set_defaults(func=cmd_run)
+    ck = sub.add_parser("check", help="stability pre-check of a scenario's sampled loop",
+                        description="Linearize the sampled closed loop (plant about the start pose, the "
+                        "scenario's controller, step and ordering) and report the spectral radius of its "
+                        "one-step map: stable if < 1 - 1e-6. Exit code 0 if stable, 1 if not.")
+    ck.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    ck.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scenario value, e.g. --set gains='\"paper_simulation\"'")
+    ck.add_argument("--eigenvalues", action="store_true", help="list every eigenvalue")
+    ck.set_defaults(func=cmd_check)
     c = sub.add_parser("compare", help="run a scenario with SC-DC and with APD-DC",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41) and APD-DC with matched "
                        "stiffness; write comparison.md and figures and print the tables.")
@@ -142,6 +204,19 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
     rp.set_defaults(func=cmd_reproduce)
+    st = sub.add_parser("study", help="run a parameter study on Dask",
+                        description="Run every case of a study file (grid, Monte Carlo or tuning) as an "
+                        "independent co-simulation on Dask workers; one row per case in OUTPUT/study.csv.")
+    st.add_argument("study", help="study TOML file, e.g. studies/robustness.toml")
+    st.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 "
+                    "(default: a LocalCluster on this machine)")
+    st.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default: one per core)")
+    st.add_argument("--out", help="output folder (overrides the study's 'output')")
+    st.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
+    st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
+    st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
+    st.add_argument("--no-progress", action="store_true", help="no progress bar")
+    st.set_defaults(func=cmd_study)
     pl = sub.add_parser("plot", help="plot a run or a comparison",
                         description="Write the figures (cf. paper Fig. 4-7) of a result folder as PNG.")
     pl.add_argument("result_dir", help="a run folder or a comparison folder")
@@ -156,7 +231,7 @@ def main(argv=None) -> int:
     except KeyboardInterrupt as err:
         print(f"{err or 'interrupted'}: the results so far are in the output folder", file=sys.stderr)
         return 130
-    except (ScenarioError, CoSimulationError, OutputExistsError, FileNotFoundError, ValueError) as err:
+    except (ScenarioError, StudyError, CoSimulationError, OutputExistsError, FileNotFoundError, ValueError) as err:
         if args.debug:
             traceback.print_exc()
         print(f"error: {err}", file=sys.stderr)

@@ -1,7 +1,8 @@
 """Scenarios: one TOML file each, validated before anything runs.
 
 Top-level keys: name, description, law ("sc-dc" or "apd-dc"), gains (a preset of
-tapmp.params.GAIN_PRESETS), stop_time, start_time, step, ordering, output,
+tapmp.params.GAIN_PRESETS), gains_file (a gain preset file, see load_gain_file; it
+replaces the preset named by gains), stop_time, start_time, step, ordering, output,
 start_on_trajectory, record_every (store every Nth step in results.csv; metrics
 always use every step), clock and connection_start (conventions of other masters, see
 orchestrator.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's).
@@ -34,7 +35,7 @@ else:  # pragma: no cover
 LAWS = {"sc-dc": 0, "apd-dc": 1}
 ORDERINGS = ("gauss-seidel", "jacobi")
 CONNECTION_STARTS = ("propagated", "zero")
-_TOP = {"name": str, "description": str, "law": str, "gains": str, "stop_time": float,
+_TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str}
 _TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
@@ -62,6 +63,44 @@ class ScenarioError(ValueError):
     """A scenario file or value is invalid; the message names the key and what is allowed."""
 
 
+def load_gain_file(path) -> dict:
+    """Read a gain preset file: a TOML table [gains] with Lambda_p, Lambda_v, b, D, K_T,
+    each a number or a list of three (per motor; units as in tapmp.control.Gains).
+
+    Other top-level keys (e.g. law, objective, command) are kept as documentation only.
+    Returns {name: (motor 1, motor 2, motor 3)}; ScenarioError names what is wrong.
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ScenarioError(f"gains_file = {str(path)!r} does not exist: allowed is a TOML gain preset "
+                            "file with a [gains] table") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"gains_file = {str(path)!r} is not valid TOML: {err}") from None
+    table = data.get("gains")
+    if not isinstance(table, dict):
+        raise ScenarioError(f"gains_file = {str(path)!r} has no [gains] table: allowed is a table with "
+                            f"{', '.join(GAIN_NAMES)}")
+    preset = {}
+    for name in GAIN_NAMES:
+        if name not in table:
+            raise ScenarioError(f"gains_file {path}: gains.{name} is missing: allowed is a number or a list of 3 numbers")
+    for name, v in table.items():
+        if name not in GAIN_NAMES:
+            raise ScenarioError(f"gains_file {path}: gains.{name} is unknown: allowed are {', '.join(GAIN_NAMES)}")
+        vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+        if not (isinstance(vals, list) and len(vals) == 3):
+            raise ScenarioError(f"gains_file {path}: gains.{name} = {v!r} is invalid: allowed is a number "
+                                "or a list of 3 numbers")
+        preset[name] = tuple(_check_type(f"gains_file {path}: gains.{name}", x, float) for x in vals)
+    try:
+        Gains.from_preset(preset).validated()
+    except ModelInputError as err:
+        raise ScenarioError(f"gains_file {path}: gains.{err}") from None
+    return preset
+
+
 @dataclass
 class Scenario:
     """A validated scenario."""
@@ -70,6 +109,7 @@ class Scenario:
     description: str = ""
     law: str = "sc-dc"
     gains: str = "default"
+    gains_file: str = ""
     gain_overrides: dict = field(default_factory=dict)
     start_time: float = 0.0
     stop_time: float = 2.5
@@ -85,6 +125,7 @@ class Scenario:
     limits: dict = field(default_factory=dict)
     record_every: int = 1
     source: str = ""
+    gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
     @property
     def n_steps(self) -> int:
@@ -96,8 +137,8 @@ class Scenario:
         return {k: self.limits.get(k, d[0]) for k, d in LIMITS.items()}
 
     def gain_values(self) -> Gains:
-        """The preset with the overrides applied."""
-        preset = dict(GAIN_PRESETS[self.gains])
+        """The preset (gains_file if given, else the named one) with the overrides applied."""
+        preset = dict(self.gain_file_values if self.gains_file else GAIN_PRESETS[self.gains])
         for k, v in self.gain_overrides.items():
             preset[k] = tuple(v)
         return Gains.from_preset(preset)
@@ -165,6 +206,8 @@ def validate(s: Scenario) -> Scenario:
         raise ScenarioError(f"law = {s.law!r} is invalid: allowed are {', '.join(LAWS)}")
     if s.gains not in GAIN_PRESETS:
         raise ScenarioError(f"gains = {s.gains!r} is invalid: allowed are {', '.join(sorted(GAIN_PRESETS))}")
+    if s.gains_file:
+        s.gain_file_values = load_gain_file(s.gains_file)
     if s.ordering not in ORDERINGS:
         raise ScenarioError(f"ordering = {s.ordering!r} is invalid: allowed are {', '.join(ORDERINGS)}")
     if s.clock not in CLOCKS:
@@ -233,6 +276,8 @@ def from_dict(data: dict, source: str = "") -> Scenario:
             raise ScenarioError(f"{key} is unknown: allowed are {', '.join([*_TOP, *sorted(_TABLES)])}")
     if "name" not in kwargs:
         kwargs["name"] = Path(source).stem if source else "scenario"
+    if kwargs.get("gains_file") and source and not Path(kwargs["gains_file"]).is_absolute():
+        kwargs["gains_file"] = str(Path(source).parent / kwargs["gains_file"])  # relative to the scenario file
     return validate(Scenario(**kwargs))
 
 

@@ -1,0 +1,528 @@
+"""Studies: many independent co-simulations of one base scenario, run on Dask.
+
+A study file (TOML) names a base scenario and what varies:
+
+* ``[grid]``: dotted scenario keys with a list of values each; every combination is a case;
+* ``[monte_carlo]``: ``samples`` draws of the factors in ``[monte_carlo.vary.NAME]`` from
+  stated distributions with a ``seed`` (combined with a grid: the same draws for every
+  grid point, so the laws of a robustness study see the same plants);
+* ``[tune]``: minimize the objective over the gains of each law (orchestrator.tuning).
+
+Every case runs through the real FMUs (orchestrator.results.run_scenario) in a Dask
+worker process, into its own folder ``OUTPUT/cases/CASE``. Workers get only plain data
+(the base scenario as a dict, the changes, paths); each loads the FMUs itself. Rows
+(parameters, metrics, status, wall time) are appended to ``OUTPUT/study.csv`` as cases
+finish; a failing case is a row with its error. ``--resume`` runs only the cases that
+have no row yet.
+
+The objective of a case is the mean over the three motors of the tracking MAE and the
+synchronization MAE, averaged: (mean(tracking_mae_um) + mean(sync_mae_um)) / 2 [um].
+"""
+
+import csv
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tapmp.params import GAIN_NAMES
+
+from .scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, tomllib, validate
+
+STUDY_CSV = "study.csv"
+STUDY_JSON = "study.json"
+STATUSES = ("completed", "failed", "rejected")
+METRIC_COLUMNS = ("objective", "tracking_mae_um_mean", "sync_mae_um_mean",
+                  "tracking_mae_um_1", "tracking_mae_um_2", "tracking_mae_um_3",
+                  "sync_mae_um_1", "sync_mae_um_2", "sync_mae_um_3")
+TAIL_COLUMNS = ("spectral_radius", "wall_time_s", "worker", "error")
+DISTRIBUTIONS = ("uniform", "loguniform", "normal")
+_SECTIONS = ("plant", "controller", "trajectory")
+
+
+class StudyError(ValueError):
+    """A study file or value is invalid, or its output folder is in the way; the message says which."""
+
+
+@dataclass
+class Factor:
+    """A Monte Carlo factor: one draw per sample, applied to every target.
+
+    distribution "uniform" / "loguniform" take low, high; "normal" takes mean, std.
+    relative = true multiplies each target's base value by the draw.
+    """
+
+    name: str
+    targets: list
+    distribution: str
+    low: float = 0.0
+    high: float = 0.0
+    mean: float = 0.0
+    std: float = 0.0
+    relative: bool = False
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """n draws from the distribution."""
+        if self.distribution == "uniform":
+            return rng.uniform(self.low, self.high, n)
+        if self.distribution == "loguniform":
+            return np.exp(rng.uniform(math.log(self.low), math.log(self.high), n))
+        return rng.normal(self.mean, self.std, n)
+
+
+@dataclass
+class Study:
+    """A validated study file."""
+
+    name: str
+    source: str
+    base: str                      # the base scenario file (absolute)
+    output: str
+    description: str = ""
+    keep_results: bool = False     # keep each case's results.csv (else run.json + metrics.json only)
+    set: dict = field(default_factory=dict)
+    grid: dict = field(default_factory=dict)
+    samples: int = 0
+    seed: int = 0
+    factors: list = field(default_factory=list)
+    tune: dict = field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        """"tune", or "grid", "monte_carlo" or "grid+monte_carlo"."""
+        if self.tune:
+            return "tune"
+        return "+".join(k for k, on in (("grid", self.grid), ("monte_carlo", self.samples)) if on)
+
+    def base_scenario(self) -> Scenario:
+        """The base scenario with the study's [set] changes."""
+        return apply_changes(load(self.base), self.set, "set")
+
+
+def _require(cond: bool, message: str) -> None:
+    if not cond:
+        raise StudyError(message)
+
+
+def _number(where: str, v) -> float:
+    _require(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+             f"{where} = {v!r} is invalid: allowed is a finite number")
+    return float(v)
+
+
+def base_value(scenario: Scenario, key: str):
+    """The value a dotted key has in a scenario (the FMU default if the scenario does not set it)."""
+    section, _, name = key.partition(".")
+    if section == "gain_overrides":
+        return list(getattr(scenario.gain_values(), name))
+    if section in _SECTIONS:
+        table = getattr(scenario, section)
+        return table[name] if name in table else _SECTION_PARAMS[section][name].start
+    return getattr(scenario, key)
+
+
+def check_key(key: str, where: str) -> None:
+    """Raise StudyError unless ``key`` is a dotted scenario key a study may vary."""
+    section, dot, name = key.partition(".")
+    if not dot:
+        _require(key in ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file",
+                         "start_on_trajectory"),
+                 f"{where}: {key} is not a scenario key a study may set: allowed are law, ordering, step, "
+                 "stop_time, start_time, gains, gains_file, start_on_trajectory or SECTION.NAME "
+                 "(gain_overrides, plant, controller, trajectory)")
+    elif section == "gain_overrides":
+        _require(name in GAIN_NAMES, f"{where}: {key} is unknown: allowed are "
+                 + ", ".join(f"gain_overrides.{g}" for g in GAIN_NAMES))
+    else:
+        _require(section in _SECTIONS and name in _SECTION_PARAMS[section],
+                 f"{where}: {key} is unknown: allowed are gain_overrides.NAME, "
+                 + ", ".join(f"{s}.NAME" for s in _SECTIONS) + " with NAME a parameter of that FMU"
+                 + (f" ({', '.join(_SECTION_PARAMS[section])})" if section in _SECTIONS else ""))
+
+
+def apply_changes(scenario: Scenario, changes: dict, where: str = "case") -> Scenario:
+    """A copy of ``scenario`` with dotted-key changes applied (validated; ScenarioError names the key)."""
+    top = {}
+    for key, value in changes.items():
+        section, dot, name = key.partition(".")
+        if not dot:
+            top[key] = value
+            continue
+        table = dict(top.get(section, getattr(scenario, section)))
+        table[name] = list(value) if isinstance(value, (list, tuple)) else value
+        top[section] = table
+    try:
+        return scenario.with_changes(**top)
+    except ScenarioError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+
+
+def load_study(path) -> Study:
+    """Read and validate a study file; StudyError names the key and what is allowed."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise StudyError(f"study file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as err:
+        raise StudyError(f"study file {path} is not valid TOML: {err}") from None
+    allowed = ("study", "set", "grid", "monte_carlo", "tune")
+    for key in data:
+        _require(key in allowed, f"{path}: [{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed))
+    head = data.get("study", {})
+    for key in head:
+        _require(key in ("name", "description", "base", "output", "keep_results"),
+                 f"{path}: study.{key} is unknown: allowed are name, description, base, output, keep_results")
+    _require(isinstance(head.get("base"), str), f"{path}: study.base is missing: allowed is the path of a "
+             "scenario TOML file, relative to the study file")
+    base = (path.parent / head["base"]).resolve()
+    _require(base.exists(), f"{path}: study.base = {head['base']!r} does not exist (looked for {base})")
+    name = head.get("name", path.stem)
+    study = Study(name=name, source=str(path.resolve()), base=str(base),
+                  output=str(head.get("output", f"results/studies/{name}")),
+                  description=str(head.get("description", "")), keep_results=bool(head.get("keep_results", False)))
+    for key, value in data.get("set", {}).items():
+        check_key(key, f"{path}: set")
+        study.set[key] = _resolve_path(key, value, path)
+    for key, values in data.get("grid", {}).items():
+        check_key(key, f"{path}: grid")
+        _require(isinstance(values, list) and len(values) >= 1,
+                 f"{path}: grid.{key} = {values!r} is invalid: allowed is a non-empty list of values")
+        study.grid[key] = [_resolve_path(key, v, path) for v in values]
+    mc = data.get("monte_carlo")
+    if mc is not None:
+        for key in mc:
+            _require(key in ("samples", "seed", "vary"),
+                     f"{path}: monte_carlo.{key} is unknown: allowed are samples, seed, vary")
+        samples = mc.get("samples")
+        _require(isinstance(samples, int) and not isinstance(samples, bool) and samples >= 1,
+                 f"{path}: monte_carlo.samples = {samples!r} is invalid: allowed is an integer >= 1")
+        seed = mc.get("seed")
+        _require(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
+                 f"{path}: monte_carlo.seed = {seed!r} is invalid: allowed is an integer >= 0 (stated, "
+                 "so the draws can be repeated)")
+        vary = mc.get("vary", {})
+        _require(isinstance(vary, dict) and vary, f"{path}: [monte_carlo.vary.NAME] tables are missing: "
+                 "allowed is at least one factor")
+        study.samples, study.seed = samples, seed
+        study.factors = [_factor(f"{path}: monte_carlo.vary.{n}", n, t) for n, t in vary.items()]
+    if "tune" in data:
+        _require(not study.grid and not study.samples,
+                 f"{path}: [tune] cannot be combined with [grid] or [monte_carlo]: use separate studies")
+        from .tuning import validate_tune
+        study.tune = validate_tune(data["tune"], path)
+    _require(study.grid or study.samples or study.tune,
+             f"{path}: nothing varies: allowed is a [grid], a [monte_carlo] or a [tune] table")
+    try:
+        study.base_scenario()
+    except ScenarioError as err:
+        raise StudyError(f"{path}: {err}") from None
+    return study
+
+
+def _resolve_path(key: str, value, study_path: Path):
+    """gains_file values in a study are relative to the study file."""
+    if key == "gains_file" and isinstance(value, str) and value and not Path(value).is_absolute():
+        return str((study_path.parent / value).resolve())
+    return value
+
+
+def _factor(where: str, name: str, table) -> Factor:
+    _require(isinstance(table, dict), f"{where} must be a table")
+    for key in table:
+        _require(key in ("targets", "distribution", "low", "high", "mean", "std", "relative"),
+                 f"{where}.{key} is unknown: allowed are targets, distribution, low, high, mean, std, relative")
+    targets = table.get("targets", [name])
+    _require(isinstance(targets, list) and targets and all(isinstance(t, str) for t in targets),
+             f"{where}.targets = {targets!r} is invalid: allowed is a list of dotted scenario keys")
+    for t in targets:
+        check_key(t, f"{where}.targets")
+        _require(t.partition(".")[0] in (*_SECTIONS, "gain_overrides"),
+                 f"{where}.targets: {t} is invalid: a sampled target must be a number in "
+                 "gain_overrides, plant, controller or trajectory")
+    dist = table.get("distribution")
+    _require(dist in DISTRIBUTIONS, f"{where}.distribution = {dist!r} is invalid: allowed are "
+             + ", ".join(DISTRIBUTIONS))
+    f = Factor(name=name, targets=targets, distribution=dist, relative=bool(table.get("relative", False)))
+    if dist == "normal":
+        f.mean, f.std = _number(f"{where}.mean", table.get("mean")), _number(f"{where}.std", table.get("std"))
+        _require(f.std >= 0.0, f"{where}.std = {f.std!r} is invalid: allowed is a number >= 0")
+    else:
+        f.low, f.high = _number(f"{where}.low", table.get("low")), _number(f"{where}.high", table.get("high"))
+        _require(f.high >= f.low, f"{where}.high = {f.high!r} is invalid: allowed is a number >= low = {f.low!r}")
+        _require(dist != "loguniform" or f.low > 0.0,
+                 f"{where}.low = {f.low!r} is invalid for loguniform: allowed is a number > 0")
+    return f
+
+
+def cases(study: Study) -> list[dict]:
+    """The cases of a grid / Monte Carlo study, in a fixed order.
+
+    Each is {"case": id, "params": {column: value}, "changes": {dotted key: value}}.
+    """
+    base = study.base_scenario()
+    grid_keys = list(study.grid)
+    combos = list(itertools.product(*study.grid.values())) if grid_keys else [()]
+    draws = []
+    if study.samples:
+        rng = np.random.default_rng(study.seed)
+        columns = {f.name: f.draw(rng, study.samples) for f in study.factors}
+        draws = [{n: float(columns[n][i]) for n in columns} for i in range(study.samples)]
+    out = []
+    for combo in combos:
+        for draw in (draws or [{}]):
+            params = dict(zip(grid_keys, combo))
+            changes = dict(params)
+            scenario = apply_changes(base, changes, "grid") if changes else base
+            for f in study.factors:
+                value = draw[f.name]
+                params[f.name] = value
+                for t in f.targets:
+                    if f.relative:
+                        b = base_value(scenario, t)
+                        changes[t] = [value * x for x in b] if isinstance(b, list) else value * b
+                    else:
+                        changes[t] = value
+            out.append({"case": f"c{len(out):04d}", "params": params, "changes": changes})
+    return out
+
+
+def objective(metrics: dict) -> float:
+    """(mean tracking MAE + mean synchronization MAE) / 2 over the three motors [um]."""
+    return 0.5 * (float(np.mean(metrics["tracking_mae_um"])) + float(np.mean(metrics["sync_mae_um"])))
+
+
+def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: bool = False,
+             reject_unstable: bool = False) -> dict:
+    """Run one case in this process (a Dask worker): returns its row as plain data.
+
+    base: the base scenario as dataclasses.asdict; changes: dotted keys; ssp, case_dir:
+    paths. Never raises for a failing case: the row's status is "failed" with the error,
+    or "rejected" (not run) when reject_unstable and the stability check finds the loop
+    not stable. The row carries the full metrics under "metrics" (not a CSV column).
+    """
+    from .results import run_scenario
+    from .stability import check
+
+    start = time.perf_counter()
+    row = {"status": "failed", "error": "", "worker": f"{os.uname().nodename}:{os.getpid()}"}
+    try:
+        scenario = apply_changes(validate(Scenario(**base)), changes)
+        report = check(scenario)
+        row["spectral_radius"] = report.spectral_radius
+        if reject_unstable and not report.stable:
+            row.update(status="rejected", error=f"not run: {report.verdict} (spectral radius "
+                       f"{report.spectral_radius:.4g})")
+        else:
+            m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True)
+            row.update(_metric_columns(m), status="completed", metrics=m)
+            if not keep_results:
+                (Path(case_dir) / "results.csv").unlink(missing_ok=True)
+    except Exception as err:  # a case's failure is its row, never the end of the study
+        row["error"] = " ".join(f"{type(err).__name__}: {err}".split())
+    row["wall_time_s"] = time.perf_counter() - start
+    return row
+
+
+def _metric_columns(m: dict) -> dict:
+    out = {"objective": objective(m), "tracking_mae_um_mean": float(np.mean(m["tracking_mae_um"])),
+           "sync_mae_um_mean": float(np.mean(m["sync_mae_um"]))}
+    for i in range(3):
+        out[f"tracking_mae_um_{i + 1}"] = m["tracking_mae_um"][i]
+        out[f"sync_mae_um_{i + 1}"] = m["sync_mae_um"][i]
+    return out
+
+
+def scenario_data(scenario: Scenario) -> dict:
+    """A scenario as plain data that crosses process boundaries (Scenario(**data) rebuilds it)."""
+    return dataclasses.asdict(scenario)
+
+
+def open_client(scheduler: str | None = None, workers: int | None = None):
+    """A Dask client: on the cluster at ``scheduler`` (address), or on a new LocalCluster of
+    ``workers`` single-threaded worker processes (default: one per core). Close it when done."""
+    from dask.distributed import Client, LocalCluster
+    if scheduler:
+        return Client(scheduler)
+    n = workers or os.cpu_count() or 1
+    _require(n >= 1, f"--workers = {n} is invalid: allowed is an integer >= 1")
+    cluster = LocalCluster(n_workers=n, processes=True, threads_per_worker=1, dashboard_address=":0",
+                           silence_logs=40)
+    client = Client(cluster)
+    client._tapmp_cluster = cluster  # closed with the client by close_client
+    return client
+
+
+def close_client(client) -> None:
+    """Close a client from open_client (and its LocalCluster, if it made one)."""
+    cluster = getattr(client, "_tapmp_cluster", None)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+class StudyTable:
+    """study.csv: one row per case, appended and flushed as cases finish."""
+
+    def __init__(self, path: Path, param_columns: list):
+        self.path = Path(path)
+        self.columns = ["case", *param_columns, "status", *METRIC_COLUMNS, *TAIL_COLUMNS]
+        self.rows = {}
+        if self.path.exists():
+            with open(self.path, newline="") as f:
+                reader = csv.DictReader(f)
+                _require(reader.fieldnames == self.columns,
+                         f"{self.path} has columns {reader.fieldnames}, not those of this study "
+                         f"({self.columns}): it was written by another study; use --overwrite")
+                for row in reader:
+                    self.rows[row["case"]] = row
+        new = not self.path.exists()
+        self.file = open(self.path, "a", newline="")
+        self.writer = csv.DictWriter(self.file, self.columns, extrasaction="ignore")
+        if new:
+            self.writer.writeheader()
+            self.file.flush()
+
+    def add(self, case: dict, row: dict) -> None:
+        full = {"case": case["case"], **case["params"], **row}
+        self.writer.writerow({k: ("" if full.get(k) is None else full.get(k, "")) for k in self.columns})
+        self.file.flush()
+        self.rows[case["case"]] = full
+
+    def close(self) -> None:
+        self.file.close()
+
+
+class CaseRunner:
+    """Runs cases on a Dask client and records their rows in a StudyTable."""
+
+    def __init__(self, client, base: Scenario, ssp: Path, out: Path, table: StudyTable,
+                 keep_results: bool, progress: bool = True, desc: str = "cases"):
+        self.client = client
+        self.base = scenario_data(base)
+        self.ssp = str(Path(ssp).resolve())
+        self.out = Path(out).resolve()
+        self.table = table
+        self.keep_results = keep_results
+        self.progress = progress
+        self.desc = desc
+
+    def run(self, cases: list, reject_unstable: bool = False) -> list:
+        """Rows of ``cases`` in their order; cases that have a row already are not run again."""
+        from dask.distributed import as_completed
+        from tqdm import tqdm
+
+        rows = {c["case"]: self.table.rows[c["case"]] for c in cases if c["case"] in self.table.rows}
+        todo = [c for c in cases if c["case"] not in rows]
+        bar = tqdm(total=len(cases), initial=len(rows), desc=self.desc, unit="case", disable=not self.progress,
+                   file=sys.stderr, leave=False)
+        futures = {}
+        try:
+            for c in todo:
+                fut = self.client.submit(run_case, self.base, c["changes"], self.ssp,
+                                         str(self.out / "cases" / c["case"]), self.keep_results,
+                                         reject_unstable, pure=False, key=f"case-{c['case']}-{os.urandom(4).hex()}")
+                futures[fut] = c
+            for fut in as_completed(futures):
+                c = futures[fut]
+                if fut.status == "finished":
+                    row = fut.result()
+                else:  # the worker died or the task could not run: still a row
+                    exc = fut.exception()
+                    row = {"status": "failed", "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
+                self.table.add(c, row)
+                rows[c["case"]] = self.table.rows[c["case"]]
+                bar.update(1)
+        finally:
+            for fut in futures:
+                fut.cancel()
+            bar.close()
+        return [rows[c["case"]] for c in cases]
+
+
+def fingerprint(study: Study, case_list: list) -> str:
+    """A hash of what the study runs: its cases and base scenario (resume refuses another)."""
+    text = json.dumps({"base": scenario_data(study.base_scenario()), "cases": case_list,
+                       "tune": study.tune, "keep": study.keep_results}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> None:
+    """Create the output folder, or check it for --resume; StudyError if it is in the way."""
+    csv_path = out / STUDY_CSV
+    meta = out / STUDY_JSON
+    if resume:
+        if meta.exists():
+            old = json.loads(meta.read_text()).get("fingerprint")
+            _require(old == fp, f"--resume: {out} holds a different study (fingerprint {old}, this one {fp}); "
+                     "the study file or its base scenario changed: run it into another --out or pass --overwrite")
+        return
+    if csv_path.exists():
+        _require(overwrite, f"output folder {out} already holds {STUDY_CSV}: pass --resume to run only the "
+                 "missing cases, --overwrite to start again, or --out for another folder")
+        csv_path.unlink()
+        shutil.rmtree(out / "cases", ignore_errors=True)
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
+              overwrite: bool = False, progress: bool = True, command: str = "") -> dict:
+    """Run a study on a Dask client; returns a summary (counts, paths, wall time)."""
+    ssp = Path(ssp)
+    if not ssp.exists():
+        raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
+                         "tapmp build) or pass --ssp")
+    out = Path(out or study.output)
+    if study.tune:
+        from .tuning import run_tuning
+        return run_tuning(study, ssp, client, out, resume, overwrite, progress, command)
+    case_list = cases(study)
+    fp = fingerprint(study, case_list)
+    prepare(study, out, resume, overwrite, fp)
+    out.mkdir(parents=True, exist_ok=True)
+    from .results import write_json
+    write_json(out / STUDY_JSON, {"name": study.name, "source": study.source, "kind": study.kind,
+                                  "fingerprint": fp, "command": command, "cases": case_list})
+    params = list(case_list[0]["params"])
+    table = StudyTable(out / STUDY_CSV, params)
+    done_before = len(table.rows)
+    start = time.perf_counter()
+    try:
+        rows = CaseRunner(client, study.base_scenario(), ssp, out, table, study.keep_results,
+                          progress, study.name).run(case_list)
+    finally:
+        table.close()
+    wall = time.perf_counter() - start
+    from .study_plots import plot_study
+    figures = plot_study(out, study, params)
+    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    return {"out": out, "cases": len(case_list), "ran": len(case_list) - done_before, "counts": counts,
+            "wall_time_s": wall, "figures": figures}
+
+
+def read_study_csv(path) -> list[dict]:
+    """Rows of a study.csv with numbers as floats (empty cells as None)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        for k, v in row.items():
+            if k in ("case", "status", "error", "worker", "law", "ordering", "gains", "gains_file"):
+                continue
+            try:
+                row[k] = float(v) if v != "" else None
+            except ValueError:
+                pass
+    return rows
+
+
+__all__ = ["Study", "StudyError", "load_study", "cases", "run_case", "run_study", "open_client",
+           "close_client", "objective", "read_study_csv"]

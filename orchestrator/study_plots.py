@@ -1,0 +1,133 @@
+"""Figures of studies: MAE against swept parameters, robustness histograms, tuning progress.
+
+All values in micrometres (um). Written as PNG with matplotlib's Agg backend.
+"""
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+_MAE = (("tracking_mae_um_mean", "tracking MAE (mean of q1-q3) [um]"),
+        ("sync_mae_um_mean", "synchronization MAE (mean of q1-q3) [um]"))
+
+
+def _numeric(values) -> bool:
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+
+
+def plot_study(out: Path, study, params: list) -> list:
+    """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
+    from .study import STUDY_CSV, read_study_csv
+    rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
+    done = [r for r in rows if r["status"] == "completed"]
+    if not done:
+        return []
+    paths = []
+    numeric_grid = [k for k in study.grid if _numeric(study.grid[k]) and len(study.grid[k]) > 1]
+    group_keys = [k for k in study.grid if k not in numeric_grid]
+    groups = {}
+    for r in done:
+        groups.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
+    if study.samples:
+        paths.append(_histograms(Path(out) / "robustness.png", study, groups, group_keys))
+    elif len(numeric_grid) == 1:
+        paths.append(_lines(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[0]))
+    elif len(numeric_grid) >= 2:
+        paths.append(_heatmaps(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[:2]))
+    return paths
+
+
+def _label(group_keys, group) -> str:
+    return ", ".join(f"{k} = {v}" for k, v in zip(group_keys, group)) or "all cases"
+
+
+def _histograms(path, study, groups, group_keys):
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for (key, title), ax in zip(_MAE, axes):
+        data = {g: np.array([r[key] for r in rs]) for g, rs in groups.items()}
+        lo = min(d.min() for d in data.values())
+        hi = max(d.max() for d in data.values())
+        bins = np.linspace(lo, hi if hi > lo else lo + 1e-9, 25)
+        for g, d in data.items():
+            ax.hist(d, bins=bins, alpha=0.55, label=f"{_label(group_keys, g)} (n = {len(d)}, "
+                    f"median {np.median(d):.3f})")
+        ax.set_xlabel(title)
+        ax.set_ylabel("cases")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{study.name}: {study.samples} samples of "
+                 + ", ".join(f.name for f in study.factors) + f" (seed {study.seed})", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _lines(path, study, groups, group_keys, x_key):
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for (key, title), ax in zip(_MAE, axes):
+        for g, rs in groups.items():
+            rs = sorted(rs, key=lambda r: r[x_key])
+            ax.plot([r[x_key] for r in rs], [r[key] for r in rs], "o-", label=_label(group_keys, g))
+        ax.set_xlabel(x_key)
+        ax.set_ylabel(title)
+        ax.set_yscale("log")
+        ax.legend(fontsize=8)
+    fig.suptitle(study.name, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _heatmaps(path, study, groups, group_keys, keys):
+    kx, ky = keys
+    xs, ys = sorted(set(study.grid[kx])), sorted(set(study.grid[ky]))
+    fig, axes = plt.subplots(len(groups), 2, figsize=(11, 4 * len(groups)), squeeze=False)
+    for row_axes, (g, rs) in zip(axes, groups.items()):
+        for (key, title), ax in zip(_MAE, row_axes):
+            z = np.full((len(ys), len(xs)), np.nan)
+            for r in rs:
+                z[ys.index(r[ky]), xs.index(r[kx])] = r[key]
+            im = ax.imshow(np.log10(z), origin="lower", aspect="auto", cmap="viridis")
+            for (i, j), v in np.ndenumerate(z):
+                ax.text(j, i, "failed" if np.isnan(v) else f"{v:.3g}", ha="center", va="center",
+                        fontsize=7, color="w")
+            ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
+            ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys])
+            ax.set_xlabel(kx)
+            ax.set_ylabel(ky)
+            ax.set_title(f"{title}\n{_label(group_keys, g)}", fontsize=9)
+            fig.colorbar(im, ax=ax, label="log10 [um]")
+    fig.suptitle(f"{study.name} (blank/failed: the case did not complete)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_objective(path: Path, results: dict) -> Path:
+    """Objective of every tuning evaluation (log scale) and the best so far, one panel per law."""
+    from .tuning import PENALTY_UM, _value
+    fig, axes = plt.subplots(1, len(results), figsize=(5.5 * len(results), 4), squeeze=False)
+    for ax, (law, r) in zip(axes[0], results.items()):
+        vals = np.array([_value(row) for row in r["rows"]])
+        ok = vals < PENALTY_UM
+        n = np.arange(len(vals))
+        ax.semilogy(n[ok], vals[ok], ".", label="candidate")
+        ax.semilogy(n, np.minimum.accumulate(vals), "-", label="best so far")
+        if (~ok).any():
+            ax.plot(n[~ok], np.full((~ok).sum(), vals[ok].max() if ok.any() else 1.0), "x", color="r",
+                    label="rejected (not stable) / failed")
+        ax.axhline(r["start"], color="grey", ls="--", label=f"start gains ({r['start']:.4f} um)")
+        ax.set_title(f"{law}: tuned {r['tuned']:.4f} um", fontsize=10)
+        ax.set_xlabel("evaluation")
+        ax.set_ylabel("objective (tracking + sync MAE)/2 [um]")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

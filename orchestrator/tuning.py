@@ -1,0 +1,265 @@
+"""Gain tuning: minimize the study objective over a law's gains with differential evolution.
+
+scipy.optimize.differential_evolution searches the base-10 logarithm of the tuned gains
+(the same value on all three motors) within stated bounds. It hands each generation to
+``workers`` as one batch; ``TuneObjective.map`` runs the batch as cases on the Dask
+workers (through the real FMUs, orchestrator.study.run_case) and records every
+evaluation as a row of study.csv. A candidate that the stability pre-check
+(orchestrator.stability) finds not stable is rejected without running (status
+"rejected"); rejected and failed candidates score PENALTY_UM.
+
+The objective is orchestrator.study.objective: (mean tracking MAE + mean synchronization
+MAE) / 2 over the three motors [um], on the study's base scenario (with its [set], e.g. a
+short stop_time). K_T is not tuned: F = u / K_T, so only the ratios Lambda / K_T matter.
+
+After tuning each law it writes WRITE_TO/<law>.toml (a gain preset file a scenario uses
+with gains_file = "...") and runs the starting and the tuned gains of every law over
+compare_stop_time into WRITE_TO/comparison.md, with WRITE_TO/objective.png.
+"""
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import differential_evolution
+
+from tapmp.params import GAIN_NAMES
+
+from .scenario import LAWS, load_gain_file
+from .study import (STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, _require, apply_changes, fingerprint,
+                    prepare)
+
+PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
+_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
+_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
+
+
+def validate_tune(table, path) -> dict:
+    """Check a study's [tune] table; returns it as plain data. StudyError names the key."""
+    where = f"{path}: tune"
+    _require(isinstance(table, dict), f"{where} must be a table")
+    for key in table:
+        _require(key in _KEYS, f"{where}.{key} is unknown: allowed are {', '.join(_KEYS)}")
+    laws = table.get("laws", list(LAWS))
+    _require(isinstance(laws, list) and laws and all(law in LAWS for law in laws),
+             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(LAWS)}")
+    bounds = table.get("bounds", {})
+    out_bounds = {}
+    for law in laws:
+        b = bounds.get(law)
+        _require(isinstance(b, dict) and b, f"{where}.bounds.{law} is missing: allowed is a table of "
+                 f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
+        out_bounds[law] = {}
+        for gain, lim in b.items():
+            _require(gain in _TUNABLE[law], f"{where}.bounds.{law}.{gain} is invalid: allowed are "
+                     f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
+                     + "K_T is not tuned: only Lambda / K_T matters)")
+            ok = (isinstance(lim, list) and len(lim) == 2
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim)
+                  and 0.0 < lim[0] < lim[1])
+            _require(ok, f"{where}.bounds.{law}.{gain} = {lim!r} is invalid: allowed is [low, high] with "
+                     "0 < low < high (searched on a log scale)")
+            out_bounds[law][gain] = [float(lim[0]), float(lim[1])]
+    spec = {"laws": laws, "bounds": out_bounds}
+    for key, default, lo in (("population", 6, 2), ("generations", 5, 1), ("seed", 0, 0)):
+        v = table.get(key, default)
+        _require(isinstance(v, int) and not isinstance(v, bool) and v >= lo,
+                 f"{where}.{key} = {v!r} is invalid: allowed is an integer >= {lo}")
+        spec[key] = v
+    w = table.get("write_to")
+    _require(isinstance(w, str) and w, f"{where}.write_to is missing: allowed is a folder for the preset "
+             "files, comparison.md and objective.png (relative to the working directory)")
+    spec["write_to"] = w
+    cst = table.get("compare_stop_time", 2.5)
+    _require(isinstance(cst, (int, float)) and not isinstance(cst, bool) and cst > 0,
+             f"{where}.compare_stop_time = {cst!r} is invalid: allowed is a number > 0 [s]")
+    spec["compare_stop_time"] = float(cst)
+    return spec
+
+
+def _value(row) -> float:
+    v = row.get("objective")
+    if row.get("status") != "completed" or v in (None, ""):
+        return PENALTY_UM
+    return float(v)
+
+
+class TuneObjective:
+    """The objective of one law's candidates x = log10(gains), evaluated as study cases."""
+
+    def __init__(self, runner: CaseRunner, law: str, names: list):
+        self.runner = runner
+        self.law = law
+        self.names = names
+        self.count = 0
+        self.cases = []
+
+    def case(self, x) -> dict:
+        """The study case of candidate x (the next evaluation number)."""
+        gains = {n: float(10.0 ** v) for n, v in zip(self.names, x)}
+        case = {"case": f"{self.law}-{self.count:04d}", "params": {"law": self.law, **gains},
+                "changes": {"law": self.law, **{f"gain_overrides.{n}": v for n, v in gains.items()}}}
+        self.count += 1
+        old = self.runner.table.rows.get(case["case"])
+        if old is not None:  # resumed: the optimizer must be asking for the same candidate
+            same = all(math.isclose(float(old[n]), gains[n], rel_tol=1e-9) for n in self.names)
+            _require(same, f"--resume: evaluation {case['case']} in {self.runner.table.path} had other gains "
+                     "than the optimizer asks for now; the study changed: use --overwrite")
+        self.cases.append(case)
+        return case
+
+    def map(self, func, xs) -> list:
+        """scipy's ``workers`` protocol: [func(x) for x in xs], here one batch of cases on Dask
+        (func is this objective, wrapped by scipy; its batch is run instead of one by one)."""
+        rows = self.runner.run([self.case(x) for x in xs], reject_unstable=True)
+        return [_value(r) for r in rows]
+
+    def __call__(self, x) -> float:
+        return self.map(None, [x])[0]
+
+
+def _preset_text(law, gains, objective_start, objective_tuned, base, command) -> str:
+    lines = [f"# {law} gains tuned by `{command}`" if command else f"# {law} gains, tuned",
+             f"# objective (mean tracking + sync MAE)/2 on {base.name}, {base.stop_time - base.start_time:g} s, "
+             f"h = {base.step:g} s: start {objective_start:.6g} um -> tuned {objective_tuned:.6g} um",
+             f'# use in a scenario: gains_file = "<path of this file>"', f'law = "{law}"',
+             f"objective_start_um = {objective_start!r}", f"objective_tuned_um = {objective_tuned!r}",
+             "", "[gains]"]
+    for n in GAIN_NAMES:
+        lines.append(f"{n} = [{', '.join(repr(float(v)) for v in gains[n])}]")
+    return "\n".join(lines) + "\n"
+
+
+def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
+               command: str) -> dict:
+    """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png."""
+    from .results import write_json
+
+    spec = study.tune
+    fp = fingerprint(study, [])
+    prepare(study, out, resume, overwrite, fp)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / STUDY_JSON, {"name": study.name, "source": study.source, "kind": "tune",
+                                  "fingerprint": fp, "command": command, "tune": spec})
+    names_all = [n for n in GAIN_NAMES if any(n in spec["bounds"][law] for law in spec["laws"])]
+    table = StudyTable(out / STUDY_CSV, ["law", *names_all])
+    write_to = Path(spec["write_to"])
+    write_to.mkdir(parents=True, exist_ok=True)
+    base = study.base_scenario()
+    start = time.perf_counter()
+    results = {}
+    try:
+        for law in spec["laws"]:
+            scenario = base.with_changes(law=law)
+            g0 = scenario.gain_values()
+            names = list(spec["bounds"][law])
+            lo = np.log10([spec["bounds"][law][n][0] for n in names])
+            hi = np.log10([spec["bounds"][law][n][1] for n in names])
+            x0 = np.clip(np.log10([float(np.mean(getattr(g0, n))) for n in names]), lo, hi)
+            runner = CaseRunner(client, scenario, ssp, out, table, study.keep_results, progress,
+                                f"{study.name} {law}")
+            obj = TuneObjective(runner, law, names)
+            res = differential_evolution(obj, list(zip(lo, hi)), x0=x0, popsize=spec["population"],
+                                         maxiter=spec["generations"], seed=spec["seed"], polish=False,
+                                         updating="deferred", workers=obj.map, tol=0.0)
+            rows = [table.rows[c["case"]] for c in obj.cases]
+            start_row = rows[0]  # differential_evolution evaluates x0 first
+            best_row = min(rows, key=_value)
+            tuned = {n: tuple(float(v) for v in getattr(g0, n)) for n in GAIN_NAMES}
+            for n in names:
+                tuned[n] = (float(best_row[n]),) * 3
+            preset = write_to / f"{law}.toml"
+            preset.write_text(_preset_text(law, tuned, _value(start_row), _value(best_row), scenario, command))
+            load_gain_file(preset)  # what we wrote must be a valid preset file
+            results[law] = {"preset": preset, "start": _value(start_row), "tuned": _value(best_row),
+                            "evaluations": len(rows), "result_fun": float(res.fun),
+                            "rows": rows, "start_gains": {n: list(getattr(g0, n)) for n in GAIN_NAMES},
+                            "tuned_gains": tuned}
+        compare = _compare(study, ssp, client, out, table, results, spec, progress)
+    finally:
+        table.close()
+    from .study_plots import plot_objective
+    fig = plot_objective(write_to / "objective.png", results)
+    text = _comparison_md(write_to / "comparison.md", study, base, results, compare, spec, command)
+    for r in results.values():
+        r.pop("rows")
+    return {"out": out, "tuning": results, "comparison": text, "figures": [fig],
+            "wall_time_s": time.perf_counter() - start,
+            "cases": len(table.rows), "counts": {}}
+
+
+def _compare(study, ssp, client, out, table, results, spec, progress) -> dict:
+    """Run the starting and the tuned gains of each law over compare_stop_time.
+
+    Returns {"base": scenario, "metrics": {(law, "start" | "tuned"): metrics.json or None}, "rows": {...}}.
+    """
+    base = apply_changes(study.base_scenario(), {"stop_time": spec["compare_stop_time"]},
+                         "tune.compare_stop_time")
+    cases = []
+    for law, r in results.items():
+        for which in ("start", "tuned"):
+            changes = {"law": law}
+            if which == "tuned":
+                changes["gains_file"] = str(Path(r["preset"]).resolve())
+            gains = r["tuned_gains"] if which == "tuned" else r["start_gains"]
+            params = {"law": law, **{n: gains[n][0] for n in table.columns if n in GAIN_NAMES}}
+            cases.append({"case": f"compare-{law}-{which}", "params": params, "changes": changes})
+    runner = CaseRunner(client, base, ssp, out, table, study.keep_results, progress, f"{study.name} compare")
+    rows = runner.run(cases)
+    metrics, by_case = {}, {}
+    for c, row in zip(cases, rows):
+        key = (c["params"]["law"], c["case"].rsplit("-", 1)[1])
+        path = Path(out) / "cases" / c["case"] / "metrics.json"
+        metrics[key] = json.loads(path.read_text()) if row["status"] == "completed" and path.exists() else None
+        by_case[key] = row
+    return {"base": base, "metrics": metrics, "rows": by_case}
+
+
+def _comparison_md(path: Path, study, short, results, compare, spec, command) -> str:
+    """comparison.md: starting vs tuned gains per law, and SC-DC vs APD-DC with both laws tuned."""
+    from .report import comparison_tables
+    from .study import objective
+
+    base = compare["base"]
+    lines = [f"# Tuned gains: {study.name}", "",
+             f"Produced by `{command}` (from the repository root, after `bash build_fmus.sh`)." if command else "",
+             "",
+             f"Tuning: differential evolution (scipy) over log10 of the gains, the same value on all three "
+             f"motors, population {spec['population']} x dimensions, {spec['generations']} generations, "
+             f"seed {spec['seed']}; every candidate is a co-simulation of `{Path(study.base).name}` with the "
+             f"study's changes ({', '.join(f'{k} = {v}' for k, v in study.set.items()) or 'none'}), "
+             f"{short.stop_time - short.start_time:g} s at h = {short.step:g} s, {short.ordering}. "
+             "Objective: (mean tracking MAE + mean synchronization MAE) / 2 over the three motors [um], "
+             "on the plant's true positions. Candidates the stability check finds not stable are rejected "
+             f"without running (scored {PENALTY_UM:g} um).", "",
+             "| law | evaluations | rejected (not stable) | failed | objective, start gains [um] | "
+             "objective, tuned [um] | tuned gains (all motors) | preset file |",
+             "|---|---|---|---|---|---|---|---|"]
+    for law, r in results.items():
+        st = [row["status"] for row in r["rows"]]
+        tuned = ", ".join(f"{n} = {r['tuned_gains'][n][0]:.4g}" for n in spec["bounds"][law])
+        lines.append(f"| {law} | {r['evaluations']} | {st.count('rejected')} | {st.count('failed')} | "
+                     f"{r['start']:.4f} | {r['tuned']:.4f} | {tuned} | `{Path(r['preset']).name}` |")
+    start_desc = "; ".join(f"{law}: " + ", ".join(f"{n} = {r['start_gains'][n][0]:g}" for n in spec["bounds"][law])
+                           for law, r in results.items())
+    lines += ["", f"Starting gains (the base scenario's `{short.gains}` preset): {start_desc}.", "",
+              f"## Full horizon: {base.stop_time - base.start_time:g} s of `{Path(study.base).name}`", "",
+              "| law | gains | objective [um] | tracking MAE q1, q2, q3 [um] | sync MAE q1, q2, q3 [um] |",
+              "|---|---|---|---|---|"]
+    for (law, which), m in compare["metrics"].items():
+        if m is None:
+            lines.append(f"| {law} | {which} | failed: {compare['rows'][(law, which)].get('error', '')} | | |")
+            continue
+        lines.append(f"| {law} | {which} | {objective(m):.4f} | "
+                     + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]) + " | "
+                     + ", ".join(f"{v:.4f}" for v in m["sync_mae_um"]) + " |")
+    tuned = {law: compare["metrics"].get((law, "tuned")) for law in results}
+    if all(tuned.values()) and len(tuned) == 2:
+        lines += ["", "## SC-DC vs APD-DC, both laws tuned", "",
+                  "Laid out like `tapmp compare` (paper Tables 1-3): both rows use their own tuned gains.", "",
+                  comparison_tables(base.name, tuned)]
+    text = "\n".join(lines) + "\n"
+    path.write_text(text)
+    return text

@@ -1,0 +1,143 @@
+"""Stability pre-check: the verdict and the spectral radius agree with what the loop does."""
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.cli import main
+from orchestrator.scenario import load
+from orchestrator.stability import MARGIN, OneStepMap, check, loop_models
+from tapmp.closed_loop import simulate
+from tapmp.errors import KinematicDomainError
+from tapmp.kinematics import inverse
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ROOT / "scenarios" / "paper_simulation.toml"
+
+EQ40 = 'gains="paper_simulation"'
+
+
+def tracking_errors(scenario, n_steps, linear=False, perturb=0.0):
+    """Max |q_d - q_true| over the motors [m] at each communication point of the plain loop,
+    and the step at which the plant left the workspace (None if it did not)."""
+    plant, ctrl, traj = loop_models(scenario, linear)
+    plant.state[0] += perturb
+    rows = []
+
+    def record(t, ref, F, q, q_true):
+        q_d = inverse(ref[0], ref[1], ref[2], ctrl.p.L_1)
+        rows.append([q_d[i] - q_true[i] for i in range(3)])
+    try:
+        simulate(plant, ctrl, traj, scenario.start_time, n_steps, scenario.step, scenario.ordering, record)
+        return np.array(rows), None
+    except KinematicDomainError:
+        return np.array(rows), len(rows)
+
+
+@pytest.mark.parametrize("ordering", ["gauss-seidel", "jacobi"])
+def test_paper_eq40_gains_are_unstable_and_the_unsaturated_run_diverges_at_the_predicted_rate(ordering):
+    scenario = load(PAPER, [EQ40, f'ordering="{ordering}"', "plant.force_limit=0"])
+    report = check(scenario)
+    assert report.verdict == "unstable" and not report.stable
+    assert report.spectral_radius > 5.0
+    errors, failed_at = tracking_errors(scenario, 200)
+    assert failed_at is not None and failed_at < 20  # leaves the workspace within 2 ms
+    size = np.abs(errors).max(axis=1)
+    growth = (size[-1] / size[-5]) ** 0.25  # per step over the last four steps before it left
+    assert report.spectral_radius / 2.0 < growth < 2.0 * report.spectral_radius
+
+
+def test_paper_eq40_gains_with_the_force_limit_chatter_instead_of_settling():
+    unstable = load(PAPER, [EQ40, "stop_time=0.2"])
+    stable = load(PAPER, ["stop_time=0.2"])
+    assert not check(unstable).stable and check(stable).stable
+    late_unstable = np.abs(tracking_errors(unstable, unstable.n_steps)[0][-500:]).mean()
+    late_stable = np.abs(tracking_errors(stable, stable.n_steps)[0][-500:]).mean()
+    assert late_unstable > 2e-6   # several micrometres of chatter at the 600 N limit
+    assert late_stable < 0.5e-6   # sub-micrometre with the default gains
+    assert late_unstable > 10 * late_stable
+
+
+def loop_states(scenario, perturb):
+    """Plant state and integral of c at each communication point of the linearized plain loop,
+    with the start X perturbed by ``perturb`` [m]."""
+    plant, ctrl, traj = loop_models(scenario, linear=True)
+    plant.state[0] += perturb
+    rows = []
+    simulate(plant, ctrl, traj, scenario.start_time, scenario.n_steps, scenario.step, scenario.ordering,
+             lambda *_: rows.append([*plant.state, *ctrl.integral]))
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("ordering", ["gauss-seidel", "jacobi"])
+@pytest.mark.parametrize("law, window", [("sc-dc", (500, 1000)), ("apd-dc", (100, 300))])
+def test_default_gains_are_stable_and_a_perturbation_decays_at_the_spectral_radius(law, window, ordering):
+    scenario = load(PAPER, [f'law="{law}"', f'ordering="{ordering}"', "stop_time=0.1"])
+    report = check(scenario)
+    assert report.verdict == "stable" and report.spectral_radius < 1.0 - MARGIN
+    scale = np.array([1e-8] * 3 + [1e-6] * 3 + [1e-10] * 3)  # m or rad, m/s or rad/s, m s
+    dev = np.linalg.norm((loop_states(scenario, 1e-6) - loop_states(scenario, 0.0)) / scale, axis=1)
+    a, b = window  # once the slowest mode dominates (and before round-off does)
+    assert dev[b] < 0.05 * dev[1]
+    assert (dev[b] / dev[a]) ** (1 / (b - a)) == pytest.approx(report.spectral_radius, abs=3e-3)
+    errors, failed_at = tracking_errors(scenario, scenario.n_steps)  # the full nonlinear run stays put
+    assert failed_at is None and np.abs(errors).max() < 1e-6
+
+
+@pytest.mark.parametrize("ordering", ["gauss-seidel", "jacobi"])
+def test_one_step_map_is_the_simulated_loop_step_for_step(ordering):
+    scenario = load(PAPER, [f'ordering="{ordering}"', "stop_time=0.01"])
+    m = OneStepMap(scenario, linear=False)
+    x = m.start_state()
+    plant, ctrl, traj = loop_models(scenario)
+    states = []
+    simulate(plant, ctrl, traj, scenario.start_time, scenario.n_steps, scenario.step, ordering,
+             lambda *row: states.append(list(plant.state)))
+    for k in range(scenario.n_steps):
+        x = m.at(scenario.start_time + k * scenario.step)(x)
+        # equal up to the last bit of t0 + (k + 1) h versus t0 + k h + h in the reference
+        assert list(x[:6]) == pytest.approx(states[k + 1], rel=1e-12, abs=1e-15)
+
+
+def test_the_conserved_sum_of_the_integrals_is_the_only_unit_eigenvalue_removed():
+    scenario = load(PAPER)
+    m = OneStepMap(scenario)
+    full = np.linalg.eigvals(m.jacobian(m.start_state()))
+    assert np.min(np.abs(full - 1.0)) < 1e-8           # exact 1: sum of integrals of c is conserved
+    report = check(scenario)
+    assert len(report.eigenvalues) == len(full) - 1
+    assert max(abs(z) for z in report.eigenvalues) < 1.0 - 1e-3
+    assert report.states[6:9] == ["integral_c1", "integral_c2", "integral_c3"]
+    assert report.states[9:] == ["q1_prev", "q2_prev", "q3_prev"]
+
+
+def test_jacobi_adds_the_held_command_to_the_state_and_apd_drops_the_integral():
+    jacobi = check(load(PAPER, ['ordering="jacobi"']))
+    apd = check(load(PAPER, ['law="apd-dc"']))
+    assert jacobi.states[-3:] == ["F1_held", "F2_held", "F3_held"] and len(jacobi.states) == 15
+    assert not any(s.startswith("integral") for s in apd.states) and len(apd.states) == 9
+
+
+def test_check_command_prints_the_verdict_and_exits_1_when_unstable(capsys):
+    assert main(["check", str(PAPER)]) == 0
+    out = capsys.readouterr().out
+    assert "stable: spectral radius 0.99" in out
+    assert main(["check", str(PAPER), "--set", EQ40]) == 1
+    out = capsys.readouterr().out
+    assert "unstable: spectral radius 39." in out and "grows" in out
+
+
+def test_run_warns_on_one_stderr_line_before_running_an_unstable_scenario(built, tmp_path):
+    cmd = [sys.executable, "-m", "orchestrator", "run", str(PAPER), "--set", EQ40, "--set", "stop_time=0.002",
+           "--ssp", str(built["ssp"]), "--out", str(tmp_path / "run"), "--no-progress"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0
+    warnings = [line for line in proc.stderr.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1 and "unstable" in warnings[0] and "spectral radius 39.2" in warnings[0]
+    stable = subprocess.run(cmd[:5] + cmd[7:-2] + [str(tmp_path / "stable"), "--no-progress"], capture_output=True, text=True, timeout=120)
+    assert stable.returncode == 0 and "warning" not in stable.stderr
+    assert math.isfinite(check(load(PAPER)).time_constant)
