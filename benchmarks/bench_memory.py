@@ -10,7 +10,6 @@ metrics still use every step), and reports each process's peak resident memory
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import tempfile

@@ -283,5 +283,5 @@ class TapmpSlave(Fmi2Slave):
     def get_integer(self, vrs):
         return [self.ints[vr] for vr in vrs]
 
-    def do_step(self, current_time, step_size):
+    def do_step(self, current_time, step_size):  # Fmi2Slave's abstract method; the binary calls fmi2_do_step
         return self.fmi2_do_step(current_time, step_size) & 7 == OK

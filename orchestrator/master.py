@@ -116,11 +116,6 @@ class _Unit:
         """Bind the connection table for the hot path (after all units are instantiated)."""
         self._copies = tuple((j, src.out, i) for j, (src, i, _) in enumerate(self.sources))
 
-    @property
-    def values(self) -> list[float]:
-        """Outputs at the last communication point, in the order of :attr:`outputs`."""
-        return self.out[:]
-
     def read_outputs(self) -> int:
         """fmi2GetReal of every output into :attr:`out`; returns the fmi2Status."""
         return self._get_real(self.slave.component, self.out_vrs, self.n_out, self.out)
@@ -352,7 +347,7 @@ class CoSimulation:
         """Time and every FMU's outputs at the current communication point."""
         out = [self.time]
         for unit in self._row_units:
-            out.extend(unit.values)
+            out += unit.out[:]
         return out
 
     def step(self) -> None:

@@ -63,6 +63,18 @@ class ScenarioError(ValueError):
     """A scenario file or value is invalid; the message names the key and what is allowed."""
 
 
+def read_toml(path: Path, subject: str, error=None, allowed: str = "") -> dict:
+    """Parse a TOML file; a missing or malformed file raises ``error`` (ScenarioError by
+    default) as "<subject> does not exist<allowed>" or "<subject> is not valid TOML: ..."."""
+    error = error or ScenarioError
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise error(f"{subject} does not exist{allowed}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise error(f"{subject} is not valid TOML: {err}") from None
+
+
 def load_gain_file(path) -> dict:
     """Read a gain preset file: a TOML table [gains] with Lambda_p, Lambda_v, b, D, K_T,
     each a number or a list of three (per motor; units as in tapmp.control.Gains).
@@ -71,13 +83,8 @@ def load_gain_file(path) -> dict:
     Returns {name: (motor 1, motor 2, motor 3)}; ScenarioError names what is wrong.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ScenarioError(f"gains_file = {str(path)!r} does not exist: allowed is a TOML gain preset "
-                            "file with a [gains] table") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"gains_file = {str(path)!r} is not valid TOML: {err}") from None
+    data = read_toml(path, f"gains_file = {str(path)!r}",
+                     allowed=": allowed is a TOML gain preset file with a [gains] table")
     table = data.get("gains")
     if not isinstance(table, dict):
         raise ScenarioError(f"gains_file = {str(path)!r} has no [gains] table: allowed is a table with "
@@ -296,12 +303,7 @@ def parse_override(text: str) -> tuple[list[str], object]:
 def load(path, overrides: list[str] = ()) -> Scenario:
     """Read, override (``--set`` strings) and validate a scenario TOML file."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ScenarioError(f"scenario file {path} does not exist") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"scenario file {path} is not valid TOML: {err}") from None
+    data = read_toml(path, f"scenario file {path}")
     for text in overrides:
         keys, value = parse_override(text)
         node = data

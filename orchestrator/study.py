@@ -36,7 +36,7 @@ import numpy as np
 
 from tapmp.params import GAIN_NAMES
 
-from .scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, tomllib, validate
+from .scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, read_toml, validate
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -169,12 +169,7 @@ def apply_changes(scenario: Scenario, changes: dict, where: str = "case") -> Sce
 def load_study(path) -> Study:
     """Read and validate a study file; StudyError names the key and what is allowed."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise StudyError(f"study file {path} does not exist") from None
-    except tomllib.TOMLDecodeError as err:
-        raise StudyError(f"study file {path} is not valid TOML: {err}") from None
+    data = read_toml(path, f"study file {path}", StudyError)
     allowed = ("study", "set", "grid", "monte_carlo", "tune")
     for key in data:
         _require(key in allowed, f"{path}: [{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed))

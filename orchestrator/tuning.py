@@ -124,7 +124,7 @@ def _preset_text(law, gains, objective_start, objective_tuned, base, command) ->
     lines = [f"# {law} gains tuned by `{command}`" if command else f"# {law} gains, tuned",
              f"# objective (mean tracking + sync MAE)/2 on {base.name}, {base.stop_time - base.start_time:g} s, "
              f"h = {base.step:g} s: start {objective_start:.6g} um -> tuned {objective_tuned:.6g} um",
-             f'# use in a scenario: gains_file = "<path of this file>"', f'law = "{law}"',
+             '# use in a scenario: gains_file = "<path of this file>"', f'law = "{law}"',
              f"objective_start_um = {objective_start!r}", f"objective_tuned_um = {objective_tuned!r}",
              "", "[gains]"]
     for n in GAIN_NAMES:

@@ -3,7 +3,6 @@ the dynamics alone, determinism and isolation of closed loops in one process."""
 
 import csv
 import json
-import os
 import signal
 import subprocess
 import sys
