@@ -28,6 +28,8 @@ test_ecos.py, test_fmpy_ssp.py):
 """
 
 import math
+import posixpath
+import re
 import shutil
 import tempfile
 import zipfile
@@ -76,6 +78,24 @@ HINT = ("hint: gains unstable at this step size? `tapmp check` tells before a ru
 # Envelope signals per limit name (see orchestrator.scenario.LIMITS): (element, output, unit).
 ENVELOPE = {"motor_travel": [("plant", f"q{i}_true", "m") for i in (1, 2, 3)],
             "platform_angle": [("plant", "B", "rad")]}
+
+
+_ELEMENT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_NAME_RULE = "a name matching [A-Za-z_][A-Za-z0-9_]* (letters, digits, _), unique in the system"
+_MEMBER_RULE = ("allowed is a relative path inside the archive, without a leading /, a URI scheme, "
+                "backslashes or .. above its root, e.g. resources/TAPMP_Plant.fmu")
+
+
+def _inside_archive(path: str) -> str | None:
+    """``path`` (an SSD source or an archive member name) normalized relative to the archive
+    root, or None if it is absolute, a URI, holds a backslash or NUL or climbs out with ``..``."""
+    if not isinstance(path, str) or not path or "\\" in path or "\0" in path \
+            or path.startswith("/") or re.match(r"[A-Za-z][A-Za-z0-9+.-]*:", path):
+        return None
+    norm = posixpath.normpath(path)
+    if norm in (".", "..") or norm.startswith("../"):
+        return None
+    return norm
 
 
 class _Unit:
@@ -213,33 +233,24 @@ class CoSimulation:
     def _open(self):
         if not self.ssp_path.is_file():
             raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
+        ssd, members = self._read_ssp()
+        elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
         self.tmp = Path(tempfile.mkdtemp(prefix="tapmp_cosim_"))
-        try:
-            ssd = read_ssd(str(self.ssp_path))
-            with zipfile.ZipFile(self.ssp_path) as z:
-                z.extractall(self.tmp / "ssp")
-        except Exception as err:
-            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
-                                    "holding SystemStructure.ssd and the FMUs)") from err
+        fmus = self._extract(members, elements)
         self.callbacks = fmi2CallbackFunctions()
         self.callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
         self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         from fmpy.logging import addLoggerProxy
         addLoggerProxy(byref(self.callbacks))
-        for comp in ssd.system.elements:
-            fmu = self.tmp / "ssp" / comp.source
-            if not fmu.is_file():
-                raise CoSimulationError(f"SSP file {self.ssp_path}: the FMU {comp.source} of element "
-                                        f"{comp.name} is missing from the archive", comp.name)
+        for name, (source, _) in elements.items():
             try:
-                unit = _Unit(comp.name, fmu, self.tmp / comp.name, self.log)
+                unit = _Unit(name, fmus[name], self.tmp / "fmu" / name, self.log)
             except Exception as err:
-                raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {comp.source} of "
-                                        f"element {comp.name} (truncated or not an FMU): {err}",
-                                        comp.name) from err
-            self.units[comp.name] = unit
-            self.guids[comp.name] = unit.md.guid
+                raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {source} of "
+                                        f"element {name} (truncated or not an FMU): {err}", name) from err
+            self.units[name] = unit
+            self.guids[name] = unit.md.guid
         missing = set(INIT_ORDER) - set(self.units)
         if missing:
             raise CoSimulationError(f"SSP system lacks the element(s) {', '.join(sorted(missing))}")
@@ -283,6 +294,80 @@ class CoSimulation:
                     self._envelope.append((unit.out, unit.outputs.index(output),
                                            f"{element}.{output}", float(limit), unit_name, key))
         self._check_outputs(self.t0)
+
+    def _read_ssp(self):
+        """The SSD of the SSP file and its archive members {normalized name: member name};
+        refuses an archive with a member named by an absolute path or one with ``..``."""
+        try:
+            ssd = read_ssd(str(self.ssp_path))
+            with zipfile.ZipFile(self.ssp_path) as z:
+                names = [i.filename for i in z.infolist() if not i.is_dir()]
+        except Exception as err:
+            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
+                                    "holding SystemStructure.ssd and the FMUs)") from err
+        members = {}
+        for name in names:
+            inside = _inside_archive(name)
+            if inside is None:
+                raise CoSimulationError(f"SSP file {self.ssp_path}: archive member {name!r} points outside the "
+                                        f"archive: {_MEMBER_RULE}")
+            members[inside] = name
+        return ssd, members
+
+    def _check_elements(self, elements, members: dict) -> dict:
+        """{element name: (source, normalized member name)}, in the order of the SSD; raise unless every
+        element is an FMU component with a unique identifier name (it names a folder) and a
+        source that is a member of the archive."""
+        out = {}
+        for e in elements:
+            name = getattr(e, "name", None)
+            if not isinstance(name, str) or not _ELEMENT_NAME.fullmatch(name):
+                raise CoSimulationError(f"SSP file {self.ssp_path}: element name {name!r} is invalid: "
+                                        f"allowed is {_NAME_RULE}")
+            where = f"SSP file {self.ssp_path}: element {name}"
+            if name in out:
+                raise CoSimulationError(f"{where} is defined twice: allowed is {_NAME_RULE}", name)
+            source = getattr(e, "source", None)
+            if type(e).__name__ != "Component" or not isinstance(source, str):
+                raise CoSimulationError(f"{where} is a {type(e).__name__}: allowed are FMU components "
+                                        "(ssd:Component with a source)", name)
+            inside = _inside_archive(source)
+            if inside is None:
+                raise CoSimulationError(f"{where}: source {source!r} points outside the archive: "
+                                        f"{_MEMBER_RULE}", name)
+            if inside not in members:
+                raise CoSimulationError(f"SSP file {self.ssp_path}: the FMU {source} of element {name} is missing "
+                                        f"from the archive: allowed are its members "
+                                        f"{', '.join(m for m in members if m.endswith('.fmu')) or '(no FMU)'}",
+                                        name)
+            out[name] = (source, inside)
+        return out
+
+    def _extract(self, members: dict, elements: dict) -> dict:
+        """Copy the FMU of every element out of the archive into ``tmp/ssp`` (only those
+        members, each checked to land inside it); returns {element name: FMU path}."""
+        root = (self.tmp / "ssp").resolve()
+        paths = {}
+        try:
+            with zipfile.ZipFile(self.ssp_path) as z:
+                for name, (source, inside) in elements.items():
+                    target = (root / inside).resolve()
+                    if not target.is_relative_to(root):  # cannot happen after _inside_archive; be sure
+                        raise CoSimulationError(f"SSP file {self.ssp_path}: element {name}: source {source!r} "
+                                                f"points outside the archive: {_MEMBER_RULE}", name)
+                    if not target.exists():
+                        target.parent.mkdir(parents=True, exist_ok=True)
+                        with z.open(members[inside]) as src, open(target, "wb") as dst:
+                            shutil.copyfileobj(src, dst)
+                    paths[name] = target
+        except CoSimulationError:
+            raise
+        except OSError as err:
+            raise CoSimulationError(f"cannot extract SSP file {self.ssp_path} into {self.tmp}: {err}") from err
+        except Exception as err:
+            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
+                                    "holding SystemStructure.ssd and the FMUs)") from err
+        return paths
 
     def _connect(self, connections) -> None:
         """Wire the SSP connections, output to input; reject, before any FMU is instantiated,

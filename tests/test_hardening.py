@@ -1,0 +1,111 @@
+"""Hardening of the SSP loader against crafted systems, through the real `tapmp run`: element
+names and FMU sources are not trusted as paths, every FMU input is driven or declared open."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
+SSD = "SystemStructure.ssd"
+TRAJECTORY = 'name="trajectory" type="application/x-fmu-sharedlibrary" source="resources/TAPMP_Trajectory.fmu"'
+CONTROLLER = 'name="controller" type="application/x-fmu-sharedlibrary" source="resources/TAPMP_Controller.fmu"'
+DQ1 = '<ssd:Connection startElement="plant" startConnector="dq1" endElement="controller" endConnector="dq1" />'
+
+
+def craft_ssp(src: Path, dst: Path, edit=lambda ssd: ssd, extra: dict | None = None) -> Path:
+    """A copy of the SSP archive ``src`` with SystemStructure.ssd edited and ``extra`` members
+    (name -> bytes) added, written as given (zipfile keeps names like ``../x`` as they are)."""
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for name in zin.namelist():
+            data = zin.read(name)
+            zout.writestr(name, edit(data.decode()).encode() if name == SSD else data)
+        for name, data in (extra or {}).items():
+            zout.writestr(zipfile.ZipInfo(name), data)
+    return dst
+
+
+def tapmp(*args, cwd: Path, tmpdir: Path, timeout=120) -> subprocess.CompletedProcess:
+    """The real command line in a child process, with its temp folder in ``tmpdir``."""
+    env = dict(os.environ, TMPDIR=str(tmpdir))
+    return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def files_under(folder: Path) -> set:
+    """Every path below ``folder`` (files and folders), relative to it."""
+    return {p.relative_to(folder) for p in folder.rglob("*")}
+
+
+@pytest.fixture
+def sandbox(tmp_path):
+    """A working folder, a private TMPDIR and an output folder below tmp_path."""
+    (tmp_path / "tmp").mkdir()
+    return tmp_path
+
+
+# name -> (edit of the SSD given the sandbox, decoy FMU placed where a trusting loader would read it,
+#          text the one-line error must hold)
+PATH_CASES = {
+    "name ../../x": (lambda ssd, box: ssd.replace('name="trajectory"', 'name="../../x"'), None,
+                     "element name '../../x' is invalid: allowed is a name matching [A-Za-z_][A-Za-z0-9_]*"),
+    "absolute name": (lambda ssd, box: ssd.replace('name="trajectory"', f'name="{box}/abs/dir"'), None,
+                      "/abs/dir' is invalid: allowed is a name matching [A-Za-z_][A-Za-z0-9_]*"),
+    "duplicate name plant": (lambda ssd, box: ssd.replace('name="controller"', 'name="plant"'), None,
+                             "element plant is defined twice: allowed is a name matching [A-Za-z_][A-Za-z0-9_]* "
+                             "(letters, digits, _), unique in the system"),
+    "absolute source": (lambda ssd, box: ssd.replace(TRAJECTORY, TRAJECTORY.replace(
+                            "resources/TAPMP_Trajectory.fmu", f"{box}/abs/x.fmu")), "abs/x.fmu",
+                        "element trajectory: source '{box}/abs/x.fmu' points outside the archive: allowed is a "
+                        "relative path inside the archive"),
+    "source ../../x.fmu": (lambda ssd, box: ssd.replace(TRAJECTORY, TRAJECTORY.replace(
+                               "resources/TAPMP_Trajectory.fmu", "../../x.fmu")), "tmp/x.fmu",
+                           "element trajectory: source '../../x.fmu' points outside the archive: allowed is a "
+                           "relative path inside the archive"),
+    "source not in the archive": (lambda ssd, box: ssd.replace(CONTROLLER, CONTROLLER.replace(
+                                      "resources/TAPMP_Controller.fmu", "resources/../TAPMP_Controller.fmu")), None,
+                                  "the FMU resources/../TAPMP_Controller.fmu of element controller is missing from "
+                                  "the archive: allowed are its members resources/TAPMP_Trajectory.fmu, "
+                                  "resources/TAPMP_Controller.fmu, resources/TAPMP_Plant.fmu"),
+}
+
+
+@pytest.mark.parametrize("case", PATH_CASES)
+def test_element_names_and_sources_are_not_trusted_as_paths(built, sandbox, case):
+    edit, decoy, message = PATH_CASES[case]
+    box = sandbox
+    if decoy:  # a real FMU where the crafted source points: a loader that follows it would run
+        (box / decoy).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(built["TAPMP_Trajectory"], box / decoy)
+    ssp = craft_ssp(built["ssp"], box / "crafted.ssp", lambda ssd: edit(ssd, box))
+    before = files_under(box)
+    res = tapmp("run", PAPER, "--ssp", ssp, "--out", box / "out", "--set", "stop_time=0.3", "--no-progress",
+                cwd=box, tmpdir=box / "tmp")
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: SSP file {ssp}: "), res.stderr
+    assert message.format(box=box) in lines[0]
+    created = files_under(box) - before
+    assert {p for p in created if p.parts[0] != "out"} == set(), created  # nothing outside out/, tmp/ empty
+    run = json.loads((box / "out" / "run.json").read_text())
+    assert run["status"] == "failed" and run["exit_code"] == 2 and run["error"] == lines[0][len("error: "):]
+
+
+@pytest.mark.parametrize("member", ["../evil.txt", "/abs/evil.txt"])
+def test_an_archive_member_named_outside_the_archive_is_refused_before_extraction(built, sandbox, member):
+    ssp = craft_ssp(built["ssp"], sandbox / "crafted.ssp", extra={member: b"not for you"})
+    before = files_under(sandbox)
+    res = tapmp("run", PAPER, "--ssp", ssp, "--out", sandbox / "out", "--set", "stop_time=0.3", "--no-progress",
+                cwd=sandbox, tmpdir=sandbox / "tmp")
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == (f"error: SSP file {ssp}: archive member {member!r} points outside the archive: "
+                                  "allowed is a relative path inside the archive, without a leading /, a URI scheme, "
+                                  "backslashes or .. above its root, e.g. resources/TAPMP_Plant.fmu")
+    assert {p for p in files_under(sandbox) - before if p.parts[0] != "out"} == set()
+    assert not Path("/abs/evil.txt").exists()
