@@ -177,13 +177,15 @@ class CoSimulation:
     stay within ``limits`` ({"motor_travel": m, "platform_angle": rad}, 0 = off);
     a breach raises DivergenceError naming the time, the signal and the value.
     ``start_time`` and ``step_size`` are in s; ``clock`` and ``connection_start`` select
-    the conventions described in the module docstring.
+    the conventions described in the module docstring. Every FMU input must be driven by
+    a connection unless ``open_inputs`` names it ("element.variable"): such an input keeps
+    its start value.
     """
 
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
                  limits: dict | None = None, clock: str = "exact",
-                 connection_start: str = "propagated"):
+                 connection_start: str = "propagated", open_inputs=()):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -197,6 +199,10 @@ class CoSimulation:
         except ValueError as err:
             raise CoSimulationError(str(err)) from None
         self.connection_start = connection_start
+        if isinstance(open_inputs, str) or not all(isinstance(x, str) for x in open_inputs):
+            raise CoSimulationError(f"open_inputs = {open_inputs!r} is invalid: allowed is a list of "
+                                    "\"element.variable\" strings")
+        self.open_inputs = tuple(open_inputs)
         self.ssp_path = Path(ssp_path)
         self.parameters = parameters
         self.t0 = float(start_time)
@@ -372,7 +378,8 @@ class CoSimulation:
     def _connect(self, connections) -> None:
         """Wire the SSP connections, output to input; reject, before any FMU is instantiated,
         a connection that names an element or variable that does not exist, runs the wrong
-        way, or drives an input that another connection drives already."""
+        way, or drives an input that another connection drives already, and an input that
+        nothing drives (unless named in ``open_inputs``)."""
         driven = {}
         for c in connections:
             name = f"{c.startElement}.{c.startConnector} -> {c.endElement}.{c.endConnector}"
@@ -394,6 +401,26 @@ class CoSimulation:
                                         f"by {driven[end]}: allowed is one connection per input", dst.name)
             driven[end] = f"{c.startElement}.{c.startConnector}"
             dst.connect(src, c.startConnector, dst.vars[c.endConnector].valueReference)
+        self._check_open_inputs({f"{e}.{v}": source for (e, v), source in driven.items()})
+
+    def _check_open_inputs(self, driven: dict) -> None:
+        """Refuse an FMU input that no connection drives unless ``open_inputs`` names it, and
+        an ``open_inputs`` entry that is no input of the system or that a connection drives."""
+        inputs = [f"{u.name}.{n}" for u in self.units.values() for n, v in u.vars.items() if v.causality == "input"]
+        for entry in self.open_inputs:
+            if entry not in inputs:
+                raise CoSimulationError(f"open_inputs: {entry!r} is not an input of the system in SSP file "
+                                        f"{self.ssp_path}: allowed are {', '.join(inputs)}")
+            if entry in driven:
+                raise CoSimulationError(f"open_inputs: {entry} is driven by {driven[entry]} in SSP file "
+                                        f"{self.ssp_path}: allowed are inputs that no connection drives",
+                                        entry.split(".")[0])
+        undriven = [i for i in inputs if i not in driven and i not in self.open_inputs]
+        if undriven:
+            raise CoSimulationError(f"SSP file {self.ssp_path}: no connection drives the input(s) "
+                                    f"{', '.join(undriven)}: allowed is every FMU input driven by a connection, "
+                                    "or named in the scenario's open_inputs to keep its start value",
+                                    undriven[0].split(".")[0])
 
     def _call(self, unit: _Unit, action, what: str, t: float | None = None):
         """Run one FMI call; a failed call (an exception or a returned status above

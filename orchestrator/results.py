@@ -114,7 +114,8 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
         with _sigint_stops(stop), \
                 CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
                              scenario.ordering, limits=scenario.limit_values(), clock=scenario.clock,
-                             connection_start=scenario.connection_start) as sim, \
+                             connection_start=scenario.connection_start,
+                             open_inputs=scenario.open_inputs) as sim, \
                 open(out / "results.csv", "w", newline="") as f:
             info["guids"] = sim.guids
             writer = csv.writer(f)

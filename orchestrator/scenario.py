@@ -5,7 +5,10 @@ tapmp.params.GAIN_PRESETS), gains_file (a gain preset file, see load_gain_file; 
 replaces the preset named by gains), stop_time, start_time, step, ordering, output,
 start_on_trajectory, record_every (store every Nth step in results.csv; metrics
 always use every step), clock and connection_start (conventions of other masters, see
-orchestrator.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's).
+orchestrator.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's),
+open_inputs (a list of "element.variable" FMU inputs that no connection of the SSP
+drives, deliberately: they keep their start values; the master refuses any other
+undriven input, and an entry that is no input of the system or that a connection drives).
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
@@ -14,6 +17,7 @@ parameters of the respective FMU (names as in its modelDescription.xml), and
 
 import copy
 import math
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +41,8 @@ ORDERINGS = ("gauss-seidel", "jacobi")
 CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
-        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str}
+        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
+        "open_inputs": list}
 _TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
@@ -131,6 +136,7 @@ class Scenario:
     controller: dict = field(default_factory=dict)
     limits: dict = field(default_factory=dict)
     record_every: int = 1
+    open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -207,6 +213,23 @@ def _check_type(key: str, value, kind):
     return value
 
 
+_OPEN_INPUT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.[^\s.][^\s]*")
+
+
+def _check_open_inputs(entries) -> None:
+    """open_inputs is a list of distinct "element.variable" strings (whether each is an
+    input of the system is checked by the master against the SSP)."""
+    if not isinstance(entries, list):
+        raise ScenarioError(f"open_inputs = {entries!r} is invalid: allowed is a list of \"element.variable\" "
+                            "strings, e.g. [\"controller.dq1\"]")
+    for i, entry in enumerate(entries):
+        if not isinstance(entry, str) or not _OPEN_INPUT.fullmatch(entry):
+            raise ScenarioError(f"open_inputs[{i}] = {entry!r} is invalid: allowed is \"element.variable\", an "
+                                "FMU input of the system, e.g. \"controller.dq1\"")
+        if entry in entries[:i]:
+            raise ScenarioError(f"open_inputs[{i}] = {entry!r} is listed twice: allowed is each input once")
+
+
 def validate(s: Scenario) -> Scenario:
     """Check every value of a scenario; raise ScenarioError naming the key."""
     if s.law not in LAWS:
@@ -258,6 +281,7 @@ def validate(s: Scenario) -> Scenario:
         if not (math.isfinite(v) and v >= 0.0):
             raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
                                 f"[{LIMITS[k][1]}] (0 = no limit)")
+    _check_open_inputs(s.open_inputs)
     if s.record_every < 1:
         raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)

@@ -109,3 +109,55 @@ def test_an_archive_member_named_outside_the_archive_is_refused_before_extractio
                                   "backslashes or .. above its root, e.g. resources/TAPMP_Plant.fmu")
     assert {p for p in files_under(sandbox) - before if p.parts[0] != "out"} == set()
     assert not Path("/abs/evil.txt").exists()
+
+
+@pytest.fixture(scope="module")
+def no_dq1(built, tmp_path_factory):
+    """TAPMP.ssp without the connection plant.dq1 -> controller.dq1."""
+    def edit(ssd):
+        assert DQ1 in ssd
+        return ssd.replace(DQ1, "")
+    return craft_ssp(built["ssp"], tmp_path_factory.mktemp("open") / "no_dq1.ssp", edit)
+
+
+def test_an_input_no_connection_drives_is_refused_with_the_list(no_dq1, sandbox):
+    res = tapmp("run", PAPER, "--ssp", no_dq1, "--out", sandbox / "out", "--set", "stop_time=0.3", "--no-progress",
+                cwd=sandbox, tmpdir=sandbox / "tmp")
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == (f"error: SSP file {no_dq1}: no connection drives the input(s) controller.dq1: "
+                                  "allowed is every FMU input driven by a connection, or named in the scenario's "
+                                  "open_inputs to keep its start value")
+    assert json.loads((sandbox / "out" / "run.json").read_text())["status"] == "failed"
+    assert list((sandbox / "tmp").iterdir()) == []
+
+
+def test_an_input_named_in_open_inputs_may_stay_undriven(no_dq1, sandbox):
+    res = tapmp("run", PAPER, "--ssp", no_dq1, "--out", sandbox / "out", "--set", "stop_time=0.3",
+                "--set", 'open_inputs=["controller.dq1"]', "--no-progress", cwd=sandbox, tmpdir=sandbox / "tmp")
+    assert res.returncode == 0, res.stderr
+    run = json.loads((sandbox / "out" / "run.json").read_text())
+    assert run["status"] == "completed" and run["scenario"]["open_inputs"] == ["controller.dq1"]
+
+
+OPEN_INPUT_ERRORS = {
+    "not an input": ('["controller.dq9"]', True, "error: open_inputs: 'controller.dq9' is not an input of the "
+                     "system in SSP file {ssp}: allowed are controller.X_d, "),
+    "an output": ('["plant.q1"]', True, "error: open_inputs: 'plant.q1' is not an input of the system"),
+    "driven": ('["controller.dq2"]', True, "error: open_inputs: controller.dq2 is driven by plant.dq2 in SSP file "
+               "{ssp}: allowed are inputs that no connection drives"),
+    "no element": ('["dq1"]', False, "error: open_inputs[0] = 'dq1' is invalid: allowed is \"element.variable\", "
+                   "an FMU input of the system"),
+    "twice": ('["controller.dq1", "controller.dq1"]', False,
+              "error: open_inputs[1] = 'controller.dq1' is listed twice: allowed is each input once"),
+    "not a list": ('"controller.dq1"', False, "error: open_inputs = 'controller.dq1' has the wrong type: allowed is list"),
+}
+
+
+@pytest.mark.parametrize("case", OPEN_INPUT_ERRORS)
+def test_open_inputs_entries_are_checked_against_the_system(no_dq1, sandbox, case):
+    value, reaches_master, message = OPEN_INPUT_ERRORS[case]
+    res = tapmp("run", PAPER, "--ssp", no_dq1, "--out", sandbox / "out", "--set", "stop_time=0.3",
+                "--set", f"open_inputs={value}", "--no-progress", cwd=sandbox, tmpdir=sandbox / "tmp")
+    assert res.returncode == 2, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and res.stderr.startswith(message.format(ssp=no_dq1))
+    assert (sandbox / "out").exists() == reaches_master  # scenario errors stop before the output folder
