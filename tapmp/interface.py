@@ -29,6 +29,8 @@ class Var(NamedTuple):
     start: float = 0.0
     type: str = "Real"      # "Real" or "Integer"
     variability: str = ""   # "" = continuous (in/out), "fixed" or "tunable" (parameters)
+    min: float | None = None  # declared range of a parameter (modelDescription min/max)
+    max: float | None = None
 
 
 # SI base-unit exponents of every unit used, for modelDescription UnitDefinitions.
@@ -145,7 +147,45 @@ TRAJECTORY_VARS: tuple[Var, ...] = tuple(
     + [Var("L_1", "parameter", "m", "platform width used for q_d", PAPER_MODEL.L_1, variability="fixed")]
 )
 
+# Declared range [min, max] of every parameter, by name (the same name means the same
+# quantity in every model). They keep each model's arithmetic finite: with errors within
+# the motor travel, no product of these values overflows a double. Every FMU family
+# checks them (at fmi2SetReal for a tunable parameter in Step Mode, else when the model
+# is set up) and writes them into modelDescription.xml as min/max.
+_MASS = (1e-6, 1e6)
+RANGES: dict[str, tuple[float, float]] = {
+    "m_p": _MASS, "m_1": _MASS, "m_2": _MASS, "m_3": _MASS, "I_y": _MASS, "L_1": (1e-6, 1e3),
+    "g": (1e-6, 1e6),
+    "X0": (-1.0, 1.0), "Z0": (-1.0, 1.0), "B0": (-1.5, 1.5),
+    "dX0": (-1e3, 1e3), "dZ0": (-1e3, 1e3), "dB0": (-1e3, 1e3),
+    "encoder_resolution": (0.0, 1.0), "c_v1": (0.0, 1e9), "c_v2": (0.0, 1e9), "c_v3": (0.0, 1e9),
+    "F_c1": (0.0, 1e9), "F_c2": (0.0, 1e9), "F_c3": (0.0, 1e9), "v_s": (1e-12, 1e3),
+    "force_limit": (0.0, 1e9), "k_pull": (0.0, 1e12),
+    # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
+    # stays below a millisecond of CPU per step or so
+    "substeps": (1, 10000),
+    **{f"{n}{i}": r for n, r in (("Lambda_p", (0.0, 1e12)), ("Lambda_v", (0.0, 1e12)), ("b", (0.0, 1e9)),
+                                 ("D", (0.0, 1e9)), ("K_T", (1e-12, 1e12))) for i in (1, 2, 3)},
+    "law": (0, 1), "velocity_source": (0, 1),
+    "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),
+    "phase_xz": (-1e6, 1e6), "B_amplitude": (0.0, 1.5), "f_B": (0.0, 1e4), "phase_B": (-1e6, 1e6),
+    "B_offset": (-1.5, 1.5),
+}
+
+
+def _ranged(table: tuple[Var, ...]) -> tuple[Var, ...]:
+    return tuple(v._replace(min=RANGES[v.name][0], max=RANGES[v.name][1]) if v.causality == "parameter"
+                 else v for v in table)
+
+
+PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(t) for t in (PLANT_VARS, CONTROLLER_VARS,
+                                                                     TRAJECTORY_VARS))
 VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECTORY_VARS}
+
+
+def range_text(v: Var) -> str:
+    """What a parameter allows, as the FMUs write it: "a number in [min, max]"."""
+    return f"a number in [{v.min:g}, {v.max:g}]"
 
 # (source model, source variable, destination model, destination variable)
 CONNECTIONS: tuple[tuple[str, str, str, str], ...] = tuple(

@@ -1,0 +1,256 @@
+/* FMI 2.0 co-simulation interface of a native TAPMP FMU: maps every fmi2 function onto the
+ * version-neutral instance (instance.c). Functions a co-simulation FMU of this kind does
+ * not support (Boolean/String variables, derivatives, asynchronous steps) return
+ * fmi2Error with a message. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "instance.h"
+
+#define FMI2_FUNCTION_PREFIX_UNUSED
+#include "fmi2Functions.h"
+
+typedef struct {
+    fmi2CallbackFunctions cb;
+} fmi2_env;
+
+static void logger(void *instance, int status, const char *category, const char *message)
+{
+    tapmp_instance *inst = instance;
+    fmi2_env *env = inst->env;
+    if (env && env->cb.logger)
+        env->cb.logger(env->cb.componentEnvironment, inst->name, (fmi2Status)status, category, "%s", message);
+}
+
+/* Every call on an instance goes through here: a NULL or freed instance is refused. */
+#define INSTANCE(c) tapmp_instance *inst = (tapmp_instance *)(c); if (!tapmp_alive(inst)) return fmi2Error
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    (void)fmuResourceLocation, (void)visible;
+    fmi2_env *env = calloc(1, sizeof *env);
+    if (!env) return NULL;
+    if (functions) env->cb = *functions;
+    if (fmuType != fmi2CoSimulation) {
+        if (env->cb.logger)
+            env->cb.logger(env->cb.componentEnvironment, instanceName, fmi2Error, "logStatusError",
+                           "fmi2Instantiate: fmuType = %d is invalid: allowed is fmi2CoSimulation (1); "
+                           "%s is a co-simulation FMU", (int)fmuType, MODEL_IDENTIFIER_STRING);
+        free(env);
+        return NULL;
+    }
+    tapmp_instance *inst = tapmp_new(instanceName, "fmi2", logger, env, loggingOn, fmuGUID);
+    if (!inst) free(env);
+    return inst;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    tapmp_instance *inst = (tapmp_instance *)c;
+    if (!tapmp_alive(inst)) return;  /* a second free, or not ours: ignored */
+    void *env = inst->env;
+    tapmp_free(inst);
+    free(env);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String categories[])
+{
+    (void)n, (void)categories;
+    INSTANCE(c);
+    inst->logging_on = loggingOn;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
+    INSTANCE(c);
+    return (fmi2Status)tapmp_setup_experiment(inst, startTime);
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_enter_initialization(inst); }
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_exit_initialization(inst); }
+fmi2Status fmi2Terminate(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_terminate(inst); }
+fmi2Status fmi2Reset(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_reset(inst); }
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[])
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_get_real(inst, vr, n, value);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[])
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_get_integer(inst, vr, n, value);
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[])
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_set_real(inst, vr, n, value);
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[])
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_set_integer(inst, vr, n, value);
+}
+
+static fmi2Status unsupported(tapmp_instance *inst, const char *call, const char *why)
+{
+    return (fmi2Status)tapmp_fail(inst, "fmi2%s is not supported: %s", call, why);
+}
+
+#define NO_VARIABLES(call) unsupported(inst, call, "this FMU has no variables of that type (n must be 0)")
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[])
+{
+    (void)vr, (void)v;
+    INSTANCE(c);
+    return n ? NO_VARIABLES("GetBoolean") : fmi2OK;
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[])
+{
+    (void)vr, (void)v;
+    INSTANCE(c);
+    return n ? NO_VARIABLES("GetString") : fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[])
+{
+    (void)vr, (void)v;
+    INSTANCE(c);
+    return n ? NO_VARIABLES("SetBoolean") : fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
+{
+    (void)vr, (void)v;
+    INSTANCE(c);
+    return n ? NO_VARIABLES("SetString") : fmi2OK;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_get_state(inst, (tapmp_state **)state);
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_set_state(inst, (const tapmp_state *)state);
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_free_state(inst, (tapmp_state **)state);
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    (void)state;
+    INSTANCE(c);
+    *size = tapmp_serialized_size();
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_serialize(inst, (const tapmp_state *)state, bytes, size);
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
+{
+    INSTANCE(c);
+    return (fmi2Status)tapmp_deserialize(inst, bytes, size, (tapmp_state **)state);
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz, const fmi2Real dv[],
+                                        fmi2Real dz[])
+{
+    (void)u, (void)nu, (void)z, (void)nz, (void)dv, (void)dz;
+    INSTANCE(c);
+    return unsupported(inst, "GetDirectionalDerivative", "providesDirectionalDerivative is false");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    (void)vr, (void)n, (void)order, (void)value;
+    INSTANCE(c);
+    return unsupported(inst, "SetRealInputDerivatives", "canInterpolateInputs is false");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    (void)vr, (void)n, (void)order, (void)value;
+    INSTANCE(c);
+    return unsupported(inst, "GetRealOutputDerivatives", "maxOutputDerivativeOrder is 0");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    (void)noSetFMUStatePriorToCurrentPoint;
+    INSTANCE(c);
+    return (fmi2Status)tapmp_do_step(inst, t, h);
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    INSTANCE(c);
+    return unsupported(inst, "CancelStep", "doStep always completes synchronously");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    (void)s, (void)value;
+    INSTANCE(c);
+    return unsupported(inst, "GetStatus", "doStep always completes synchronously");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    INSTANCE(c);
+    if (s == fmi2LastSuccessfulTime) {
+        *value = inst->time;
+        return fmi2OK;
+    }
+    return unsupported(inst, "GetRealStatus", "only fmi2LastSuccessfulTime is available");
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    (void)s, (void)value;
+    INSTANCE(c);
+    return unsupported(inst, "GetIntegerStatus", "doStep always completes synchronously");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    INSTANCE(c);
+    if (s == fmi2Terminated) {
+        *value = fmi2False;
+        return fmi2OK;
+    }
+    return unsupported(inst, "GetBooleanStatus", "only fmi2Terminated is available");
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    (void)s, (void)value;
+    INSTANCE(c);
+    return unsupported(inst, "GetStringStatus", "doStep always completes synchronously");
+}

@@ -1,0 +1,617 @@
+/* Version-neutral FMU instance; see instance.h. The rules it enforces, the same as the
+ * pythonfmu family's (fmu_common/slave.py):
+ * - bad input is an error status at the call that receives it, with one logged message
+ *   naming the variable, the value, the time and what is allowed; after an error every
+ *   doStep is refused, so no stale or non-finite value travels on;
+ * - a call the co-simulation state machine does not allow in the current mode is an error;
+ * - doStep(t, h) needs a finite t that continues the previous step (t equals the end of
+ *   the previous step, or the start time, within TIME_TOLERANCE max(1 s, |t|)) and a
+ *   finite h > 0; outputs are computed, checked to be finite and only then published. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "instance.h"
+
+#define INSTANCE_MAGIC 0x7A3D9C51u
+#define TIME_TOLERANCE 1e-9
+
+const tapmp_var VARS[N_VARS] = MODEL_VARS_INIT;
+
+static const char *MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
+
+char *tapmp_repr(double x, char *buf)
+{
+    if (isnan(x)) return strcpy(buf, "nan");
+    if (isinf(x)) return strcpy(buf, x > 0 ? "inf" : "-inf");
+    if (x == 0.0) return strcpy(buf, signbit(x) ? "-0.0" : "0.0");
+    char e[40];
+    for (int p = 1; p <= 17; p++) {  /* the shortest digits that read back as x */
+        snprintf(e, sizeof e, "%.*e", p - 1, x);
+        if (strtod(e, NULL) == x) break;
+    }
+    const char *s = e;
+    int neg = *s == '-';
+    if (neg) s++;
+    char digits[24];
+    int nd = 0;
+    for (; *s && *s != 'e'; s++)
+        if (*s != '.') digits[nd++] = *s;
+    while (nd > 1 && digits[nd - 1] == '0') nd--;
+    digits[nd] = 0;
+    int exp10 = atoi(s + 1), decpt = exp10 + 1;
+    char *o = buf;
+    if (neg) *o++ = '-';
+    if (decpt <= -4 || decpt > 16) {  /* Python's switch to scientific notation */
+        *o++ = digits[0];
+        if (nd > 1) o += sprintf(o, ".%s", digits + 1);
+        sprintf(o, "e%c%02d", exp10 < 0 ? '-' : '+', abs(exp10));
+    } else if (decpt <= 0) {
+        o += sprintf(o, "0.");
+        for (int i = 0; i < -decpt; i++) *o++ = '0';
+        strcpy(o, digits);
+    } else if (decpt >= nd) {
+        o += sprintf(o, "%s", digits);
+        for (int i = nd; i < decpt; i++) *o++ = '0';
+        strcpy(o, ".0");
+    } else {
+        memcpy(o, digits, (size_t)decpt);
+        o += decpt;
+        sprintf(o, ".%s", digits + decpt);
+    }
+    return buf;
+}
+
+/* Live instances: a free of one that is not (twice, or a stray pointer) is ignored. The
+ * registry is a small array guarded by nothing: FMI calls on one FMU come from one thread
+ * at a time for a given instance, and instances are created rarely. */
+#define MAX_LIVE 4096
+static tapmp_instance *live[MAX_LIVE];
+
+static void registry_add(tapmp_instance *inst)
+{
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (!live[i]) {
+            live[i] = inst;
+            return;
+        }
+}
+
+tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, void *env,
+                          int logging_on, const char *token)
+{
+    tapmp_instance *inst = calloc(1, sizeof *inst);
+    if (!inst) return NULL;
+    inst->name = malloc(strlen(name ? name : "") + 1);
+    if (!inst->name) {
+        free(inst);
+        return NULL;
+    }
+    strcpy(inst->name, name ? name : "");
+    inst->fmi = fmi;
+    inst->log = log;
+    inst->env = env;
+    inst->logging_on = logging_on;
+    inst->magic = INSTANCE_MAGIC;
+    if (!token || strcmp(token, INSTANTIATION_TOKEN) != 0) {
+        tapmp_log(inst, ST_ERROR, "logStatusError",
+                  "%sInstantiate: %s = '%s' is not this FMU's: allowed is '%s' (the modelDescription.xml "
+                  "does not belong to this binary of %s)", fmi,
+                  strcmp(fmi, "fmi2") == 0 ? "fmuGUID" : "instantiationToken", token ? token : "(null)",
+                  INSTANTIATION_TOKEN, MODEL_IDENTIFIER_STRING);
+        tapmp_free(inst);
+        return NULL;
+    }
+    tapmp_reset(inst);
+    registry_add(inst);
+    return inst;
+}
+
+int tapmp_alive(const tapmp_instance *inst)
+{
+    if (!inst) return 0;
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (live[i] == inst) return inst->magic == INSTANCE_MAGIC;
+    return 0;
+}
+
+void tapmp_free(tapmp_instance *inst)
+{
+    if (!inst) return;
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (live[i] == inst) live[i] = NULL;
+    inst->magic = 0;
+    free(inst->name);
+    free(inst);
+}
+
+void tapmp_log(tapmp_instance *inst, int status, const char *category, const char *fmt, ...)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    if (status >= ST_ERROR && !inst->failed) {
+        inst->failed = 1;
+        snprintf(inst->error, sizeof inst->error, "%s", msg);
+    }
+    if (inst->log && (inst->logging_on || status >= ST_ERROR)) inst->log(inst, status, category, msg);
+}
+
+int tapmp_fail(tapmp_instance *inst, const char *fmt, ...)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    tapmp_log(inst, ST_ERROR, "logStatusError", "%s", msg);
+    return ST_ERROR;
+}
+
+int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
+                       const char *allowed, int has_time, double time)
+{
+    char at[64] = "";
+    if (has_time) snprintf(at, sizeof at, " at t = %.6g s", time);
+    snprintf(buf, size, "%s = %s%s is invalid: allowed is %s", name, value, at, allowed);
+    return 0;
+}
+
+int tapmp_invalid(tapmp_instance *inst, const char *name, const char *value, const char *allowed,
+                  int time_in_value)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    tapmp_invalid_text(msg, sizeof msg, name, value, allowed, time_in_value, inst->time);
+    if (time_in_value) return tapmp_fail(inst, "%s", msg);
+    return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+}
+
+int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed)
+{
+    return tapmp_fail(inst, "%s%s is not allowed in %s: allowed in %s", inst->fmi, call,
+                      MODE_NAMES[inst->mode], allowed);
+}
+
+/* Range of a parameter, declared as min/max in the modelDescription (tapmp/interface.py). */
+static int check_ranges(const tapmp_instance *inst, char *msg, size_t size)
+{
+    char v[40], lo[40], allowed[120];
+    for (int vr = 0; vr < N_VARS; vr++) {
+        const tapmp_var *var = &VARS[vr];
+        if (var->causality != 'p') continue;
+        double x = var->type == 'R' ? inst->reals[vr] : (double)inst->ints[vr];
+        if (x >= var->min && x <= var->max) continue;
+        if (var->type == 'R') tapmp_repr(x, v);
+        else snprintf(v, sizeof v, "%d", inst->ints[vr]);
+        snprintf(lo, sizeof lo, "%g", var->min);
+        snprintf(allowed, sizeof allowed, "a number in [%s, %g]", lo, var->max);
+        return tapmp_invalid_text(msg, size, var->name, v, allowed, 0, 0.0);
+    }
+    return 1;
+}
+
+/* model_validate + ranges + model_setup; on failure logs "<msg> (at t = T s)". */
+static int setup(tapmp_instance *inst)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg)) {
+        return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+    }
+    model_setup(inst);
+    inst->has_model = 1;
+    return ST_OK;
+}
+
+int tapmp_setup_experiment(tapmp_instance *inst, double start_time)
+{
+    if (inst->mode != MODE_INSTANTIATED) return tapmp_mode_error(inst, "SetupExperiment", "Instantiated");
+    if (!isfinite(start_time)) {
+        char v[40];
+        return tapmp_invalid(inst, "startTime", tapmp_repr(start_time, v), "a finite number", 0);
+    }
+    inst->time = start_time;
+    return ST_OK;
+}
+
+int tapmp_enter_initialization(tapmp_instance *inst)
+{
+    if (inst->mode != MODE_INSTANTIATED)
+        return tapmp_mode_error(inst, "EnterInitializationMode", "Instantiated");
+    inst->mode = MODE_INITIALIZATION;
+    inst->dirty = 1;
+    return inst->failed ? ST_ERROR : setup(inst);
+}
+
+int tapmp_exit_initialization(tapmp_instance *inst)
+{
+    if (inst->mode != MODE_INITIALIZATION)
+        return tapmp_mode_error(inst, "ExitInitializationMode", "Initialization Mode");
+    inst->mode = MODE_STEP;
+    inst->retune = inst->dirty = 0;
+    if (inst->failed) return ST_ERROR;
+    int status = setup(inst);
+    if (status != ST_OK) return status;
+    char msg[TAPMP_MESSAGE_MAX];
+    if (!model_initial_outputs(inst, msg, sizeof msg))
+        return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+    return ST_OK;
+}
+
+int tapmp_do_step(tapmp_instance *inst, double t, double h)
+{
+    char v[40], w[40], allowed[160], msg[TAPMP_MESSAGE_MAX];
+    if (inst->mode != MODE_STEP) {
+        const char *hint = inst->mode == MODE_TERMINATED ? " (the instance is terminated; reset it first)" :
+                           " (leave initialization first: EnterInitializationMode, ExitInitializationMode)";
+        return tapmp_fail(inst, "%sDoStep is not allowed in %s: allowed in Step Mode%s", inst->fmi,
+                          MODE_NAMES[inst->mode], hint);
+    }
+    if (inst->failed)
+        return tapmp_fail(inst, "doStep at t = %.6g s refused after an earlier error: %s", t, inst->error);
+    if (!isfinite(t)) return tapmp_invalid(inst, "currentCommunicationPoint", tapmp_repr(t, v),
+                                           "a finite number", 0);
+    if (!(isfinite(h) && h > 0.0))
+        return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a finite number > 0 "
+                          "(at t = %.6g s)", tapmp_repr(h, v), t);
+    if (fabs(t - inst->time) > TIME_TOLERANCE * fmax(1.0, fabs(inst->time))) {
+        snprintf(allowed, sizeof allowed, "the end of the previous step, %s s (within %g s)",
+                 tapmp_repr(inst->time, w), TIME_TOLERANCE * fmax(1.0, fabs(inst->time)));
+        return tapmp_invalid(inst, "currentCommunicationPoint", tapmp_repr(t, v), allowed, 0);
+    }
+    double out[MODEL_N_OUT];
+    ModelData before = inst->m;
+    if (inst->retune) {  /* new tunable values take effect at this sample */
+        inst->retune = 0;
+        if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg))
+            return tapmp_fail(inst, "%s (at t = %.6g s)", msg, t);
+    }
+    if (!model_step(inst, t, h, out, msg, sizeof msg)) {
+        inst->m = before;
+        return tapmp_fail(inst, "%s", msg);
+    }
+    for (int i = 0; i < MODEL_N_OUT; i++)
+        if (!isfinite(out[i])) {
+            inst->m = before;
+            snprintf(allowed, sizeof allowed, "a finite number (the output overflowed; check the inputs "
+                     "and parameters)");
+            tapmp_invalid_text(msg, sizeof msg, VARS[MODEL_OUT_FIRST + i].name, tapmp_repr(out[i], v),
+                               allowed, 1, t + h);
+            return tapmp_fail(inst, "%s", msg);
+        }
+    memcpy(inst->reals + MODEL_OUT_FIRST, out, sizeof out);
+    inst->time = t + h;
+    return ST_OK;
+}
+
+int tapmp_terminate(tapmp_instance *inst)
+{
+    if (inst->mode != MODE_STEP && !inst->failed)
+        return tapmp_mode_error(inst, "Terminate", "Step Mode");
+    inst->mode = MODE_TERMINATED;
+    return ST_OK;
+}
+
+int tapmp_reset(tapmp_instance *inst)
+{
+    inst->mode = MODE_INSTANTIATED;
+    inst->time = 0.0;
+    inst->failed = inst->retune = inst->has_model = inst->dirty = 0;
+    inst->error[0] = 0;
+    memset(&inst->m, 0, sizeof inst->m);
+    for (int vr = 0; vr < N_VARS; vr++) {
+        inst->reals[vr] = VARS[vr].type == 'R' ? VARS[vr].start : 0.0;
+        inst->ints[vr] = VARS[vr].type == 'I' ? (int)VARS[vr].start : 0;
+    }
+    return ST_OK;
+}
+
+static int bad_vr(tapmp_instance *inst, const char *call, unsigned vr, char type)
+{
+    return tapmp_fail(inst, "%s%s: value reference %u is invalid: allowed are the %s variables of %s "
+                      "(see modelDescription.xml)", inst->fmi, call, vr, type == 'R' ? "Real" : "Integer",
+                      MODEL_IDENTIFIER_STRING);
+}
+
+/* FMI lets a master set parameters and inputs in Initialization Mode and read the
+ * outputs (initial unknowns) before leaving it; libcosim, Ecos and fmpy's container do.
+ * The first get after a set recomputes them. A combination that is invalid may be a
+ * master's half-way point: the outputs keep their values, and ExitInitializationMode,
+ * which sets the model up again, reports the error if it is still there. */
+static void update_initial_unknowns(tapmp_instance *inst)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    inst->dirty = 0;
+    if (inst->failed || !model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg))
+        return;
+    model_setup(inst);
+    inst->has_model = 1;
+    model_initial_outputs(inst, msg, sizeof msg);
+}
+
+int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[])
+{
+    if (inst->dirty && inst->mode == MODE_INITIALIZATION) update_initial_unknowns(inst);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == N_VARS) {  /* FMI 3.0's independent variable `time` */
+            v[i] = inst->time;
+            continue;
+        }
+        if (vr[i] > N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, "GetReal", vr[i], 'R');
+        v[i] = inst->reals[vr[i]];
+    }
+    return ST_OK;
+}
+
+int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v[])
+{
+    if (inst->dirty && inst->mode == MODE_INITIALIZATION) update_initial_unknowns(inst);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, "GetInteger", vr[i], 'I');
+        v[i] = inst->ints[vr[i]];
+    }
+    return ST_OK;
+}
+
+/* OK if variable vr may be set to x (printed as text) now, else the logged error. */
+static int settable(tapmp_instance *inst, unsigned vr, const char *text, const char *call)
+{
+    const tapmp_var *var = &VARS[vr];
+    if (inst->mode == MODE_TERMINATED) return tapmp_mode_error(inst, call, "Instantiated, Initialization "
+                                                               "Mode or Step Mode");
+    if (var->causality == 'o') return tapmp_invalid(inst, var->name, text, "no value: it is an output", 0);
+    if (var->variability == 'f' && inst->mode == MODE_STEP)
+        return tapmp_invalid(inst, var->name, text, "no change after initialization: it is a fixed parameter", 0);
+    return ST_OK;
+}
+
+/* A tunable parameter set in Step Mode is checked at once: the model's own rules, then
+ * the declared range. On failure the previous value stays. */
+static int check_tunable(tapmp_instance *inst, unsigned vr, double old_real, int old_int)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    if (inst->mode != MODE_STEP || VARS[vr].variability != 't') return ST_OK;
+    if (model_validate(inst, msg, sizeof msg) && check_ranges(inst, msg, sizeof msg)) {
+        inst->retune = 1;
+        return ST_OK;
+    }
+    inst->reals[vr] = old_real;
+    inst->ints[vr] = old_int;
+    return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+}
+
+int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[])
+{
+    char text[40];
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, "SetReal", vr[i], 'R');
+        int status = settable(inst, vr[i], tapmp_repr(v[i], text), "SetReal");
+        if (status != ST_OK) return status;
+        if (!isfinite(v[i])) return tapmp_invalid(inst, VARS[vr[i]].name, text, "a finite number", 1);
+        double old = inst->reals[vr[i]];
+        inst->reals[vr[i]] = v[i];
+        inst->dirty |= inst->mode == MODE_INITIALIZATION;
+        if ((status = check_tunable(inst, vr[i], old, inst->ints[vr[i]])) != ST_OK) return status;
+    }
+    return ST_OK;
+}
+
+int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[])
+{
+    char text[40];
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, "SetInteger", vr[i], 'I');
+        snprintf(text, sizeof text, "%d", v[i]);
+        int status = settable(inst, vr[i], text, "SetInteger");
+        if (status != ST_OK) return status;
+        int old = inst->ints[vr[i]];
+        inst->ints[vr[i]] = v[i];
+        inst->dirty |= inst->mode == MODE_INITIALIZATION;
+        if ((status = check_tunable(inst, vr[i], inst->reals[vr[i]], old)) != ST_OK) return status;
+    }
+    return ST_OK;
+}
+
+/* --- FMU state ---------------------------------------------------------------------- */
+/* The state is the instance from `mode` to the end. Serialized, it is a fixed layout:
+ * magic, model identifier, variable count, then the values in native byte order. */
+struct tapmp_state {
+    unsigned magic;
+    tapmp_instance copy;
+};
+#define STATE_MAGIC 0x5EA7E001u
+static const char SERIAL_MAGIC[8] = {'T', 'A', 'P', 'M', 'P', 'S', 'T', '1'};
+
+typedef struct {
+    char magic[8];
+    char model[32];
+    int n_vars, n_hidden, mode, failed, retune, has_model;
+    double time;
+    double reals[N_VARS];
+    int ints[N_VARS];
+    double hidden[MODEL_N_HIDDEN > 0 ? MODEL_N_HIDDEN : 1];
+    char error[TAPMP_MESSAGE_MAX];
+} serial_layout;
+
+int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
+{
+    if (!state) return tapmp_fail(inst, "%sGetFMUstate: FMUstate pointer is NULL", inst->fmi);
+    tapmp_state *s = *state;
+    if (!s || s->magic != STATE_MAGIC) {
+        s = calloc(1, sizeof *s);
+        if (!s) return tapmp_fail(inst, "%sGetFMUstate: out of memory", inst->fmi);
+        s->magic = STATE_MAGIC;
+    }
+    s->copy = *inst;
+    *state = s;
+    return ST_OK;
+}
+
+/* Check a state fully before any of it is applied; 0 + msg if it is not valid. */
+static int validate_state(const tapmp_instance *c, char *msg, size_t size)
+{
+    char v[40];
+    if (c->mode < MODE_INSTANTIATED || c->mode > MODE_TERMINATED) {
+        snprintf(msg, size, "FMU state: mode = %d is invalid: allowed are 0 to 3", (int)c->mode);
+        return 0;
+    }
+    if (!isfinite(c->time)) return tapmp_invalid_text(msg, size, "FMU state: time", tapmp_repr(c->time, v),
+                                                      "a finite number", 0, 0.0);
+    for (int vr = 0; vr < N_VARS; vr++)
+        if (VARS[vr].type == 'R' && !isfinite(c->reals[vr]))
+            return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(c->reals[vr], v),
+                                      "a finite number (in the FMU state)", 0, 0.0);
+    double hidden[MODEL_N_HIDDEN > 0 ? MODEL_N_HIDDEN : 1];
+    if (c->has_model) {
+        model_get_hidden(c, hidden);
+        for (int i = 0; i < MODEL_N_HIDDEN; i++)
+            if (!isfinite(hidden[i])) {
+                snprintf(msg, size, "FMU state: hidden state value %d = %s is invalid: allowed is a finite "
+                         "number", i, tapmp_repr(hidden[i], v));
+                return 0;
+            }
+        if (!model_validate(c, msg, size) || !check_ranges(c, msg, size)) return 0;
+    }
+    return 1;
+}
+
+/* Apply a validated copy: everything from `mode` on, keeping identity and callbacks. */
+static void apply_state(tapmp_instance *inst, const tapmp_instance *c)
+{
+    inst->mode = c->mode;
+    inst->time = c->time;
+    inst->failed = c->failed;
+    inst->retune = c->retune;
+    inst->has_model = c->has_model;
+    inst->dirty = c->dirty;
+    memcpy(inst->reals, c->reals, sizeof inst->reals);
+    memcpy(inst->ints, c->ints, sizeof inst->ints);
+    inst->m = c->m;
+    memcpy(inst->error, c->error, sizeof inst->error);
+}
+
+int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    if (!state || state->magic != STATE_MAGIC)
+        return tapmp_fail(inst, "%sSetFMUstate: FMUstate is invalid: allowed is a state from %sGetFMUstate "
+                          "or %sDeSerializeFMUstate of this FMU", inst->fmi, inst->fmi, inst->fmi);
+    if (!validate_state(&state->copy, msg, sizeof msg))
+        return tapmp_fail(inst, "%sSetFMUstate: %s; nothing was changed", inst->fmi, msg);
+    apply_state(inst, &state->copy);
+    return ST_OK;
+}
+
+int tapmp_free_state(tapmp_instance *inst, tapmp_state **state)
+{
+    (void)inst;
+    if (state && *state) {
+        (*state)->magic = 0;
+        free(*state);
+        *state = NULL;
+    }
+    return ST_OK;
+}
+
+size_t tapmp_serialized_size(void) { return sizeof(serial_layout); }
+
+int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes, size_t size)
+{
+    if (!state || state->magic != STATE_MAGIC)
+        return tapmp_fail(inst, "%sSerializeFMUstate: FMUstate is invalid: allowed is a state from "
+                          "%sGetFMUstate", inst->fmi, inst->fmi);
+    if (size < sizeof(serial_layout))
+        return tapmp_fail(inst, "%sSerializeFMUstate: size = %zu is invalid: allowed is >= %zu (from "
+                          "%sSerializedFMUstateSize)", inst->fmi, size, sizeof(serial_layout), inst->fmi);
+    serial_layout *s = calloc(1, sizeof *s);
+    if (!s) return tapmp_fail(inst, "%sSerializeFMUstate: out of memory", inst->fmi);
+    const tapmp_instance *c = &state->copy;
+    memcpy(s->magic, SERIAL_MAGIC, sizeof s->magic);
+    snprintf(s->model, sizeof s->model, "%s", MODEL_IDENTIFIER_STRING);
+    s->n_vars = N_VARS;
+    s->n_hidden = MODEL_N_HIDDEN;
+    s->mode = (int)c->mode;
+    s->failed = c->failed;
+    s->retune = c->retune;
+    s->has_model = c->has_model;
+    s->time = c->time;
+    memcpy(s->reals, c->reals, sizeof s->reals);
+    memcpy(s->ints, c->ints, sizeof s->ints);
+    if (c->has_model) model_get_hidden(c, s->hidden);
+    memcpy(s->error, c->error, sizeof s->error);
+    memcpy(bytes, s, sizeof *s);
+    free(s);
+    return ST_OK;
+}
+
+int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapmp_state **state)
+{
+    char msg[TAPMP_MESSAGE_MAX];
+    if (!state) return tapmp_fail(inst, "%sDeSerializeFMUstate: FMUstate pointer is NULL", inst->fmi);
+    if (!bytes || size != sizeof(serial_layout))
+        return tapmp_fail(inst, "%sDeSerializeFMUstate: size = %zu is invalid: allowed is %zu (a state "
+                          "serialized by this FMU)", inst->fmi, size, sizeof(serial_layout));
+    serial_layout *s = malloc(sizeof *s);
+    tapmp_state *st = calloc(1, sizeof *st);
+    if (!s || !st) {
+        free(s);
+        free(st);
+        return tapmp_fail(inst, "%sDeSerializeFMUstate: out of memory", inst->fmi);
+    }
+    memcpy(s, bytes, sizeof *s);
+    int ok = 1;
+    if (memcmp(s->magic, SERIAL_MAGIC, sizeof s->magic) != 0 ||
+        strncmp(s->model, MODEL_IDENTIFIER_STRING, sizeof s->model) != 0 || s->n_vars != N_VARS ||
+        s->n_hidden != MODEL_N_HIDDEN) {
+        snprintf(msg, sizeof msg, "the bytes are not a state of %s serialized by this FMU",
+                 MODEL_IDENTIFIER_STRING);
+        ok = 0;
+    }
+    tapmp_instance *c = &st->copy;
+    if (ok) {
+        *c = *inst;
+        c->mode = (tapmp_mode)s->mode;
+        c->failed = s->failed != 0;
+        c->retune = s->retune != 0;
+        c->has_model = s->has_model != 0;
+        c->time = s->time;
+        memcpy(c->reals, s->reals, sizeof c->reals);
+        memcpy(c->ints, s->ints, sizeof c->ints);
+        s->error[sizeof s->error - 1] = 0;
+        memcpy(c->error, s->error, sizeof c->error);
+        memset(&c->m, 0, sizeof c->m);
+        if (c->has_model) {
+            /* validate the hidden values before rebuilding the model from the parameters */
+            char v[40];
+            for (int i = 0; i < MODEL_N_HIDDEN && ok; i++)
+                if (!isfinite(s->hidden[i])) {
+                    snprintf(msg, sizeof msg, "FMU state: hidden state value %d = %s is invalid: allowed "
+                             "is a finite number", i, tapmp_repr(s->hidden[i], v));
+                    ok = 0;
+                }
+            if (ok && (s->mode < MODE_INSTANTIATED || s->mode > MODE_TERMINATED)) {
+                snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to 3", s->mode);
+                ok = 0;
+            }
+            if (ok && !(model_validate(c, msg, sizeof msg) && check_ranges(c, msg, sizeof msg))) ok = 0;
+            if (ok) {  /* the serialized outputs stand: setup may publish its own */
+                model_setup(c);
+                model_set_hidden(c, s->hidden);
+                memcpy(c->reals, s->reals, sizeof c->reals);
+            }
+        }
+        if (ok) ok = validate_state(c, msg, sizeof msg);
+    }
+    free(s);
+    if (!ok) {
+        free(st);
+        return tapmp_fail(inst, "%sDeSerializeFMUstate: %s; nothing was changed", inst->fmi, msg);
+    }
+    st->magic = STATE_MAGIC;
+    if (*state && (*state)->magic == STATE_MAGIC) tapmp_free_state(inst, state);
+    *state = st;
+    return ST_OK;
+}

@@ -1,0 +1,118 @@
+/* The FMI-version-neutral part of a native TAPMP FMU: one instance's values, the
+ * co-simulation state machine, error reporting and the FMU state. fmi2_api.c and
+ * fmi3_api.c map the FMI 2.0 and 3.0 functions onto it; the model file (plant.c,
+ * controller.c or trajectory.c) supplies the hooks declared at the end.
+ *
+ * The variable table (names, causality, variability, type, start, min, max; the value
+ * reference is the index) is generated from tapmp/interface.py into model_vars.h at
+ * build time, so every family of FMUs has the same interface. */
+#ifndef TAPMP_INSTANCE_H
+#define TAPMP_INSTANCE_H
+
+#include <stddef.h>
+
+typedef struct {
+    const char *name;
+    char causality;    /* 'i' input, 'o' output, 'p' parameter */
+    char variability;  /* 'f' fixed, 't' tunable, 'c' continuous, 'd' discrete */
+    char type;         /* 'R' Real / Float64, 'I' Integer / Int32 */
+    double start, min, max;
+} tapmp_var;
+
+/* Generated per FMU: the model's header (ModelData, MODEL_N_HIDDEN, MODEL_N_OUT,
+ * MODEL_OUT_FIRST), N_VARS, the VR_<name> value references, MODEL_VARS_INIT,
+ * MODEL_IDENTIFIER_STRING and INSTANTIATION_TOKEN. */
+#include "model_vars.h"
+
+typedef enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_TERMINATED } tapmp_mode;
+
+/* Status codes shared by FMI 2.0 and 3.0 (OK, Warning, Discard, Error, Fatal). */
+enum { ST_OK = 0, ST_WARNING = 1, ST_DISCARD = 2, ST_ERROR = 3, ST_FATAL = 4 };
+
+/* Where log messages go; set by the FMI layer. */
+typedef void (*tapmp_logger)(void *instance, int status, const char *category, const char *message);
+
+#define TAPMP_MESSAGE_MAX 1024
+
+typedef struct tapmp_instance {
+    /* identity and callbacks: never part of an FMU state */
+    char *name;
+    const char *fmi;        /* "fmi2" or "fmi3": prefix of call names in messages */
+    tapmp_logger log;
+    void *env;              /* the FMI layer's callback data */
+    int logging_on;
+    unsigned magic;         /* INSTANCE_MAGIC while alive (double free detection) */
+    /* everything below is the FMU state */
+    tapmp_mode mode;
+    double time;            /* current communication point [s] */
+    int failed;             /* an error was reported: doStep is refused from then on */
+    int retune;             /* a tunable parameter changed in Step Mode */
+    int has_model;          /* the model has been set up */
+    int dirty;              /* a value was set in Initialization Mode since the outputs were computed */
+    double reals[N_VARS];
+    int ints[N_VARS];
+    ModelData m;
+    char error[TAPMP_MESSAGE_MAX];  /* the first error */
+} tapmp_instance;
+
+extern const tapmp_var VARS[N_VARS];
+
+/* Python's repr() of a float ("0.1", "1e-05", "inf") into buf (>= 32 bytes); returns buf. */
+char *tapmp_repr(double x, char *buf);
+
+/* Life cycle */
+tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, void *env,
+                          int logging_on, const char *token);
+void tapmp_free(tapmp_instance *inst);
+int tapmp_alive(const tapmp_instance *inst);
+
+/* Logging: an error is always passed on and recorded (the first one) in inst->error. */
+void tapmp_log(tapmp_instance *inst, int status, const char *category, const char *fmt, ...);
+int tapmp_fail(tapmp_instance *inst, const char *fmt, ...);
+/* "NAME = VALUE[ at t = T s] is invalid: allowed is ALLOWED[ (at t = T s)]" as
+ * tapmp.errors.ModelInputError and fmu_common/slave.py write it; returns ST_ERROR. */
+int tapmp_invalid(tapmp_instance *inst, const char *name, const char *value, const char *allowed,
+                  int time_in_value);
+/* The same with the message only written to buf (no logging); returns 0. */
+int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
+                       const char *allowed, int has_time, double time);
+int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);
+
+/* FMI operations, version neutral; each returns a status. */
+int tapmp_setup_experiment(tapmp_instance *inst, double start_time);
+int tapmp_enter_initialization(tapmp_instance *inst);
+int tapmp_exit_initialization(tapmp_instance *inst);
+int tapmp_do_step(tapmp_instance *inst, double t, double h);
+int tapmp_terminate(tapmp_instance *inst);
+int tapmp_reset(tapmp_instance *inst);
+int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[]);
+int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v[]);
+int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[]);
+int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[]);
+
+/* FMU state: a copy of the instance from `mode` on. */
+typedef struct tapmp_state tapmp_state;
+int tapmp_get_state(tapmp_instance *inst, tapmp_state **state);
+int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state);
+int tapmp_free_state(tapmp_instance *inst, tapmp_state **state);
+size_t tapmp_serialized_size(void);
+int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes, size_t size);
+int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapmp_state **state);
+
+/* --- hooks of the model file ------------------------------------------------------ */
+/* Check the parameters as the Python model's validated() does, in the same order; on
+ * failure write the message (tapmp_invalid_text) to msg and return 0. */
+int model_validate(const tapmp_instance *inst, char *msg, size_t size);
+/* Build the model from the parameters (after model_validate) and publish the outputs
+ * that do not depend on inputs. */
+void model_setup(tapmp_instance *inst);
+/* Outputs that depend on inputs at the end of initialization (controller); 0 + msg on error. */
+int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size);
+/* Advance from t to t + h [s]; compute the outputs into out (MODEL_N_OUT values, in the
+ * order of the output block) without publishing; 0 + msg on error. */
+int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
+/* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. */
+void model_get_hidden(const tapmp_instance *inst, double hidden[]);
+void model_set_hidden(tapmp_instance *inst, const double hidden[]);
+
+#endif

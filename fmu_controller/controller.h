@@ -1,0 +1,17 @@
+/* Model data of the native TAPMP_Controller FMU (see controller.c). */
+#ifndef TAPMP_CONTROLLER_FMU_H
+#define TAPMP_CONTROLLER_FMU_H
+#include "tapmp_model.h"
+
+typedef struct {
+    tapmp_params p;
+    tapmp_gains g;
+    int law, velocity_source;
+    double force_limit;
+    tapmp_controller_state st;
+} ModelData;
+
+#define MODEL_N_HIDDEN 7            /* integral of c (3), previous q (3), has previous q */
+#define MODEL_N_OUT 12              /* F1..F3, u1..u3, e1..e3, es1..es3 */
+#define MODEL_OUT_FIRST VR_F1
+#endif

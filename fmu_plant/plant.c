@@ -1,0 +1,99 @@
+/* Native TAPMP_Plant FMU: maps the FMU variables to the plant of tapmp_model.c, as
+ * fmu_plant/TAPMP_Plant.py maps them to tapmp.plant.PlantModel. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "instance.h"
+
+#define HALF_PI 1.5707963267948966
+#define R(name) inst->reals[VR_##name]
+
+static const char *const PARAMS[] = {"m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g"};
+static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
+static const int CONFIG_VR[] = {VR_encoder_resolution, VR_c_v1, VR_c_v2, VR_c_v3, VR_F_c1, VR_F_c2,
+                                VR_F_c3, VR_v_s, VR_force_limit, VR_k_pull};
+static const int INITIAL_VR[] = {VR_X0, VR_Z0, VR_B0, VR_dX0, VR_dZ0, VR_dB0};
+
+/* tapmp.params.ModelParams.validated, PlantConfig.validated, PlantModel.__init__ */
+int model_validate(const tapmp_instance *inst, char *msg, size_t size)
+{
+    char v[40];
+    for (int i = 0; i < 7; i++) {
+        double x = inst->reals[PARAM_VR[i]];
+        if (!(isfinite(x) && x > 0.0))
+            return tapmp_invalid_text(msg, size, PARAMS[i], tapmp_repr(x, v), "a finite number > 0", 0, 0);
+    }
+    for (int i = 0; i < 10; i++) {
+        double x = inst->reals[CONFIG_VR[i]];
+        if (!(isfinite(x) && x >= 0.0))
+            return tapmp_invalid_text(msg, size, VARS[CONFIG_VR[i]].name, tapmp_repr(x, v),
+                                      "a finite number >= 0", 0, 0);
+    }
+    if (R(v_s) <= 0.0) return tapmp_invalid_text(msg, size, "v_s", tapmp_repr(R(v_s), v),
+                                                 "a finite number > 0", 0, 0);
+    if (inst->ints[VR_substeps] < 1) {
+        snprintf(v, sizeof v, "%d", inst->ints[VR_substeps]);
+        return tapmp_invalid_text(msg, size, "substeps", v, "an integer >= 1", 0, 0);
+    }
+    for (int i = 0; i < 6; i++)
+        if (!isfinite(inst->reals[INITIAL_VR[i]]))
+            return tapmp_invalid_text(msg, size, VARS[INITIAL_VR[i]].name,
+                                      tapmp_repr(inst->reals[INITIAL_VR[i]], v), "a finite number", 0, 0);
+    if (!(fabs(R(B0)) < HALF_PI))
+        return tapmp_invalid_text(msg, size, "B0", tapmp_repr(R(B0), v), "|B0| < pi/2 rad", 0, 0);
+    return 1;
+}
+
+static void publish(tapmp_instance *inst)
+{
+    tapmp_plant_outputs(&inst->m.plant, inst->reals + MODEL_OUT_FIRST);
+}
+
+void model_setup(tapmp_instance *inst)
+{
+    tapmp_plant *pl = &inst->m.plant;
+    pl->p = (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
+    pl->c = (tapmp_plant_config){R(encoder_resolution), {R(c_v1), R(c_v2), R(c_v3)},
+                                 {R(F_c1), R(F_c2), R(F_c3)}, R(v_s), R(force_limit), R(k_pull),
+                                 inst->ints[VR_substeps]};
+    double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
+    tapmp_plant_init(pl, pose0, rate0);
+    publish(inst);
+}
+
+int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size)
+{
+    (void)inst, (void)msg, (void)size;
+    return 1;
+}
+
+int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
+{
+    double F[3] = {R(F1), R(F2), R(F3)}, s[6];
+    tapmp_plant *pl = &inst->m.plant;
+    if (!tapmp_plant_step(pl, h, F, s)) {
+        char value[6 * 40 + 16] = "(", v[40];
+        for (int i = 0; i < 6; i++) {
+            snprintf(value + strlen(value), sizeof value - strlen(value), "%s%s", i ? ", " : "",
+                     tapmp_repr(s[i], v));
+        }
+        strcat(value, ")");
+        return tapmp_invalid_text(msg, size, "plant state (X, Z, B, dX, dZ, dB)", value,
+                                  "finite values with |B| < pi/2 rad", 1, t + h);
+    }
+    for (int i = 0; i < 6; i++) pl->s[i] = s[i];
+    tapmp_plant_outputs(pl, out);
+    return 1;
+}
+
+void model_get_hidden(const tapmp_instance *inst, double hidden[])
+{
+    for (int i = 0; i < 6; i++) hidden[i] = inst->m.plant.s[i];
+}
+
+void model_set_hidden(tapmp_instance *inst, const double hidden[])
+{
+    for (int i = 0; i < 6; i++) inst->m.plant.s[i] = hidden[i];
+    publish(inst);
+}

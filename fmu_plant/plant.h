@@ -1,0 +1,13 @@
+/* Model data of the native TAPMP_Plant FMU (see plant.c). */
+#ifndef TAPMP_PLANT_FMU_H
+#define TAPMP_PLANT_FMU_H
+#include "tapmp_model.h"
+
+typedef struct {
+    tapmp_plant plant;
+} ModelData;
+
+#define MODEL_N_HIDDEN 6            /* the state X, Z, B, dX, dZ, dB */
+#define MODEL_N_OUT 15              /* q1..q3, q1_true..q3_true, dq1..dq3, X, Z, B, dX, dZ, dB */
+#define MODEL_OUT_FIRST VR_q1
+#endif

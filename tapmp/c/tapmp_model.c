@@ -1,0 +1,362 @@
+/* The TAPMP model in C; see tapmp_model.h. Each function names the Python function it
+ * mirrors; expressions keep the Python evaluation order (left to right) on purpose, so
+ * that both give the same doubles. Compile without -ffast-math and with
+ * -ffp-contract=off (no fused multiply-add), as build_native.py does. */
+#include <math.h>
+
+#include "tapmp_model.h"
+
+#define S3 TAPMP_S3
+#define SQRT3 TAPMP_SQRT3
+#define HALF_PI 1.5707963267948966
+#define TWO_PI 6.283185307179586
+
+/* kinematics.inverse */
+void tapmp_inverse(double X, double Z, double B, double L1, double q[3])
+{
+    double c = cos(B), s = sin(B);
+    q[0] = X + S3 * Z + L1 * (1.0 - c + S3 * s);
+    q[1] = X;
+    q[2] = X - S3 * Z - L1 * (1.0 - c - S3 * s);
+}
+
+/* kinematics.forward */
+int tapmp_forward(const double q[3], double L1, double x[3], double *arg)
+{
+    double a = SQRT3 / (2.0 * L1) * (2.0 * q[1] - q[0] - q[2]);
+    *arg = a;
+    if (!(fabs(a) < 1.0)) return 0;  /* also NaN */
+    double B = -asin(a);
+    x[0] = q[1];
+    x[1] = 0.5 * SQRT3 * (q[0] - q[2] - 2.0 * L1 + 2.0 * L1 * cos(B));
+    x[2] = B;
+    return 1;
+}
+
+/* kinematics.rotation_column */
+void tapmp_rotation_column(double B, double L1, double *a1, double *a3)
+{
+    double c = cos(B), s = sin(B);
+    *a1 = L1 * (S3 * c + s);
+    *a3 = L1 * (S3 * c - s);
+}
+
+/* kinematics.rotation_column_dB */
+static void rotation_column_dB(double B, double L1, double *d1, double *d3)
+{
+    double c = cos(B), s = sin(B);
+    *d1 = L1 * (c - S3 * s);
+    *d3 = -L1 * (S3 * s + c);
+}
+
+/* kinematics.joint_velocity */
+void tapmp_joint_velocity(double B, double dX, double dZ, double dB, double L1, double dq[3])
+{
+    double a1, a3;
+    tapmp_rotation_column(B, L1, &a1, &a3);
+    dq[0] = dX + S3 * dZ + a1 * dB;
+    dq[1] = dX;
+    dq[2] = dX - S3 * dZ + a3 * dB;
+}
+
+/* kinematics.task_velocity */
+void tapmp_task_velocity(double B, const double dq[3], double L1, double dx[3])
+{
+    double a1, a3;
+    tapmp_rotation_column(B, L1, &a1, &a3);
+    double dB = (dq[0] + dq[2] - 2.0 * dq[1]) / (a1 + a3);
+    dx[0] = dq[1];
+    dx[1] = (dq[0] - dq[1] - a1 * dB) / S3;
+    dx[2] = dB;
+}
+
+/* kinematics.solve_transpose */
+void tapmp_solve_transpose(double B, const double v[3], double L1, double w[3])
+{
+    double a1, a3;
+    tapmp_rotation_column(B, L1, &a1, &a3);
+    double d = v[1] / S3;
+    double w1 = (v[2] + a3 * d) / (a1 + a3);
+    double w3 = w1 - d;
+    w[0] = w1;
+    w[1] = v[0] - w1 - w3;
+    w[2] = w3;
+}
+
+/* dynamics.mass_matrix */
+void tapmp_mass_matrix(double B, const tapmp_params *p, double M[9])
+{
+    double a1, a3, m1 = p->m_1, m2 = p->m_2, m3 = p->m_3;
+    tapmp_rotation_column(B, p->L_1, &a1, &a3);
+    M[0] = p->m_p + m1 + m2 + m3;
+    M[1] = M[3] = S3 * (m1 - m3);
+    M[2] = M[6] = m1 * a1 + m3 * a3;
+    M[4] = p->m_p + (m1 + m3) / 3.0;
+    M[5] = M[7] = S3 * (m1 * a1 - m3 * a3);
+    M[8] = p->I_y + m1 * a1 * a1 + m3 * a3 * a3;
+}
+
+/* dynamics.coriolis_times: C(x, xd) v for a v whose B component is v3 */
+static void coriolis_times(double B, double dB, double v3, const tapmp_params *p, double out[3])
+{
+    double d1, d3, a1, a3;
+    rotation_column_dB(B, p->L_1, &d1, &d3);
+    tapmp_rotation_column(B, p->L_1, &a1, &a3);
+    double w1 = p->m_1 * d1 * dB * v3;
+    double w3 = p->m_3 * d3 * dB * v3;
+    out[0] = w1 + w3;
+    out[1] = S3 * (w1 - w3);
+    out[2] = a1 * w1 + a3 * w3;
+}
+
+/* dynamics.solve_sym3: M y = r for a symmetric positive definite M, by its adjugate */
+static void solve_sym3(const double M[9], double r1, double r2, double r3, double y[3])
+{
+    double a = M[0], b = M[1], c = M[2], d = M[4], e = M[5], f = M[8];
+    double A11 = d * f - e * e, A12 = c * e - b * f, A13 = b * e - c * d;
+    double A22 = a * f - c * c, A23 = b * c - a * e, A33 = a * d - b * b;
+    double det = a * A11 + b * A12 + c * A13;
+    y[0] = (A11 * r1 + A12 * r2 + A13 * r3) / det;
+    y[1] = (A12 * r1 + A22 * r2 + A23 * r3) / det;
+    y[2] = (A13 * r1 + A23 * r2 + A33 * r3) / det;
+}
+
+/* dynamics.task_acceleration (Eq. 11) */
+void tapmp_task_acceleration(double B, double dB, const double u[3], const tapmp_params *p,
+                             double xdd[3])
+{
+    double c[3], M[9];
+    coriolis_times(B, dB, dB, p, c);
+    tapmp_mass_matrix(B, p, M);
+    solve_sym3(M, u[0] - c[0], u[1] - c[1] - p->m_p * p->g, u[2] - c[2], xdd);
+}
+
+/* dynamics.generalized_force */
+void tapmp_generalized_force(double B, double dB, const double xdd[3], double dBv,
+                             const tapmp_params *p, double out[3])
+{
+    double M[9], c[3];
+    tapmp_mass_matrix(B, p, M);
+    coriolis_times(B, dB, dBv, p, c);
+    out[0] = M[0] * xdd[0] + M[1] * xdd[1] + M[2] * xdd[2] + c[0];
+    out[1] = M[1] * xdd[0] + M[4] * xdd[1] + M[5] * xdd[2] + c[1] + p->m_p * p->g;
+    out[2] = M[2] * xdd[0] + M[5] * xdd[1] + M[8] * xdd[2] + c[2];
+}
+
+/* plant.quantize */
+double tapmp_quantize(double q, double resolution)
+{
+    if (resolution == 0.0) return q;
+    return resolution * floor(q / resolution + 0.5);
+}
+
+/* plant.PlantModel.__init__ (state and reference gaps; ranges are checked by the caller) */
+void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3])
+{
+    double q[3];
+    for (int i = 0; i < 3; i++) {
+        pl->s[i] = pose0[i];
+        pl->s[3 + i] = rate0[i];
+    }
+    tapmp_inverse(pose0[0], pose0[1], pose0[2], pl->p.L_1, q);
+    pl->gap12_0 = q[1] - q[0];
+    pl->gap23_0 = q[2] - q[1];
+}
+
+/* plant.PlantModel._make_rhs: the fused right-hand side (Eq. 2-4, 11-14 with friction
+ * and pulling), forces already saturated */
+void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6])
+{
+    const tapmp_params *p = &pl->p;
+    const tapmp_plant_config *c = &pl->c;
+    double L1 = p->L_1, m1 = p->m_1, m3 = p->m_3, mpg = p->m_p * p->g;
+    double M11 = p->m_p + p->m_1 + p->m_2 + p->m_3;
+    double M12 = S3 * (m1 - m3);
+    double M22 = p->m_p + (m1 + m3) / 3.0;
+    double X = s[0], Z = s[1], B = s[2], dX = s[3], dZ = s[4], dB = s[5];
+    double F1 = F[0], F2 = F[1], F3 = F[2], vs = c->v_s;
+    double cB = cos(B), sB = sin(B);
+    double a1 = L1 * (S3 * cB + sB);                      /* rotation_column (Eq. 4) */
+    double a3 = L1 * (S3 * cB - sB);
+    double dq1 = dX + S3 * dZ + a1 * dB;                  /* joint_velocity (Eq. 3) */
+    double dq3 = dX - S3 * dZ + a3 * dB;
+    F1 -= c->c_v[0] * dq1 + c->F_c[0] * tanh(dq1 / vs);  /* friction */
+    F2 -= c->c_v[1] * dX + c->F_c[1] * tanh(dX / vs);
+    F3 -= c->c_v[2] * dq3 + c->F_c[2] * tanh(dq3 / vs);
+    if (c->k_pull != 0.0) {                               /* mutual pulling */
+        double q1 = X + S3 * Z + L1 * (1.0 - cB + S3 * sB);   /* inverse (Eq. 2) */
+        double q3 = X - S3 * Z - L1 * (1.0 - cB - S3 * sB);
+        double p12 = c->k_pull * (X - q1 - pl->gap12_0);
+        double p23 = c->k_pull * (q3 - X - pl->gap23_0);
+        F1 += p12;
+        F2 += p23 - p12;
+        F3 -= p23;
+    }
+    double d1 = L1 * (cB - S3 * sB);                      /* rotation_column_dB */
+    double d3 = -L1 * (S3 * sB + cB);
+    double w1 = m1 * d1 * dB * dB;                        /* C xd */
+    double w3 = m3 * d3 * dB * dB;
+    double r1 = F1 + F2 + F3 - (w1 + w3);                 /* J^T F - C xd - G (Eq. 11, 14) */
+    double r2 = S3 * (F1 - F3) - S3 * (w1 - w3) - mpg;
+    double r3 = a1 * F1 + a3 * F3 - (a1 * w1 + a3 * w3);
+    double M13 = m1 * a1 + m3 * a3;                       /* exact mass matrix (Eq. 12) */
+    double M23 = S3 * (m1 * a1 - m3 * a3);
+    double M33 = p->I_y + m1 * a1 * a1 + m3 * a3 * a3;
+    double A11 = M22 * M33 - M23 * M23;                   /* adjugate solve */
+    double A12 = M13 * M23 - M12 * M33;
+    double A13 = M12 * M23 - M13 * M22;
+    double A22 = M11 * M33 - M13 * M13;
+    double A23 = M12 * M13 - M11 * M23;
+    double A33 = M11 * M22 - M12 * M12;
+    double det = M11 * A11 + M12 * A12 + M13 * A13;
+    ds[0] = dX;
+    ds[1] = dZ;
+    ds[2] = dB;
+    ds[3] = (A11 * r1 + A12 * r2 + A13 * r3) / det;
+    ds[4] = (A12 * r1 + A22 * r2 + A23 * r3) / det;
+    ds[5] = (A13 * r1 + A23 * r2 + A33 * r3) / det;
+}
+
+static double saturate(double F, double lim)
+{
+    if (F < -lim) F = -lim;
+    return F > lim ? lim : F;
+}
+
+/* plant.PlantModel.step: classic RK4 with `substeps` steps */
+int tapmp_plant_step(const tapmp_plant *pl, double h, const double F_in[3], double s_new[6])
+{
+    double F[3] = {F_in[0], F_in[1], F_in[2]};
+    double lim = pl->c.force_limit;
+    if (lim > 0.0)
+        for (int i = 0; i < 3; i++) F[i] = saturate(F[i], lim);
+    int n = pl->c.substeps;
+    double dt = h / n, hdt = 0.5 * dt, dt6 = dt / 6.0;
+    double s[6], k1[6], k2[6], k3[6], k4[6], t[6];
+    for (int i = 0; i < 6; i++) s[i] = pl->s[i];
+    for (int step = 0; step < n; step++) {
+        tapmp_plant_rhs(pl, s, F, k1);
+        for (int i = 0; i < 6; i++) t[i] = s[i] + hdt * k1[i];
+        tapmp_plant_rhs(pl, t, F, k2);
+        for (int i = 0; i < 6; i++) t[i] = s[i] + hdt * k2[i];
+        tapmp_plant_rhs(pl, t, F, k3);
+        for (int i = 0; i < 6; i++) t[i] = s[i] + dt * k3[i];
+        tapmp_plant_rhs(pl, t, F, k4);
+        for (int i = 0; i < 6; i++) s[i] = s[i] + dt6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+    for (int i = 0; i < 6; i++) s_new[i] = s[i];
+    return fabs(s[2]) < HALF_PI && isfinite(s[0] + s[1] + s[3] + s[4] + s[5]);
+}
+
+/* plant.PlantModel.measured_positions, joint_positions, joint_velocities and the state */
+void tapmp_plant_outputs(const tapmp_plant *pl, double out[15])
+{
+    const double *s = pl->s;
+    double L1 = pl->p.L_1;
+    tapmp_inverse(s[0], s[1], s[2], L1, out + 3);
+    for (int i = 0; i < 3; i++) out[i] = tapmp_quantize(out[3 + i], pl->c.encoder_resolution);
+    tapmp_joint_velocity(s[2], s[3], s[4], s[5], L1, out + 6);
+    for (int i = 0; i < 6; i++) out[9 + i] = s[i];
+}
+
+/* control.feedforward (Eq. 26 / 39) */
+int tapmp_feedforward(const double q[3], const double dq[3], const double dx_d[3],
+                      const double ddx_d[3], const tapmp_params *p, double u_d[3], double *arg)
+{
+    double x[3], dx[3], gf[3];
+    if (!tapmp_forward(q, p->L_1, x, arg)) return 0;
+    double B = x[2];
+    tapmp_task_velocity(B, dq, p->L_1, dx);
+    tapmp_generalized_force(B, dx[2], ddx_d, dx_d[2], p, gf);
+    tapmp_solve_transpose(B, gf, p->L_1, u_d);
+    return 1;
+}
+
+/* control.scdc_command (Eq. 22-25) */
+void tapmp_scdc_command(const double e[3], const double de[3], const double c[3],
+                        const double integral_c[3], const double u_d[3], const tapmp_gains *g,
+                        double u[3])
+{
+    for (int i = 0; i < 3; i++) {
+        double b = g->b[i];
+        double e_c = e[i] + b * integral_c[i];   /* Eq. 22 */
+        double de_c = de[i] + b * c[i];          /* Eq. 23 */
+        double n = de_c + g->D[i] * e_c;         /* Eq. 24 */
+        u[i] = g->K_T[i] * u_d[i] + g->Lambda_v[i] * n + g->Lambda_p[i] * c[i];  /* Eq. 25 */
+    }
+}
+
+/* control.apd_command (Eq. 38) */
+void tapmp_apd_command(const double e[3], const double de[3], const double u_d[3],
+                       const tapmp_gains *g, double u[3])
+{
+    for (int i = 0; i < 3; i++)
+        u[i] = g->K_T[i] * u_d[i] + g->Lambda_v[i] * de[i] + g->Lambda_p[i] * e[i];
+}
+
+/* control.ControllerModel.sample */
+int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
+                            int velocity_source, double force_limit,
+                            const tapmp_controller_state *st, double h, const double ref[9],
+                            const double q[3], const double dq_in[3], int advance,
+                            double out[12], tapmp_controller_state *next, double *arg)
+{
+    double L1 = p->L_1, q_d[3], dq_d[3], dq[3], e[3], de[3], es[3], u_d[3], u[3];
+    double integral[3] = {st->integral[0], st->integral[1], st->integral[2]};
+    tapmp_inverse(ref[0], ref[1], ref[2], L1, q_d);
+    tapmp_joint_velocity(ref[2], ref[3], ref[4], ref[5], L1, dq_d);
+    for (int i = 0; i < 3; i++)
+        dq[i] = (velocity_source == 0 && st->has_q_prev && advance) ? (q[i] - st->q_prev[i]) / h
+                                                                     : dq_in[i];
+    for (int i = 0; i < 3; i++) {
+        e[i] = q_d[i] - q[i];       /* Eq. 15 */
+        de[i] = dq_d[i] - dq[i];
+    }
+    es[0] = e[0] - e[1];            /* Eq. 18 */
+    es[1] = e[1] - e[2];
+    es[2] = e[2] - e[0];
+    if (!tapmp_feedforward(q, dq, ref + 3, ref + 6, p, u_d, arg)) return 0;  /* Eq. 26 */
+    if (law == TAPMP_SCDC) {
+        double c[3] = {es[0] - es[2], es[1] - es[0], es[2] - es[1]};  /* Eq. 21 */
+        if (advance)
+            for (int i = 0; i < 3; i++) integral[i] = integral[i] + h * c[i];
+        tapmp_scdc_command(e, de, c, integral, u_d, g, u);
+    } else {
+        tapmp_apd_command(e, de, u_d, g, u);
+    }
+    for (int i = 0; i < 3; i++) {
+        double F = u[i] / g->K_T[i];
+        out[i] = force_limit > 0.0 ? saturate(F, force_limit) : F;
+        out[3 + i] = u[i];
+        out[6 + i] = e[i];
+        out[9 + i] = es[i];
+    }
+    if (advance) {
+        for (int i = 0; i < 3; i++) {
+            next->integral[i] = integral[i];
+            next->q_prev[i] = q[i];
+        }
+        next->has_q_prev = 1;
+    } else if (next != st) {
+        *next = *st;
+    }
+    return 1;
+}
+
+/* trajectory.reference */
+void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
+{
+    double w = TWO_PI * tp->f_xz, th = w * t + tp->phase_xz;
+    double s = sin(th), c = cos(th), R = tp->radius;
+    double wb = TWO_PI * tp->f_B, thb = wb * t + tp->phase_B;
+    double sb = sin(thb), cb = cos(thb), A = tp->B_amplitude;
+    ref[0] = tp->X_c + R * s;
+    ref[1] = tp->Z_c + R * c;
+    ref[2] = tp->B_offset + A * sb;
+    ref[3] = R * w * c;
+    ref[4] = -R * w * s;
+    ref[5] = A * wb * cb;
+    ref[6] = -R * w * w * s;
+    ref[7] = -R * w * w * c;
+    ref[8] = -A * wb * wb * sb;
+}

@@ -1,0 +1,119 @@
+/* The TAPMP model in C: kinematics (Eq. 1-4), task-space dynamics (Eq. 5-14), the plant
+ * with its non-idealities, the SC-DC (Eq. 15-26) and APD-DC (Eq. 38-39) control laws and
+ * the reference trajectory. Plain functions on doubles, SI units, nothing but libm.
+ *
+ * This is a hand-written twin of the Python package tapmp/ (kinematics.py, dynamics.py,
+ * plant.py, control.py, trajectory.py): every expression is evaluated in the same order
+ * as there, so the two agree to round-off (tests/test_native_model.py checks every
+ * function on random states, and the closed loops, against the Python model). */
+#ifndef TAPMP_MODEL_H
+#define TAPMP_MODEL_H
+
+#define TAPMP_S3 0.5773502691896257      /* sqrt(3)/3, the slope of the outer links */
+#define TAPMP_SQRT3 1.7320508075688772   /* sqrt(3) */
+
+/* Rigid-body parameters (paper Section 5.1): masses [kg], inertia [kg m^2], width [m], g [m/s^2]. */
+typedef struct {
+    double m_p, m_1, m_2, m_3, I_y, L_1, g;
+} tapmp_params;
+
+/* Plant non-idealities (tapmp.plant.PlantConfig), SI units; 0 switches one off. */
+typedef struct {
+    double encoder_resolution;  /* [m] */
+    double c_v[3];              /* viscous friction [N s/m] */
+    double F_c[3];              /* Coulomb friction [N] */
+    double v_s;                 /* tanh smoothing velocity [m/s] */
+    double force_limit;         /* [N] */
+    double k_pull;              /* adjacent-mover pulling stiffness [N/m] */
+    int substeps;               /* RK4 steps per communication step */
+} tapmp_plant_config;
+
+/* The plant: parameters, settings, reference gaps and the state (X, Z, B, dX, dZ, dB). */
+typedef struct {
+    tapmp_params p;
+    tapmp_plant_config c;
+    double gap12_0, gap23_0;
+    double s[6];
+} tapmp_plant;
+
+/* Controller gains per motor (tapmp.control.Gains). */
+typedef struct {
+    double Lambda_p[3], Lambda_v[3], b[3], D[3], K_T[3];
+} tapmp_gains;
+
+/* Reference trajectory parameters (tapmp.trajectory.TrajectoryParams): m, Hz, rad. */
+typedef struct {
+    double X_c, Z_c, radius, f_xz, phase_xz, B_amplitude, f_B, phase_B, B_offset;
+} tapmp_trajectory;
+
+/* --- kinematics (tapmp/kinematics.py) --- */
+/* Eq. 2: pose (X [m], Z [m], B [rad]) -> motor positions q [m]. */
+void tapmp_inverse(double X, double Z, double B, double L1, double q[3]);
+/* Eq. 1: q [m] -> pose; returns 0 and the arcsine argument in *arg outside |arg| < 1. */
+int tapmp_forward(const double q[3], double L1, double x[3], double *arg);
+/* Third column of J (Eq. 4), rows 1 and 3 [m/rad]. */
+void tapmp_rotation_column(double B, double L1, double *a1, double *a3);
+/* Eq. 3: qdot = J(x) xdot [m/s]. */
+void tapmp_joint_velocity(double B, double dX, double dZ, double dB, double L1, double dq[3]);
+/* xdot = J^-1 qdot. */
+void tapmp_task_velocity(double B, const double dq[3], double L1, double dx[3]);
+/* Eq. 14: w = J^-T v, generalized forces [N, N, N m] -> motor forces [N]. */
+void tapmp_solve_transpose(double B, const double v[3], double L1, double w[3]);
+
+/* --- dynamics (tapmp/dynamics.py) --- */
+/* Exact mass matrix M(x) (Eq. 12, general m_1, m_3), row-major 3x3. */
+void tapmp_mass_matrix(double B, const tapmp_params *p, double M[9]);
+/* Forward dynamics (Eq. 11): xdd for the generalized force u = J^T F. */
+void tapmp_task_acceleration(double B, double dB, const double u[3], const tapmp_params *p,
+                             double xdd[3]);
+/* Inverse dynamics M xdd + C(x, xd) v + G; dB the B rate, dBv the B component of v. */
+void tapmp_generalized_force(double B, double dB, const double xdd[3], double dBv,
+                             const tapmp_params *p, double out[3]);
+
+/* --- plant (tapmp/plant.py) --- */
+/* Round q [m] to the nearest encoder count of `resolution` [m] (0 = exact). */
+double tapmp_quantize(double q, double resolution);
+/* Set the initial state and the reference gaps of the pulling law. */
+void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
+/* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
+void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6]);
+/* Advance over h [s] with RK4 and `substeps`; F [N] is saturated here. The new state is
+ * written to s_new; returns 1 if it is finite with |B| < pi/2, else 0 (state untouched). */
+int tapmp_plant_step(const tapmp_plant *pl, double h, const double F[3], double s_new[6]);
+/* Outputs in the FMU's order: q1..q3 (measured), q_true, dq, X, Z, B, dX, dZ, dB (15). */
+void tapmp_plant_outputs(const tapmp_plant *pl, double out[15]);
+
+/* --- control (tapmp/control.py) --- */
+enum { TAPMP_SCDC = 0, TAPMP_APDDC = 1 };
+/* Dynamics compensation u_d of Eq. 26 / 39 [N]; returns 0 (and *arg) if q leaves Eq. 1's domain. */
+int tapmp_feedforward(const double q[3], const double dq[3], const double dx_d[3],
+                      const double ddx_d[3], const tapmp_params *p, double u_d[3], double *arg);
+/* SC-DC command u of Eq. 22-25. */
+void tapmp_scdc_command(const double e[3], const double de[3], const double c[3],
+                        const double integral_c[3], const double u_d[3], const tapmp_gains *g,
+                        double u[3]);
+/* APD-DC command of Eq. 38 (k_p = Lambda_p, k_v = Lambda_v, K_T1 = K_T, Eq. 41). */
+void tapmp_apd_command(const double e[3], const double de[3], const double u_d[3],
+                       const tapmp_gains *g, double u[3]);
+
+/* The discrete controller's state between samples. */
+typedef struct {
+    double integral[3];  /* running integral of c [m s] */
+    double q_prev[3];    /* previous measured positions [m] */
+    int has_q_prev;
+} tapmp_controller_state;
+
+/* One sample of tapmp.control.ControllerModel.sample: ref (9 values), q, dq_in -> F, u, e,
+ * e_s (12 outputs, in that order). `advance` = 0 leaves the state untouched (initialization).
+ * The new state goes to *next (may equal *st). Returns 0 (and *arg) on a domain error. */
+int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
+                            int velocity_source, double force_limit,
+                            const tapmp_controller_state *st, double h, const double ref[9],
+                            const double q[3], const double dq_in[3], int advance,
+                            double out[12], tapmp_controller_state *next, double *arg);
+
+/* --- trajectory (tapmp/trajectory.py) --- */
+/* Desired pose and its first and second derivatives at t [s] (9 values). */
+void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
+
+#endif
