@@ -8,7 +8,7 @@ from pathlib import Path
 
 from . import build as build_mod
 from .master import CoSimulationError
-from .results import OutputExistsError, run_scenario
+from .results import OutputExistsError, OutputInUseError, one_line, output_lock, run_scenario
 from .scenario import ScenarioError, load
 from .study import StudyError
 
@@ -90,12 +90,13 @@ def cmd_compare(args) -> int:
     scenario = load(args.scenario, args.set)
     out = Path(args.out or scenario.output)
     results = {}
-    for name, sc in compare_runs(scenario).items():
-        results[name] = _run_one(sc, Path(args.ssp), out / name, args.overwrite,
-                                 not args.no_progress, f"{scenario.name} {name}")
-    command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-    text = write_comparison(out / "comparison.md", scenario, results, command)
-    plot(out)
+    with output_lock(out):  # the runs write subfolders; comparison.md and figures go here
+        for name, sc in compare_runs(scenario).items():
+            results[name] = _run_one(sc, Path(args.ssp), out / name, args.overwrite,
+                                     not args.no_progress, f"{scenario.name} {name}")
+        command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+        text = write_comparison(out / "comparison.md", scenario, results, command)
+        plot(out)
     print(text)
     print(f"results, figures and comparison.md in {out}")
     return 0
@@ -109,9 +110,10 @@ def cmd_reproduce(args) -> int:
     for name in ("paper_simulation", "paper_experiment"):
         scenario = load(Path(args.scenarios) / f"{name}.toml")
         out = Path(args.results) / name
-        results = {run: _run_one(sc, Path(args.ssp), out / run, True, not args.no_progress, f"{name} {run}")
-                   for run, sc in compare_runs(scenario).items()}
-        plot(out)
+        with output_lock(out):
+            results = {run: _run_one(sc, Path(args.ssp), out / run, True, not args.no_progress, f"{name} {run}")
+                       for run, sc in compare_runs(scenario).items()}
+            plot(out)
         tables[name] = (scenario, results)
     write_reproduction(Path(args.out), tables, "tapmp reproduce " + " ".join(sys.argv[2:]))
     print(f"wrote {args.out}")
@@ -126,13 +128,15 @@ def cmd_study(args) -> int:
                          "or tapmp build) or pass --ssp")
     if args.workers is not None and args.workers < 1:
         raise StudyError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
-    client = open_client(args.scheduler, args.workers)
-    try:
-        command = "tapmp study " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-        s = run_study(study, Path(args.ssp), client, Path(args.out) if args.out else None, args.resume,
-                      args.overwrite, not args.no_progress, command)
-    finally:
-        close_client(client)
+    out = Path(args.out or study.output)
+    with output_lock(out):  # before starting a cluster; run_study takes it again (re-entrant)
+        client = open_client(args.scheduler, args.workers)
+        try:
+            command = "tapmp study " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+            s = run_study(study, Path(args.ssp), client, out, args.resume, args.overwrite,
+                          not args.no_progress, command)
+        finally:
+            close_client(client)
     if study.tune:
         for law, r in s["tuning"].items():
             print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
@@ -231,10 +235,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt as err:
         print(f"{err or 'interrupted'}: the results so far are in the output folder", file=sys.stderr)
         return 130
-    except (ScenarioError, StudyError, CoSimulationError, OutputExistsError, FileNotFoundError, ValueError) as err:
+    except (ScenarioError, StudyError, CoSimulationError, OutputExistsError, OutputInUseError, OSError,
+            ValueError) as err:
         if args.debug:
             traceback.print_exc()
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {one_line(err)}", file=sys.stderr)
         return 2
 
 

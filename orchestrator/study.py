@@ -471,15 +471,24 @@ def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> 
 
 def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
               overwrite: bool = False, progress: bool = True, command: str = "") -> dict:
-    """Run a study on a Dask client; returns a summary (counts, paths, wall time)."""
+    """Run a study on a Dask client; returns a summary (counts, paths, wall time). The
+    output folder is locked for the whole study (results.OutputInUseError if in use)."""
     ssp = Path(ssp)
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
                          "tapmp build) or pass --ssp")
     out = Path(out or study.output)
-    if study.tune:
-        from .tuning import run_tuning
-        return run_tuning(study, ssp, client, out, resume, overwrite, progress, command)
+    from .results import output_lock
+    with output_lock(out):  # one writer per study folder (cases lock their own folders)
+        if study.tune:
+            from .tuning import run_tuning
+            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command)
+        return _run_cases(study, ssp, client, out, resume, overwrite, progress, command)
+
+
+def _run_cases(study: Study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
+               command: str) -> dict:
+    """run_study for a grid / Monte Carlo study, in the locked output folder ``out``."""
     case_list = cases(study)
     fp = fingerprint(study, case_list)
     prepare(study, out, resume, overwrite, fp)

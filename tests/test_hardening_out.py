@@ -1,0 +1,132 @@
+"""Hardening of the output folders, through the real `tapmp` in child processes: one writer per
+folder, whole rows only, nothing stale left behind by signals or a full disk."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
+
+
+def start(*args, tmpdir: Path) -> subprocess.Popen:
+    """`tapmp ARGS` in a child process with its own temp folder ``tmpdir``."""
+    tmpdir.mkdir(parents=True, exist_ok=True)
+    return subprocess.Popen([sys.executable, "-m", "orchestrator", *map(str, args)],
+                            env=dict(os.environ, TMPDIR=str(tmpdir)), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def run_args(ssp, out, stop_time, *extra):
+    return ("run", PAPER, "--ssp", ssp, "--out", out, "--set", f"stop_time={stop_time}", "--no-progress", *extra)
+
+
+def finish(proc: subprocess.Popen, timeout=180) -> tuple[int, str]:
+    """Exit code and stderr of a child started by start()."""
+    _, err = proc.communicate(timeout=timeout)
+    return proc.returncode, err
+
+
+def whole_rows(path: Path) -> list[list[float]]:
+    """The rows of a results.csv; asserts every row has the header's fields, all floats."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows and rows[0][0] == "time"
+    assert all(len(r) == len(rows[0]) for r in rows), "a partial row"
+    return [[float(x) for x in r] for r in rows[1:]]
+
+
+def wait_for_rows(path: Path, n_bytes=50_000, timeout=120) -> None:
+    """Wait until a growing results.csv holds some rows."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and (not path.exists() or path.stat().st_size < n_bytes):
+        time.sleep(0.02)
+    assert path.exists() and path.stat().st_size >= n_bytes, "the run wrote no rows"
+
+
+def in_use(out: Path, pid: int) -> str:
+    return (f"error: output folder {out} is in use by tapmp (pid {pid}): allowed is one writer per output "
+            "folder; wait for it to end or choose another --out")
+
+
+def test_two_runs_started_at_once_on_one_folder_one_runs_and_the_other_is_refused(built, tmp_path):
+    for attempt in range(3):
+        out = tmp_path / f"out{attempt}"
+        procs = [start(*run_args(built["ssp"], out, 0.3), tmpdir=tmp_path / "tmp") for _ in range(2)]
+        done = [finish(p) for p in procs]
+        assert sorted(code for code, _ in done) == [0, 2], done
+        winner, loser = (0, 1) if done[0][0] == 0 else (1, 0)
+        if "already holds results" not in done[loser][1]:
+            break  # they overlapped (else the second started after the first had ended: try again)
+    assert done[loser][1].strip() == in_use(out, procs[winner].pid)
+    rows = whole_rows(out / "results.csv")
+    assert len(rows) == 3001 and rows[-1][0] == pytest.approx(0.3)  # one run's rows, whole
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "completed"
+    assert sorted(p.name for p in out.iterdir()) == [".tapmp.lock", "metrics.json", "results.csv", "run.json"]
+
+
+def test_overwrite_does_not_take_a_folder_another_run_is_writing(built, tmp_path):
+    out = tmp_path / "out"
+    first = start(*run_args(built["ssp"], out, 3), tmpdir=tmp_path / "tmp")
+    wait_for_rows(out / "results.csv")
+    second = start(*run_args(built["ssp"], out, 0.3, "--overwrite"), tmpdir=tmp_path / "tmp")
+    assert finish(second) == (2, in_use(out, first.pid) + "\n")
+    assert finish(first)[0] == 0
+    assert len(whole_rows(out / "results.csv")) == 30001
+    assert json.loads((out / "run.json").read_text())["status"] == "completed"
+
+
+HOLD = ("import sys; from orchestrator.results import output_lock\n"
+        "with output_lock(sys.argv[1]):\n    print('held', flush=True); sys.stdin.read()\n")
+
+
+@pytest.fixture
+def held(tmp_path):
+    """An output folder locked by another process: (folder, pid of the holder)."""
+    out = tmp_path / "held"
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(out)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline() == "held\n"
+    yield out, holder.pid
+    holder.communicate("", timeout=30)
+
+
+def test_compare_and_study_lock_their_output_folders(built, tmp_path, held):
+    out, pid = held
+    study = tmp_path / "s.toml"
+    study.write_text(f'[study]\nbase = "{PAPER}"\n[set]\nstop_time = 0.01\n[grid]\nlaw = ["sc-dc"]\n')
+    commands = {"compare": ("compare", PAPER, "--ssp", built["ssp"], "--out", out, "--set", "stop_time=0.01",
+                            "--no-progress"),
+                "study": ("study", study, "--ssp", built["ssp"], "--out", out, "--workers", "1", "--no-progress")}
+    for name, args in commands.items():
+        code, err = finish(start(*args, tmpdir=tmp_path / "tmp"))
+        assert (code, err) == (2, in_use(out, pid) + "\n"), name
+    assert sorted(p.name for p in out.iterdir()) == [".tapmp.lock"]  # nothing was written
+
+
+def test_a_run_into_the_folder_or_a_subfolder_of_a_running_compare_is_refused(built, tmp_path):
+    out = tmp_path / "cmp"
+    compare = start("compare", PAPER, "--ssp", built["ssp"], "--out", out, "--set", "stop_time=3", "--no-progress",
+                    tmpdir=tmp_path / "tmp")
+    wait_for_rows(out / "sc-dc" / "results.csv")
+    for folder in (out, out / "sc-dc"):
+        code, err = finish(start(*run_args(built["ssp"], folder, 0.3, "--overwrite"), tmpdir=tmp_path / "tmp"))
+        assert (code, err) == (2, in_use(folder, compare.pid) + "\n")
+    compare.terminate()
+    finish(compare)
+
+
+def test_json_files_are_written_under_unique_temporary_names(tmp_path):
+    from orchestrator.results import write_json
+    for i in range(3):
+        write_json(tmp_path / "run.json", {"i": i})
+    assert [p.name for p in tmp_path.iterdir()] == ["run.json"]
+    assert json.loads((tmp_path / "run.json").read_text()) == {"i": 2}
+    assert oct((tmp_path / "run.json").stat().st_mode & 0o777) == "0o644"
