@@ -33,11 +33,12 @@ import re
 import shutil
 import tempfile
 import zipfile
-from ctypes import byref, c_double, c_uint
+from ctypes import byref, c_bool, c_double, c_uint
 from pathlib import Path
 
 from fmpy import calloc, extract, free, read_model_description
 from fmpy.fmi1 import FMICallException
+from fmpy.fmi3 import FMU3Slave
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.ssp.ssd import read_ssd
@@ -108,12 +109,13 @@ class _Unit:
     def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
         self.name = name
         self.md = read_model_description(str(fmu_path))
+        self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.log = log
         extract(str(fmu_path), unzipdir=str(unzip_dir))
-        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzip_dir),
-                               modelIdentifier=self.md.coSimulation.modelIdentifier,
-                               instanceName=name)
+        slave_type = FMU3Slave if self.fmi3 else FMU2Slave
+        self.slave = slave_type(guid=self.md.guid, unzipDirectory=str(unzip_dir),
+                                modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
         self.outputs = [v.name for v in self.md.modelVariables if v.causality == "output"]
         self.n_out = len(self.outputs)
         self.out_vrs = (c_uint * self.n_out)(*(self.vars[n].valueReference for n in self.outputs))
@@ -123,7 +125,31 @@ class _Unit:
         self.n_in = 0
         self.instantiated = False
         dll = self.slave.dll
-        self._get_real, self._set_real, self._do_step = dll.fmi2GetReal, dll.fmi2SetReal, dll.fmi2DoStep
+        if self.fmi3:
+            self._get_real, self._set_real, self._do_step3 = dll.fmi3GetFloat64, dll.fmi3SetFloat64, dll.fmi3DoStep
+            self._flags = [c_bool(), c_bool(), c_bool()]  # eventHandlingNeeded, terminate, earlyReturn
+            self._last_time = c_double()
+            self._step_out = (*(byref(f) for f in self._flags), byref(self._last_time))
+        else:
+            self._get_real, self._set_real, self._do_step = dll.fmi2GetReal, dll.fmi2SetReal, dll.fmi2DoStep
+
+    def instantiate(self, callbacks, log_message) -> None:
+        """fmi2Instantiate with the master's ``callbacks``, or fmi3InstantiateCoSimulation with
+        ``log_message(instance, status, category, message)`` (FMI 3 logs carry no instance name)."""
+        if self.fmi3:
+            name = self.name.encode()
+            self.slave.instantiate(loggingOn=True, logMessage=lambda env, status, category, message:
+                                   log_message(None, name, status, category, message))
+        else:
+            self.slave.instantiate(callbacks=callbacks, loggingOn=True)
+
+    def enter_initialization(self, start_time: float) -> None:
+        """fmi2SetupExperiment + fmi2EnterInitializationMode, or fmi3EnterInitializationMode."""
+        if self.fmi3:
+            self.slave.enterInitializationMode(startTime=start_time)
+        else:
+            self.slave.setupExperiment(startTime=start_time)
+            self.slave.enterInitializationMode()
 
     def connect(self, source: "_Unit", output: str, input_vr: int) -> None:
         """Feed this unit's input ``input_vr`` from ``source``'s output ``output``."""
@@ -137,7 +163,9 @@ class _Unit:
         self._copies = tuple((j, src.out, i) for j, (src, i, _) in enumerate(self.sources))
 
     def read_outputs(self) -> int:
-        """fmi2GetReal of every output into :attr:`out`; returns the fmi2Status."""
+        """fmi2GetReal (fmi3GetFloat64) of every output into :attr:`out`; returns the status."""
+        if self.fmi3:
+            return self._get_real(self.slave.component, self.out_vrs, self.n_out, self.out, self.n_out)
         return self._get_real(self.slave.component, self.out_vrs, self.n_out, self.out)
 
     def apply_inputs(self) -> int:
@@ -147,10 +175,14 @@ class _Unit:
         inp = self.inp
         for j, src, i in self._copies:
             inp[j] = src[i]
+        if self.fmi3:
+            return self._set_real(self.slave.component, self.in_vrs, self.n_in, inp, self.n_in)
         return self._set_real(self.slave.component, self.in_vrs, self.n_in, inp)
 
     def do_step(self, t: float, h: float) -> int:
-        """fmi2DoStep(t, h); returns the fmi2Status."""
+        """fmi2DoStep(t, h) (fmi3DoStep); returns the status."""
+        if self.fmi3:
+            return self._do_step3(self.slave.component, t, h, True, *self._step_out)
         return self._do_step(self.slave.component, t, h, 1)
 
     def set_parameter(self, name: str, value) -> None:
@@ -159,11 +191,16 @@ class _Unit:
             allowed = sorted(v.name for v in self.vars.values() if v.causality == "parameter")
             raise CoSimulationError(f"{self.name}.{name} is not a parameter of {self.md.modelName}: "
                                     f"allowed are {', '.join(allowed)}", self.name)
-        if var.type == "Integer":
+        if var.type in ("Integer", "Int32"):
             if int(value) != value:
                 raise CoSimulationError(f"{self.name}.{name} = {value!r} is invalid: allowed is an integer",
                                         self.name)
-            self.slave.setInteger([var.valueReference], [int(value)])
+            if self.fmi3:
+                self.slave.setInt32([var.valueReference], [int(value)])
+            else:
+                self.slave.setInteger([var.valueReference], [int(value)])
+        elif self.fmi3:
+            self.slave.setFloat64([var.valueReference], [float(value)])
         else:
             self.slave.setReal([var.valueReference], [float(value)])
 
@@ -269,14 +306,12 @@ class CoSimulation:
                                     f"allowed are {', '.join(self.units)}")
         for name in INIT_ORDER:
             unit = self.units[name]
-            self._call(unit, lambda u=unit: u.slave.instantiate(callbacks=self.callbacks, loggingOn=True),
-                       "instantiate")
+            self._call(unit, lambda u=unit: u.instantiate(self.callbacks, self._logger), "instantiate")
             unit.instantiated = True
             for pname, value in self.parameters.get(name, {}).items():
                 self._call(unit, lambda u=unit, p=pname, v=value: u.set_parameter(p, v),
                            f"set parameter {pname}")
-            self._call(unit, lambda u=unit: u.slave.setupExperiment(startTime=self.t0), "setupExperiment")
-            self._call(unit, unit.slave.enterInitializationMode, "enterInitializationMode")
+            self._call(unit, lambda u=unit: u.enter_initialization(self.t0), "enterInitializationMode")
         propagate = self.connection_start == "propagated"
         if propagate:
             for name in INIT_ORDER:
@@ -391,8 +426,8 @@ class CoSimulation:
             src, dst = self.units[c.startElement], self.units[c.endElement]
             for unit, var, causality in ((src, c.startConnector, "output"), (dst, c.endConnector, "input")):
                 v = unit.vars.get(var)
-                if v is None or v.causality != causality or v.type != "Real":
-                    allowed = [n for n, x in unit.vars.items() if x.causality == causality and x.type == "Real"]
+                if v is None or v.causality != causality or v.type not in ("Real", "Float64"):
+                    allowed = [n for n, x in unit.vars.items() if x.causality == causality and x.type in ("Real", "Float64")]
                     raise CoSimulationError(f"{where}: {unit.name} ({unit.md.modelName}) has no Real {causality} "
                                             f"{var!r}: allowed are {', '.join(allowed)}", unit.name)
             end = (c.endElement, c.endConnector)

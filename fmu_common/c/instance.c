@@ -64,19 +64,25 @@ char *tapmp_repr(double x, char *buf)
     return buf;
 }
 
-/* Live instances: a free of one that is not (twice, or a stray pointer) is ignored. The
- * registry is a small array guarded by nothing: FMI calls on one FMU come from one thread
- * at a time for a given instance, and instances are created rarely. */
+/* Live instances: a call on, or a free of, an instance that is not live (freed already,
+ * or a stray pointer) is refused without touching it. Kept compact, so the check on every
+ * call scans only the live instances of this FMU in the process (usually one). */
 #define MAX_LIVE 4096
 static tapmp_instance *live[MAX_LIVE];
+static int n_live;
 
-static void registry_add(tapmp_instance *inst)
+static int registry_add(tapmp_instance *inst)
 {
-    for (int i = 0; i < MAX_LIVE; i++)
-        if (!live[i]) {
-            live[i] = inst;
-            return;
-        }
+    if (n_live == MAX_LIVE) return 0;
+    live[n_live++] = inst;
+    return 1;
+}
+
+int tapmp_alive(const tapmp_instance *inst)
+{
+    for (int i = n_live - 1; i >= 0; i--)
+        if (live[i] == inst) return 1;
+    return 0;
 }
 
 tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, void *env,
@@ -105,23 +111,23 @@ tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, v
         return NULL;
     }
     tapmp_reset(inst);
-    registry_add(inst);
+    if (!registry_add(inst)) {
+        tapmp_log(inst, ST_ERROR, "logStatusError", "%sInstantiate: more than %d live instances of %s in "
+                  "this process: allowed are at most %d", fmi, MAX_LIVE, MODEL_IDENTIFIER_STRING, MAX_LIVE);
+        tapmp_free(inst);
+        return NULL;
+    }
     return inst;
-}
-
-int tapmp_alive(const tapmp_instance *inst)
-{
-    if (!inst) return 0;
-    for (int i = 0; i < MAX_LIVE; i++)
-        if (live[i] == inst) return inst->magic == INSTANCE_MAGIC;
-    return 0;
 }
 
 void tapmp_free(tapmp_instance *inst)
 {
     if (!inst) return;
-    for (int i = 0; i < MAX_LIVE; i++)
-        if (live[i] == inst) live[i] = NULL;
+    for (int i = 0; i < n_live; i++)
+        if (live[i] == inst) {
+            live[i] = live[--n_live];
+            break;
+        }
     inst->magic = 0;
     free(inst->name);
     free(inst);
@@ -356,12 +362,17 @@ int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v
     return ST_OK;
 }
 
-/* OK if variable vr may be set to x (printed as text) now, else the logged error. */
-static int settable(tapmp_instance *inst, unsigned vr, const char *text, const char *call)
+/* OK if variable vr may be set to x now, else the logged error. The value is printed
+ * only for a message (Python's repr for a Real, %d for an Integer). */
+static int settable(tapmp_instance *inst, unsigned vr, double x, const char *call)
 {
     const tapmp_var *var = &VARS[vr];
+    char text[40];
     if (inst->mode == MODE_TERMINATED) return tapmp_mode_error(inst, call, "Instantiated, Initialization "
                                                                "Mode or Step Mode");
+    if (var->causality == 'i') return ST_OK;
+    if (var->type == 'R') tapmp_repr(x, text);
+    else snprintf(text, sizeof text, "%d", (int)x);
     if (var->causality == 'o') return tapmp_invalid(inst, var->name, text, "no value: it is an output", 0);
     if (var->variability == 'f' && inst->mode == MODE_STEP)
         return tapmp_invalid(inst, var->name, text, "no change after initialization: it is a fixed parameter", 0);
@@ -388,9 +399,9 @@ int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const do
     char text[40];
     for (size_t i = 0; i < n; i++) {
         if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, "SetReal", vr[i], 'R');
-        int status = settable(inst, vr[i], tapmp_repr(v[i], text), "SetReal");
+        int status = settable(inst, vr[i], v[i], "SetReal");
         if (status != ST_OK) return status;
-        if (!isfinite(v[i])) return tapmp_invalid(inst, VARS[vr[i]].name, text, "a finite number", 1);
+        if (!isfinite(v[i])) return tapmp_invalid(inst, VARS[vr[i]].name, tapmp_repr(v[i], text), "a finite number", 1);
         double old = inst->reals[vr[i]];
         inst->reals[vr[i]] = v[i];
         inst->dirty |= inst->mode == MODE_INITIALIZATION;
@@ -401,11 +412,9 @@ int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const do
 
 int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[])
 {
-    char text[40];
     for (size_t i = 0; i < n; i++) {
         if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, "SetInteger", vr[i], 'I');
-        snprintf(text, sizeof text, "%d", v[i]);
-        int status = settable(inst, vr[i], text, "SetInteger");
+        int status = settable(inst, vr[i], (double)v[i], "SetInteger");
         if (status != ST_OK) return status;
         int old = inst->ints[vr[i]];
         inst->ints[vr[i]] = v[i];
