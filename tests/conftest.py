@@ -21,6 +21,14 @@ def built(tmp_path_factory):
     return build_all(tmp_path_factory.mktemp("fmus"), log=lambda *_: None)
 
 
+@pytest.fixture(scope="session")
+def native_built(tmp_path_factory):
+    """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real (gcc and
+    mingw-w64) into a temporary folder laid out as build/native/."""
+    from orchestrator.build_native import build_native
+    return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=True)
+
+
 class LoadedFMU:
     """One FMU instance through fmpy, with its log messages collected."""
 
