@@ -30,8 +30,24 @@ def _load_adapter(resources: Path, module_name: str):
     return module
 
 
-def instantiate(resources: str, instance_name: str, visible: int, logging_on: int) -> TapmpSlave:
-    """Create the FMU's slave object for one fmi2Instantiate."""
+class GuidMismatch(ValueError):
+    """The host's fmuGUID is not the one of this FMU's modelDescription.xml."""
+
+
+def _own_guid(resources: Path) -> str:
+    from xml.etree import ElementTree as ET
+    return ET.parse(resources.parent / "modelDescription.xml").getroot().get("guid", "")
+
+
+def instantiate(resources: str, instance_name: str, visible: int, logging_on: int,
+                guid: str = "") -> TapmpSlave:
+    """Create the FMU's slave object for one fmi2Instantiate; the host's ``guid`` must be
+    the one of this FMU's modelDescription.xml (else GuidMismatch, logged by the binary)."""
+    own = _own_guid(Path(resources))
+    if guid != own:
+        module = (Path(resources) / "slavemodule.txt").read_text().strip()
+        raise GuidMismatch(f"fmi2Instantiate: fmuGUID = {guid!r} is not this FMU's: allowed is {own!r} "
+                           f"(the modelDescription.xml does not belong to this binary of {module})")
     module_name = (Path(resources) / "slavemodule.txt").read_text().strip()
     cls = getattr(_load_adapter(Path(resources), module_name), module_name)
     if not (isinstance(cls, type) and issubclass(cls, TapmpSlave)):

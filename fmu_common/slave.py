@@ -26,6 +26,7 @@ from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 
 from tapmp.errors import ModelInputError
+from tapmp.interface import range_text
 
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
 LOGS_PENDING = 8  # or-ed into a returned status when log records wait in the queue
@@ -34,6 +35,11 @@ KIND = {("Real", "input"): "i", ("Real", "parameter"): "p", ("Real", "output"): 
         ("Integer", "parameter"): "I"}
 # Modes of the FMI 2.0 co-simulation state machine that matter for setting values.
 INSTANTIATED, INITIALIZATION, STEPPING, TERMINATED = "instantiated", "initialization", "step", "terminated"
+MODE_NAMES = {INSTANTIATED: "Instantiated", INITIALIZATION: "Initialization Mode", STEPPING: "Step Mode",
+              TERMINATED: "Terminated"}
+# doStep(t, h) must continue the previous step: |t - end of previous step| <= this x max(1 s, |t_end|).
+TIME_TOLERANCE = 1e-9
+OVERFLOW = "a finite number (the output overflowed; check the inputs and parameters)"
 
 
 def _real(vr):
@@ -65,6 +71,7 @@ class TapmpSlave(Fmi2Slave):
         self.kinds = "".join(KIND[v.type, v.causality] for v in table).encode()
         self._names = [v.name for v in table]
         self._tunable = frozenset(i for i, v in enumerate(table) if v.variability == "tunable")
+        self._ranged = [(i, v) for i, v in enumerate(table) if v.causality == "parameter" and v.min is not None]
         self._records = []
         self.logging_on = False
         self._clear()
@@ -81,6 +88,7 @@ class TapmpSlave(Fmi2Slave):
 
     def _clear(self):
         self.time = 0.0
+        self._t_end = 0.0       # the time outputs being published belong to
         self.mode = INSTANTIATED
         self.error = None       # first error message; the instance refuses to step after it
         self.retune = False     # a tunable parameter changed since the last step
@@ -99,8 +107,25 @@ class TapmpSlave(Fmi2Slave):
         return slice(start, start + count)
 
     def publish_block(self, where: slice, values) -> None:
-        """Write ``values`` (a sequence of floats) to the variables of ``where``."""
+        """Write ``values`` (a sequence of floats) to the variables of ``where``; a value that
+        is not finite is never published: ModelInputError names the first such output."""
+        if not math.isfinite(sum(values)):  # one sum on the fast path
+            for name, value in zip(self._names[where], values):
+                if not math.isfinite(value):
+                    raise ModelInputError(name, value, OVERFLOW, self._t_end)
         self.reals[where] = array("d", values)
+
+    def check_ranges(self) -> None:
+        """Raise ModelInputError for a parameter outside its declared range (tapmp.interface.RANGES)."""
+        for vr, v in self._ranged:
+            value = self.reals[vr] if v.type == "Real" else self.ints[vr]
+            if not v.min <= value <= v.max:
+                raise ModelInputError(v.name, value, range_text(v))
+
+    def check_parameters(self) -> None:
+        """The model's own checks of the tunable parameters, then the ranges (a tunable
+        parameter set in Step Mode is checked at once with this)."""
+        self.check_ranges()
 
     # --- hooks for the model adapters -------------------------------------------
     def setup_model(self) -> None:
@@ -133,6 +158,17 @@ class TapmpSlave(Fmi2Slave):
         records, self._records = self._records, []
         return records
 
+    def fail_text(self, msg: str) -> int:
+        """Log ``msg`` at fmi2Error level, refuse further steps; fmi2Error."""
+        self.log(msg, ERROR, "logStatusError")
+        if self.error is None:
+            self.error = msg
+        return self._status(ERROR)
+
+    def mode_error(self, call: str, allowed: str, hint: str = "") -> int:
+        """fmi2Error for a call the co-simulation state machine does not allow now."""
+        return self.fail_text(f"fmi2{call} is not allowed in {MODE_NAMES[self.mode]}: allowed in {allowed}{hint}")
+
     def fail(self, err: Exception, t: float) -> int:
         """Log ``err`` at fmi2Error level, with the time, refuse further steps; fmi2Error."""
         msg = str(err)
@@ -152,23 +188,44 @@ class TapmpSlave(Fmi2Slave):
 
     # --- FMI entry points, called by the binary; each returns a status code -----------
     def fmi2_setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        if self.mode != INSTANTIATED:
+            return self.mode_error("SetupExperiment", "Instantiated")
         if not math.isfinite(start_time):
             return self.fail(ModelInputError("startTime", start_time, "a finite number"), 0.0)
         self.time = float(start_time)
         return self._status(OK)
 
+    def _setup(self):
+        self._t_end = self.time
+        outputs = self.reals.tolist()
+        try:
+            try:
+                self.setup_model()
+            except ModelInputError as err:
+                if err.allowed == OVERFLOW:  # as the native FMUs: a range error explains it first
+                    self.check_ranges()
+                raise
+            self.check_ranges()
+        except ModelInputError:
+            self.reals[:] = array("d", outputs)  # nothing half-built is published
+            raise
+
     def fmi2_enter_initialization_mode(self):
+        if self.mode != INSTANTIATED:
+            return self.mode_error("EnterInitializationMode", "Instantiated")
         self.mode = INITIALIZATION
-        return self._guard(self.setup_model) if self.error is None else self._status(ERROR)
+        return self._guard(self._setup) if self.error is None else self._status(ERROR)
 
     def fmi2_exit_initialization_mode(self):
+        if self.mode != INITIALIZATION:
+            return self.mode_error("ExitInitializationMode", "Initialization Mode")
         self.mode = STEPPING
         self.retune = False
         if self.error is not None:
             return self._status(ERROR)
 
         def init():
-            self.setup_model()
+            self._setup()
             self.initial_outputs()
         return self._guard(init)
 
@@ -186,20 +243,33 @@ class TapmpSlave(Fmi2Slave):
         """
         if self.mode == INITIALIZATION and self.error is None:
             try:
-                self.setup_model()
+                self._setup()
                 self.initial_outputs()
             except ModelInputError:
                 pass
         return self._status(OK)
 
     def fmi2_do_step(self, current_time, step_size):
+        if self.mode != STEPPING:
+            hint = (" (the instance is terminated; reset it first)" if self.mode == TERMINATED else
+                    " (leave initialization first: EnterInitializationMode, ExitInitializationMode)")
+            return self.mode_error("DoStep", "Step Mode", hint)
         if self.error is not None:
             self.log(f"doStep at t = {current_time:.6g} s refused after "
                      f"an earlier error: {self.error}", ERROR, "logStatusError")
             return self._status(ERROR)
+        if not math.isfinite(current_time):
+            return self.fail(ModelInputError("currentCommunicationPoint", current_time, "a finite number"),
+                             self.time)
         if not (math.isfinite(step_size) and step_size > 0.0):
             return self.fail(ModelInputError("communicationStepSize", step_size, "a finite number > 0"),
                              current_time)
+        tolerance = TIME_TOLERANCE * max(1.0, abs(self.time))
+        if abs(current_time - self.time) > tolerance:
+            return self.fail(ModelInputError("currentCommunicationPoint", current_time,
+                                             f"the end of the previous step, {self.time!r} s (within {tolerance:g} s)"),
+                             self.time)
+        self._t_end = current_time + step_size
         try:
             self.step(current_time, step_size)
         except ModelInputError as err:
@@ -208,6 +278,8 @@ class TapmpSlave(Fmi2Slave):
         return LOGS_PENDING if self._records else OK
 
     def fmi2_terminate(self):
+        if self.mode != STEPPING and self.error is None:
+            return self.mode_error("Terminate", "Step Mode")
         self.mode = TERMINATED
         return self._status(OK)
 
@@ -221,8 +293,10 @@ class TapmpSlave(Fmi2Slave):
         self.restore_hidden_state(None)
         return self._status(OK)
 
-    def _settable(self, vr, value) -> int:
+    def _settable(self, vr, value, call="SetReal") -> int:
         """OK if variable vr may be set now, else the logged error."""
+        if self.mode == TERMINATED:
+            return self.mode_error(call, "Instantiated, Initialization Mode or Step Mode")
         v = self.VARIABLES[vr]
         if v.causality == "output":
             return self.fail(ModelInputError(v.name, value, "no value: it is an output"), self.time)
@@ -240,16 +314,25 @@ class TapmpSlave(Fmi2Slave):
             return status
         if not math.isfinite(value):  # refused: the previous value stays
             return self.fail(ModelInputError(self._names[vr], value, "a finite number", self.time), self.time)
-        self.reals[vr] = value
-        self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
-        return self._status(OK)
+        return self._set_checked(self.reals, vr, value)
 
     def fmi2_set_integer(self, vr, value):
-        status = self._settable(vr, value)
+        status = self._settable(vr, value, "SetInteger")
         if status != OK:
             return status
-        self.ints[vr] = value
-        self.retune = self.retune or (vr in self._tunable and self.mode == STEPPING)
+        return self._set_checked(self.ints, vr, value)
+
+    def _set_checked(self, values, vr, value) -> int:
+        """Set; a tunable parameter in Step Mode is checked at once and kept only if valid."""
+        old = values[vr]
+        values[vr] = value
+        if vr in self._tunable and self.mode == STEPPING:
+            try:
+                self.check_parameters()
+            except ModelInputError as err:
+                values[vr] = old
+                return self.fail(err, self.time)
+            self.retune = True
         return self._status(OK)
 
     # --- FMU state: all values plus the model's hidden state ---------------------------
@@ -257,7 +340,31 @@ class TapmpSlave(Fmi2Slave):
         return (self.reals.tolist(), self.ints.tolist(),
                 [self.time, self.mode, self.error, self.retune], self.hidden_state())
 
+    def _check_state(self, state) -> None:
+        """Raise ValueError unless ``state`` is a complete, finite state of this FMU."""
+        try:
+            reals, ints, meta, hidden = state
+            time, mode, error, retune = meta
+        except (TypeError, ValueError):
+            raise ValueError("FMU state: not a state of this FMU (4 parts expected)") from None
+        n = len(self.VARIABLES)
+        if len(reals) != n or len(ints) != n or mode not in MODE_NAMES:
+            raise ValueError(f"FMU state: not a state of {type(self).__name__} ({n} variables)")
+        for name, value in zip(self._names, reals):
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise ValueError(f"FMU state: {name} = {value!r} is invalid: allowed is a finite number")
+        if not (isinstance(time, (int, float)) and math.isfinite(time)):
+            raise ValueError(f"FMU state: time = {time!r} is invalid: allowed is a finite number")
+        self.check_hidden_state(hidden)
+
+    def check_hidden_state(self, hidden) -> None:
+        """Raise ValueError if ``hidden`` (from :meth:`hidden_state`) is not valid."""
+
     def fmi2_set_state(self, state):
+        try:
+            self._check_state(state)
+        except ValueError as err:
+            return self.fail_text(f"fmi2SetFMUstate: {err}; nothing was changed")
         reals, ints, meta, hidden = state
         self.reals[:] = array("d", reals)  # in place: the binary holds these buffers
         self.ints[:] = array("i", ints)
@@ -274,7 +381,9 @@ class TapmpSlave(Fmi2Slave):
         if doc.get("model") != type(self).__name__:
             raise ValueError(f"serialized FMU state of {doc.get('model')!r}, "
                              f"not of {type(self).__name__!r}")
-        return tuple(doc["state"])
+        state = tuple(doc["state"])
+        self._check_state(state)
+        return state
 
     # --- pythonfmu's Python-level accessors (used by `pythonfmu build` for start values) -
     def get_real(self, vrs):

@@ -1,6 +1,8 @@
 """FMI adapter of the SC-DC / APD-DC controller: maps FMU variables to
 tapmp.control.ControllerModel."""
 
+import math
+
 from fmu_common.slave import TapmpSlave
 from tapmp.control import ControllerModel, Gains
 from tapmp.interface import CONTROLLER_VARS
@@ -27,6 +29,15 @@ class TAPMP_Controller(TapmpSlave):
 
     def setup_model(self):
         self.model = self._build()
+
+    def check_parameters(self):
+        self._build()  # the model's own checks (Gains.validated, law, velocity_source, force_limit)
+        super().check_parameters()
+
+    def check_hidden_state(self, hidden):
+        values = [] if hidden is None else list(hidden[0]) + list(hidden[1] or [])
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+            raise ValueError(f"FMU state: controller state {hidden!r} is invalid: allowed are finite numbers")
 
     def _sample(self, t, h, advance):
         r = self.reals

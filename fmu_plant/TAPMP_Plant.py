@@ -1,5 +1,7 @@
 """FMI adapter of the TAPMP plant: maps FMU variables to tapmp.plant.PlantModel."""
 
+import math
+
 from fmu_common.slave import TapmpSlave
 from tapmp.interface import PLANT_VARS
 from tapmp.params import ModelParams
@@ -34,6 +36,11 @@ class TAPMP_Plant(TapmpSlave):
         m = self.model
         self.publish_block(_OUTPUTS, (*m.measured_positions(), *m.joint_positions(),
                                       *m.joint_velocities(), *m.state))
+
+    def check_hidden_state(self, hidden):
+        if hidden is not None and not (len(hidden) == 6 and all(
+                isinstance(v, (int, float)) and math.isfinite(v) for v in hidden)):
+            raise ValueError(f"FMU state: plant state {hidden!r} is invalid: allowed are 6 finite numbers")
 
     def hidden_state(self):
         return None if self.model is None else list(self.model.state)

@@ -200,15 +200,36 @@ static int check_ranges(const tapmp_instance *inst, char *msg, size_t size)
     return 1;
 }
 
-/* model_validate + ranges + model_setup; on failure logs "<msg> (at t = T s)". */
+#define OVERFLOW "a finite number (the output overflowed; check the inputs and parameters)"
+
+/* After outputs were published at t: if one is not finite, put back `saved` (the outputs
+ * before) and write the message naming the first such output; 0 then. */
+static int outputs_finite(tapmp_instance *inst, const double saved[], double t, char *msg, size_t size)
+{
+    char v[40];
+    double *out = inst->reals + MODEL_OUT_FIRST;
+    for (int i = 0; i < MODEL_N_OUT; i++)
+        if (!isfinite(out[i])) {
+            tapmp_invalid_text(msg, size, VARS[MODEL_OUT_FIRST + i].name, tapmp_repr(out[i], v), OVERFLOW, 1, t);
+            memcpy(out, saved, MODEL_N_OUT * sizeof *out);
+            return 0;
+        }
+    return 1;
+}
+
+/* model_validate + ranges + model_setup; on failure logs "<msg> (at t = T s)" and nothing
+ * is published. */
 static int setup(tapmp_instance *inst)
 {
     char msg[TAPMP_MESSAGE_MAX];
+    double saved[MODEL_N_OUT];
     if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg)) {
         return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
     }
+    memcpy(saved, inst->reals + MODEL_OUT_FIRST, sizeof saved);
     model_setup(inst);
     inst->has_model = 1;
+    if (!outputs_finite(inst, saved, inst->time, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
     return ST_OK;
 }
 
@@ -242,8 +263,11 @@ int tapmp_exit_initialization(tapmp_instance *inst)
     int status = setup(inst);
     if (status != ST_OK) return status;
     char msg[TAPMP_MESSAGE_MAX];
+    double saved[MODEL_N_OUT];
+    memcpy(saved, inst->reals + MODEL_OUT_FIRST, sizeof saved);
     if (!model_initial_outputs(inst, msg, sizeof msg))
         return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+    if (!outputs_finite(inst, saved, inst->time, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
     return ST_OK;
 }
 
@@ -282,10 +306,8 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     for (int i = 0; i < MODEL_N_OUT; i++)
         if (!isfinite(out[i])) {
             inst->m = before;
-            snprintf(allowed, sizeof allowed, "a finite number (the output overflowed; check the inputs "
-                     "and parameters)");
             tapmp_invalid_text(msg, sizeof msg, VARS[MODEL_OUT_FIRST + i].name, tapmp_repr(out[i], v),
-                               allowed, 1, t + h);
+                               OVERFLOW, 1, t + h);
             return tapmp_fail(inst, "%s", msg);
         }
     memcpy(inst->reals + MODEL_OUT_FIRST, out, sizeof out);
@@ -330,12 +352,15 @@ static int bad_vr(tapmp_instance *inst, const char *call, unsigned vr, char type
 static void update_initial_unknowns(tapmp_instance *inst)
 {
     char msg[TAPMP_MESSAGE_MAX];
+    double saved[MODEL_N_OUT];
     inst->dirty = 0;
     if (inst->failed || !model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg))
         return;
+    memcpy(saved, inst->reals + MODEL_OUT_FIRST, sizeof saved);
     model_setup(inst);
     inst->has_model = 1;
-    model_initial_outputs(inst, msg, sizeof msg);
+    if (model_initial_outputs(inst, msg, sizeof msg)) outputs_finite(inst, saved, inst->time, msg, sizeof msg);
+    else memcpy(inst->reals + MODEL_OUT_FIRST, saved, sizeof saved);
 }
 
 int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[])

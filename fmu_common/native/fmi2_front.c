@@ -30,6 +30,9 @@
 static struct { TAPMP_FORWARDED(TAPMP_POINTER) } backend;
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
 static int loaded;
+#define MAX_LIVE 4096
+static fmi2Component live[MAX_LIVE];
+static int n_live;
 
 static void find_libpython(const char *key, const char *value, void *ctx)
 {
@@ -92,17 +95,49 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               "logStatusError", why);
         return NULL;
     }
-    return backend.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions,
-                               visible, loggingOn);
+    fmi2Component c = backend.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
+                                          functions, visible, loggingOn);
+    if (c) {
+        pthread_mutex_lock(&load_lock);
+        int added = n_live < MAX_LIVE;
+        if (added) live[n_live++] = c;
+        pthread_mutex_unlock(&load_lock);
+        if (!added) {
+            backend.FreeInstance(c);
+            c = NULL;
+        }
+    }
+    return c;
 }
 
-/* The backend is loaded whenever a component exists, so the rest only forward. */
-void fmi2FreeInstance(fmi2Component c) { if (c) backend.FreeInstance(c); }
+/* Live instances: a call on, or a free of, a component that is not live (freed already,
+ * or a stray pointer) is refused without touching it. Kept compact: the check on every
+ * call scans only the live instances of this FMU in the process. */
+static int alive(fmi2Component c)
+{
+    for (int i = n_live - 1; i >= 0; i--)
+        if (live[i] == c) return 1;
+    return 0;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    pthread_mutex_lock(&load_lock);
+    int found = 0;
+    for (int i = 0; i < n_live; i++)
+        if (live[i] == c) {
+            live[i] = live[--n_live];
+            found = 1;
+            break;
+        }
+    pthread_mutex_unlock(&load_lock);
+    if (found) backend.FreeInstance(c);  /* a second free, or not ours: ignored */
+}
 
 #define TAPMP_FORWARD(name, params, args)                                                      \
     fmi2Status fmi2##name params                                                               \
     {                                                                                          \
-        return c ? backend.name args : fmi2Error;                                              \
+        return alive(c) ? backend.name args : fmi2Error;                                       \
     }
 
 TAPMP_FORWARD(SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]),

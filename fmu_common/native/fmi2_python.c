@@ -39,6 +39,7 @@ typedef struct {
     int logging_on;
     int init_mode;              /* the slave is in Initialization Mode (see sync_mode) */
     int stale;                  /* a value was set in Initialization Mode since the last get */
+    int terminated;             /* in Terminated: sets go to the slave, which refuses them */
 } Instance;
 
 /* The logger's message is a printf format (FMI 2.0), so a literal '%' is passed as "%%". */
@@ -75,8 +76,12 @@ static void log_exception(Instance *I, const char *where)
     const char *msg = text ? PyUnicode_AsUTF8(text) : NULL;
     const char *tname = type ? ((PyTypeObject *)type)->tp_name : "?";
     if (!msg) { PyErr_Clear(); msg = "(no message)"; }
-    log_c(I, fmi2Error, "%s failed with a Python exception (a bug in the FMU): %s: %s", where, tname,
-          msg);
+    const char *dot = strrchr(tname, '.');
+    if (strcmp(dot ? dot + 1 : tname, "GuidMismatch") == 0)  /* bad input of the host, not a bug */
+        log_c(I, fmi2Error, "%s", msg);
+    else
+        log_c(I, fmi2Error, "%s failed with a Python exception (a bug in the FMU): %s: %s", where, tname,
+              msg);
     Py_XDECREF(text);
     Py_XDECREF(type);
     Py_XDECREF(value);
@@ -221,7 +226,7 @@ static void release(Instance *I)
 }
 
 /* Creates the slave object and takes its value arrays. GIL held; 0 on failure (logged). */
-static int create_slave(Instance *I, const char *resources, fmi2Boolean visible)
+static int create_slave(Instance *I, const char *resources, fmi2Boolean visible, const char *guid)
 {
     PyObject *sys_path = PySys_GetObject("path");  /* borrowed */
     PyObject *dir = PyUnicode_DecodeFSDefault(resources);
@@ -231,8 +236,8 @@ static int create_slave(Instance *I, const char *resources, fmi2Boolean visible)
     if (present < 0) { Py_DECREF(dir); goto fail; }
     PyObject *binding = PyImport_ImportModule("fmu_common.binding");
     if (!binding) { Py_DECREF(dir); goto fail; }
-    I->slave = PyObject_CallMethod(binding, "instantiate", "Osii", dir, I->name, (int)visible,
-                                   I->logging_on);
+    I->slave = PyObject_CallMethod(binding, "instantiate", "Osiis", dir, I->name, (int)visible,
+                                   I->logging_on, guid ? guid : "");
     Py_DECREF(binding);
     Py_DECREF(dir);
     if (!I->slave) goto fail;
@@ -264,7 +269,6 @@ EXPORT fmi2Component tapmp_Instantiate(fmi2String instanceName, fmi2Type fmuType
                                        const fmi2CallbackFunctions *functions,
                                        fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    (void)fmuGUID;
     Instance *I = calloc(1, sizeof *I);
     if (!I) return NULL;
     I->name = strdup(instanceName ? instanceName : "");
@@ -287,7 +291,7 @@ EXPORT fmi2Component tapmp_Instantiate(fmi2String instanceName, fmi2Type fmuType
         goto fail;
     }
     PyGILState_STATE gil = PyGILState_Ensure();
-    int ok = create_slave(I, resources, visible);
+    int ok = create_slave(I, resources, visible, fmuGUID);
     if (!ok) release(I);
     PyGILState_Release(gil);
     if (ok) return I;
@@ -336,6 +340,8 @@ static void sync_mode(Instance *I)
     PyObject *mode = PyObject_GetAttrString(I->slave, "mode");
     I->init_mode = mode && PyUnicode_Check(mode) &&
                    PyUnicode_CompareWithASCIIString(mode, "initialization") == 0;
+    I->terminated = mode && PyUnicode_Check(mode) &&
+                    PyUnicode_CompareWithASCIIString(mode, "terminated") == 0;
     I->stale = I->init_mode;
     Py_XDECREF(mode);
     PyErr_Clear();
@@ -439,12 +445,12 @@ EXPORT fmi2Status tapmp_SetReal(fmi2Component c, const fmi2ValueReference vr[], 
     for (size_t k = 0; k < n; k++) {
         if (!is_real(I, vr[k])) return bad_reference(I, "fmi2SetReal", vr[k], "Real");
         I->stale |= I->init_mode;
-        if (PyBytes_AS_STRING(I->kinds)[vr[k]] == 'i' && isfinite(value[k])) {
+        int input = PyBytes_AS_STRING(I->kinds)[vr[k]] == 'i';
+        if (input && isfinite(value[k]) && !I->terminated) {
             reals[vr[k]] = value[k];
             continue;
         }
-        const char *method = PyBytes_AS_STRING(I->kinds)[vr[k]] == 'i' ? "fmi2_reject_input"
-                                                                        : "fmi2_set_real";
+        const char *method = input && !I->terminated ? "fmi2_reject_input" : "fmi2_set_real";
         PyGILState_STATE gil = PyGILState_Ensure();
         fmi2Status s = finish(I, PyObject_CallMethod(I->slave, method, "Id", (unsigned)vr[k],
                                                      value[k]), "fmi2SetReal");
