@@ -338,3 +338,27 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
         log(f"wrote {paths['ssp']}")
         out[family] = paths
     return out
+
+
+def main(argv=None) -> int:
+    """``python -m orchestrator.build_native [--out DIR] [--no-windows]``."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m orchestrator.build_native",
+                                description="Build the native FMI 2.0 and 3.0 FMUs and their TAPMP.ssp "
+                                "into DIR/fmi2 and DIR/fmi3 (default: build/native, relative to the "
+                                "current directory).")
+    p.add_argument("--out", default=str(NATIVE_BUILD_DIR), help="output folder (default: build/native)")
+    p.add_argument("--no-windows", action="store_true", help="Linux binaries only (no mingw-w64 needed)")
+    args = p.parse_args(argv)
+    try:
+        build_native(Path(args.out), windows=False if args.no_windows else None)
+    except NativeBuildError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
