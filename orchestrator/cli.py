@@ -2,13 +2,17 @@
 
 import argparse
 import shlex
+import signal
 import sys
+import threading
 import traceback
+from contextlib import contextmanager
 from pathlib import Path
 
 from . import build as build_mod
-from .master import CoSimulationError
-from .results import OutputExistsError, OutputInUseError, one_line, output_lock, run_scenario
+from .master import CoSimulationError, remove_stale_folders
+from .results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
+                      one_line, output_lock, run_scenario)
 from .scenario import ScenarioError, load
 from .study import StudyError
 
@@ -137,6 +141,7 @@ def cmd_study(args) -> int:
                           not args.no_progress, command)
         finally:
             close_client(client)
+            remove_stale_folders()  # of local workers that were killed, not stopped
     if study.tune:
         for law, r in s["tuning"].items():
             print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
@@ -228,15 +233,42 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupt(signum, frame):
+    """Handler of SIGINT, SIGTERM, SIGHUP outside a run: raise Interrupted once, then let the
+    clean-up (folders, locks, a study's workers) finish undisturbed by repeats."""
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    raise Interrupted(signum)
+
+
+@contextmanager
+def _signals_interrupt():
+    """For the duration, SIGINT, SIGTERM and SIGHUP raise Interrupted (a run in progress
+    turns them into a stop at its next step boundary instead); main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, _interrupt) for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+
+
 def main(argv=None) -> int:
+    """The `tapmp` command; returns its exit code: 0, 1 (`check`: not stable), 2 (an error,
+    one line on stderr) or 128 + N after signal N (SIGINT 130, SIGHUP 129, SIGTERM 143)."""
     args = parser().parse_args(argv)
     try:
-        return args.func(args)
+        with _signals_interrupt():
+            return args.func(args)
     except KeyboardInterrupt as err:
-        print(f"{err or 'interrupted'}: the results so far are in the output folder", file=sys.stderr)
-        return 130
-    except (ScenarioError, StudyError, CoSimulationError, OutputExistsError, OutputInUseError, OSError,
-            ValueError) as err:
+        print(f"{one_line(err) if str(err) else 'interrupted'}: the results so far are in the output folder",
+              file=sys.stderr)
+        return getattr(err, "exit_code", 130)
+    except (ScenarioError, StudyError, CoSimulationError, OutputExistsError, OutputInUseError, ResultsWriteError,
+            OSError, ValueError) as err:
         if args.debug:
             traceback.print_exc()
         print(f"error: {one_line(err)}", file=sys.stderr)

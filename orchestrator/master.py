@@ -28,10 +28,13 @@ test_ecos.py, test_fmpy_ssp.py):
 """
 
 import math
+import os
 import posixpath
 import re
 import shutil
+import socket
 import tempfile
+import weakref
 import zipfile
 from ctypes import byref, c_bool, c_double, c_uint
 from pathlib import Path
@@ -97,6 +100,51 @@ def _inside_archive(path: str) -> str | None:
     if norm in (".", "..") or norm.startswith("../"):
         return None
     return norm
+
+
+_TMP_PREFIX = "tapmp_cosim_"
+_TMP_NAME = re.compile(r"tapmp_cosim_(\d+)_([A-Za-z0-9.-]*)_.+")
+
+
+def _host() -> str:
+    """This machine's name as it appears in temporary folder names."""
+    return re.sub(r"[^A-Za-z0-9.-]", "-", socket.gethostname())[:64]
+
+
+def _tmp_prefix() -> str:
+    """Prefix of this process's temporary folders: tapmp_cosim_<pid>_<host>_."""
+    return f"{_TMP_PREFIX}{os.getpid()}_{_host()}_"
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists on this machine (owned by anyone)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_folders(tmpdir=None) -> list:
+    """Remove the temporary folders (tapmp_cosim_<pid>_<host>_*) that processes of this
+    machine left in ``tmpdir`` (default: tempfile.gettempdir()) when they were killed: only
+    those whose owner pid no longer exists. Returns the removed paths."""
+    root = Path(tmpdir or tempfile.gettempdir())
+    removed, host = [], _host()
+    try:
+        entries = list(os.scandir(root))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _TMP_NAME.fullmatch(entry.name)
+        if not m or m.group(2) != host or int(m.group(1)) == os.getpid() or _alive(int(m.group(1))):
+            continue
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+            removed.append(Path(entry.path))
+    return removed
 
 
 class _Unit:
@@ -278,7 +326,9 @@ class CoSimulation:
             raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
         ssd, members = self._read_ssp()
         elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
-        self.tmp = Path(tempfile.mkdtemp(prefix="tapmp_cosim_"))
+        remove_stale_folders()
+        self.tmp = Path(tempfile.mkdtemp(prefix=_tmp_prefix()))
+        weakref.finalize(self, shutil.rmtree, str(self.tmp), True)  # also if close() is never reached
         fmus = self._extract(members, elements)
         self.callbacks = fmi2CallbackFunctions()
         self.callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
@@ -508,20 +558,23 @@ class CoSimulation:
         n_log = len(self.log)
         if self.ordering == "gauss-seidel":
             for unit in self._step_units:
-                if (unit.apply_inputs() | unit.do_step(t, h) | unit.read_outputs()) > 1 \
-                        or len(self.log) != n_log:
-                    self._step_failed(unit, t, n_log)
+                status = unit.apply_inputs() | unit.do_step(t, h) | unit.read_outputs()
+                if status > 1 or len(self.log) != n_log:
+                    self._step_failed(unit, t, n_log, status)
         else:
             units = self._step_units
             for unit in units:
-                if unit.apply_inputs() > 1:
-                    self._step_failed(unit, t, n_log)
+                status = unit.apply_inputs()
+                if status > 1:
+                    self._step_failed(unit, t, n_log, status)
             for unit in units:
-                if unit.do_step(t, h) > 1 or len(self.log) != n_log:
-                    self._step_failed(unit, t, n_log)
+                status = unit.do_step(t, h)
+                if status > 1 or len(self.log) != n_log:
+                    self._step_failed(unit, t, n_log, status)
             for unit in units:
-                if unit.read_outputs() > 1:
-                    self._step_failed(unit, t, n_log)
+                status = unit.read_outputs()
+                if status > 1:
+                    self._step_failed(unit, t, n_log, status)
         self.k += 1
         self._check_outputs(self.clock.at(self.k))
 
@@ -542,12 +595,15 @@ class CoSimulation:
                                       f"closed loop is diverging; {HINT}", signal.split(".")[0], t, signal,
                                       value, list(self.log))
 
-    def _step_failed(self, unit: _Unit, t: float, n_log: int) -> None:
-        """Raise for a failed step of ``unit`` (or return if it only logged non-errors)."""
-        errors = [m for m in self.log[n_log:] if m.startswith(("[ERROR]", "[FATAL]"))]
-        status = "" if errors else "a call returned a status above fmi2Warning"
-        if errors or status:
-            self._fail(unit, "doStep", t, status or None)
+    def _step_failed(self, unit: _Unit, t: float, n_log: int, status: int) -> None:
+        """Raise for a failed step of ``unit``: ``status`` (the or-ed status of its calls) above
+        fmi2Warning or an error logged since ``n_log``; return if it only logged non-errors."""
+        errors = any(m.startswith(("[ERROR]", "[FATAL]")) for m in self.log[n_log:])
+        if errors:
+            self._fail(unit, "doStep", t, None)
+        if status > 1:
+            self._fail(unit, "doStep", t, f"a call returned {_STATUS[status] if status < 6 else status}, "
+                       "above fmi2Warning")
 
     # --- teardown ------------------------------------------------------------------
     def close(self) -> None:

@@ -27,6 +27,7 @@ import json
 import math
 import os
 import shutil
+import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -297,19 +298,23 @@ def objective(metrics: dict) -> float:
 
 
 def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: bool = False,
-             reject_unstable: bool = False) -> dict:
+             reject_unstable: bool = False, stop_token: str | None = None) -> dict:
     """Run one case in this process (a Dask worker): returns its row as plain data.
 
     base: the base scenario as dataclasses.asdict; changes: dotted keys; ssp, case_dir:
     paths. Never raises for a failing case: the row's status is "failed" with the error,
     or "rejected" (not run) when reject_unstable and the stability check finds the loop
     not stable. The row carries the full metrics under "metrics" (not a CSV column).
+    After results.request_stop(stop_token) (the study was stopped) the case ends at a
+    step boundary, or does not start, with status "interrupted" (never a study.csv row).
     """
-    from .results import run_scenario
+    from .results import run_scenario, stop_requested
     from .stability import check
 
     start = time.perf_counter()
     row = {"status": "failed", "error": "", "worker": f"{os.uname().nodename}:{os.getpid()}"}
+    if stop_requested(stop_token):
+        return dict(row, status="interrupted", error="not run: the study was stopped", wall_time_s=0.0)
     try:
         scenario = apply_changes(validate(Scenario(**base)), changes)
         report = check(scenario)
@@ -318,10 +323,12 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
             row.update(status="rejected", error=f"not run: {report.verdict} (spectral radius "
                        f"{report.spectral_radius:.4g})")
         else:
-            m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True)
+            m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token)
             row.update(_metric_columns(m), status="completed", metrics=m)
             if not keep_results:
                 (Path(case_dir) / "results.csv").unlink(missing_ok=True)
+    except KeyboardInterrupt as err:  # the study was stopped (Dask lets this through and dies)
+        row.update(status="interrupted", error=" ".join(str(err).split()))
     except Exception as err:  # a case's failure is its row, never the end of the study
         row["error"] = " ".join(f"{type(err).__name__}: {err}".split())
     row["wall_time_s"] = time.perf_counter() - start
@@ -397,8 +404,16 @@ class StudyTable:
         self.file.close()
 
 
+STOP_WAIT_S = 60.0  # how long a stopped study waits for its running cases to end [s]
+
+
 class CaseRunner:
-    """Runs cases on a Dask client and records their rows in a StudyTable."""
+    """Runs cases on a Dask client and records their rows in a StudyTable.
+
+    If the run is left by an exception (e.g. Interrupted by SIGTERM), the running cases are
+    asked to stop at their next step boundary (results.request_stop on every worker) and
+    waited for, so they free their FMUs and temporary folders before the workers go.
+    """
 
     def __init__(self, client, base: Scenario, ssp: Path, out: Path, table: StudyTable,
                  keep_results: bool, progress: bool = True, desc: str = "cases"):
@@ -410,6 +425,7 @@ class CaseRunner:
         self.keep_results = keep_results
         self.progress = progress
         self.desc = desc
+        self.token = f"study-{os.getpid()}-{os.urandom(8).hex()}"
 
     def run(self, cases: list, reject_unstable: bool = False) -> list:
         """Rows of ``cases`` in their order; cases that have a row already are not run again."""
@@ -425,7 +441,8 @@ class CaseRunner:
             for c in todo:
                 fut = self.client.submit(run_case, self.base, c["changes"], self.ssp,
                                          str(self.out / "cases" / c["case"]), self.keep_results,
-                                         reject_unstable, pure=False, key=f"case-{c['case']}-{os.urandom(4).hex()}")
+                                         reject_unstable, self.token, pure=False,
+                                         key=f"case-{c['case']}-{os.urandom(4).hex()}")
                 futures[fut] = c
             for fut in as_completed(futures):
                 c = futures[fut]
@@ -434,14 +451,37 @@ class CaseRunner:
                 else:  # the worker died or the task could not run: still a row
                     exc = fut.exception()
                     row = {"status": "failed", "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
+                if row.get("status") not in STATUSES:  # interrupted: no row, --resume runs it
+                    continue
                 self.table.add(c, row)
                 rows[c["case"]] = self.table.rows[c["case"]]
                 bar.update(1)
+        except BaseException as err:
+            self._stop(futures, getattr(err, "signum", signal.SIGTERM))
+            raise
         finally:
             for fut in futures:
                 fut.cancel()
             bar.close()
-        return [rows[c["case"]] for c in cases]
+        return [rows.get(c["case"], {"case": c["case"], "status": "interrupted"}) for c in cases]
+
+
+    def _stop(self, futures: dict, signum: int) -> None:
+        """Stop the running cases (request_stop on every worker), wait up to STOP_WAIT_S for
+        them, and record the rows of cases that finished meanwhile."""
+        from dask.distributed import wait
+
+        from .results import request_stop
+        try:
+            self.client.run(request_stop, self.token, signum, on_error="ignore")
+            wait(list(futures), timeout=STOP_WAIT_S)
+        except Exception:
+            pass  # a worker that does not answer is ended with the cluster
+        for fut, c in futures.items():
+            if fut.status == "finished" and c["case"] not in self.table.rows:
+                row = fut.result()
+                if row.get("status") in STATUSES:
+                    self.table.add(c, row)
 
 
 def fingerprint(study: Study, case_list: list) -> str:

@@ -161,3 +161,39 @@ def test_open_inputs_entries_are_checked_against_the_system(no_dq1, sandbox, cas
     assert res.returncode == 2, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and res.stderr.startswith(message.format(ssp=no_dq1))
     assert (sandbox / "out").exists() == reaches_master  # scenario errors stop before the output folder
+
+
+WARNING_STEP = """
+
+
+class TAPMP_Plant(_RealPlant):
+    \"\"\"The real plant, logging a warning (not an error) on every step from t = 0.5 ms.\"\"\"
+
+    def step(self, t, h):
+        super().step(t, h)
+        if t >= 4.5e-4:
+            self.log(f"friction table extrapolated at t = {t:.6g} s", 1, "logStatusWarning")
+"""
+
+
+def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
+    from orchestrator.build import SCRIPTS, build_fmu
+    from orchestrator.master import CoSimulation
+    from orchestrator.scenario import load
+    from orchestrator.ssp import write_ssp
+    from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
+
+    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
+    script = tmp_path / "src" / "TAPMP_Plant.py"
+    script.parent.mkdir()
+    script.write_text(real.replace("TAPMP_Plant.block(", "_RealPlant.block(") + WARNING_STEP)
+    plant = build_fmu(PLANT, tmp_path / "fmus", script=script)
+    ssp = write_ssp(tmp_path / "warn.ssp", {PLANT: plant, CONTROLLER: built[CONTROLLER],
+                                            TRAJECTORY: built[TRAJECTORY]})
+    sc = load(PAPER, ["stop_time=0.002"])
+    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step) as sim:
+        for _ in range(sc.n_steps):
+            sim.step()
+        assert sim.time == pytest.approx(0.002)
+    warnings = [m for m in sim.log if m.startswith("[WARNING] plant: friction table extrapolated")]
+    assert len(warnings) == 15  # t = 0.5 ms ... 1.9 ms: logged, and the run went on

@@ -4,6 +4,9 @@ folder, whole rows only, nothing stale left behind by signals or a full disk."""
 import csv
 import json
 import os
+import re
+import resource
+import signal
 import subprocess
 import sys
 import time
@@ -130,3 +133,109 @@ def test_json_files_are_written_under_unique_temporary_names(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["run.json"]
     assert json.loads((tmp_path / "run.json").read_text()) == {"i": 2}
     assert oct((tmp_path / "run.json").stat().st_mode & 0o777) == "0o644"
+
+
+def cosim_folders(tmpdir: Path) -> list:
+    return sorted(p.name for p in tmpdir.glob("tapmp_cosim_*"))
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_end_a_run_at_a_step_boundary(built, tmp_path, signum):
+    out, tmpdir = tmp_path / "out", tmp_path / "tmp"
+    proc = start(*run_args(built["ssp"], out, 60), tmpdir=tmpdir)
+    wait_for_rows(out / "results.csv", n_bytes=500_000)
+    assert len(cosim_folders(tmpdir)) == 1  # the run's extracted FMUs
+    proc.send_signal(signum)
+    code, err = finish(proc)
+    name = signal.Signals(signum).name
+    assert code == 128 + signum, err
+    assert re.fullmatch(rf"interrupted by {name} at t = \S+ s: the results so far are in the output folder\n", err)
+    rows = whole_rows(out / "results.csv")
+    run = json.loads((out / "run.json").read_text())
+    assert (run["status"], run["signal"], run["exit_code"]) == ("interrupted", name, 128 + signum)
+    assert run["failed_at_s"] >= rows[-1][0] > 0.1 and not (out / "metrics.json").exists()
+    assert cosim_folders(tmpdir) == []  # removed on the way out
+
+
+def limit_file_size(n_bytes: int):
+    """preexec_fn: files of the child may not grow beyond n_bytes (writes fail with EFBIG)."""
+    def apply():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # else the kernel kills the writer
+        resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, n_bytes))
+    return apply
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 2 MB file system for an output folder: (folder, preexec_fn for the child). A tmpfs if
+    this process may mount one (root), else a 2 MB file size limit on the child: both make
+    the real writes of results.csv fail, with ENOSPC or EFBIG."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(disk)],
+                             capture_output=True).returncode == 0
+    yield disk, (None if mounted else limit_file_size(2 * 1024 * 1024))
+    if mounted:
+        subprocess.run(["umount", "-l", str(disk)], check=True)
+
+
+def test_a_full_disk_ends_the_run_with_one_line_whole_rows_and_no_temporary_files(built, tmp_path, small_disk):
+    disk, preexec = small_disk
+    out, tmpdir = disk / "out", tmp_path / "tmp"
+    tmpdir.mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator", *map(str, run_args(built["ssp"], out, 3))],
+                            env=dict(os.environ, TMPDIR=str(tmpdir)), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, preexec_fn=preexec)
+    code, err = finish(proc)
+    assert code == 2, err
+    m = re.fullmatch(rf"error: cannot write {out / 'results.csv'}: (No space left on device \(errno 28\)|"
+                     r"File too large \(errno 27\)): it keeps the rows up to t = (\S+) s, whole rows only\n", err)
+    assert m, err
+    rows = whole_rows(out / "results.csv")
+    assert len(rows) >= 1000 and rows[-1][0] == pytest.approx(float(m.group(2)))
+    assert [r[0] for r in rows] == pytest.approx([k * 1e-4 for k in range(len(rows))])  # none lost
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "failed" and run["exit_code"] == 2 and run["error"] == err[len("error: "):-1]
+    assert sorted(p.name for p in out.iterdir()) == [".tapmp.lock", "results.csv", "run.json"]  # no *.tmp
+    assert cosim_folders(tmpdir) == []
+
+
+def test_stale_temporary_folders_of_dead_processes_are_removed_at_the_start_of_a_run(built, tmp_path):
+    from orchestrator.master import _host
+    tmpdir = tmp_path / "tmp"
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    folders = {"dead": f"tapmp_cosim_{dead.pid}_{_host()}_x1", "live": f"tapmp_cosim_{os.getpid()}_{_host()}_x2",
+               "other host": f"tapmp_cosim_{dead.pid}_elsewhere_x3", "old name": "tapmp_cosim_x4"}
+    for name in folders.values():
+        (tmpdir / name / "fmu").mkdir(parents=True)
+        (tmpdir / name / "fmu" / "plant.so").write_bytes(b"x")
+    code, err = finish(start(*run_args(built["ssp"], tmp_path / "out", 0.01), tmpdir=tmpdir))
+    assert code == 0, err
+    assert cosim_folders(tmpdir) == sorted(folders[k] for k in ("live", "other host", "old name"))
+
+
+def test_sigterm_to_a_study_stops_its_cases_and_leaves_no_temporary_folder(built, tmp_path):
+    study, out, tmpdir = tmp_path / "s.toml", tmp_path / "out", tmp_path / "tmp"
+    study.write_text(f'[study]\nbase = "{PAPER}"\nkeep_results = true\n[set]\nstop_time = 2.0\n'
+                     '[grid]\n"gain_overrides.D" = [450.0, 900.0, 1800.0, 3600.0]\n')
+    proc = start("study", study, "--ssp", built["ssp"], "--out", out, "--workers", "1", "--no-progress",
+                 tmpdir=tmpdir)
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline and not list((out / "cases").glob("*/results.csv")):
+        time.sleep(0.05)  # a case is running on the worker
+    assert cosim_folders(tmpdir), "no case started"
+    proc.send_signal(signal.SIGTERM)
+    code, err = finish(proc)
+    assert code == 143, err
+    assert err.strip().splitlines()[-1] == "interrupted by SIGTERM: the results so far are in the output folder"
+    assert cosim_folders(tmpdir) == []
+    with open(out / "study.csv", newline="") as f:
+        table = list(csv.reader(f))
+    assert all(len(r) == len(table[0]) for r in table) and len(table) < 1 + 4
+    runs = [json.loads(p.read_text()) for p in (out / "cases").glob("*/run.json")]
+    assert {r["status"] for r in runs} <= {"completed", "interrupted"}
+    stopped = [r for r in runs if r["status"] == "interrupted"]
+    assert stopped and all(r["signal"] == "SIGTERM" and "the study was stopped" in r["error"] for r in stopped)
+    for case in (out / "cases").iterdir():
+        whole_rows(case / "results.csv")
