@@ -12,6 +12,11 @@ simulated time) of
   * floor-pythonfmu the same pass-through FMUs on pythonfmu 0.7's own binary (the floor
                     this project started from);
   * plain:          the FMI-free closed loop (tapmp.closed_loop) with the same models;
+  * full-native, floor-native, full-fmi3, floor-fmi3: the same for the native C FMUs
+                    (FMI 2.0 and 3.0; the floor is benchmarks/floor_model.c in place of
+                    each model file);
+  * c-master:       the native FMI 2.0 closed loop stepped from C (benchmarks/c_master.c),
+                    no Python in the process: the cost without a Python master;
 plus `tapmp run` end to end (results.csv written every step) and the peak memory.
 Each configuration runs --repeat times, interleaved; the table shows the fastest run.
 """
@@ -76,6 +81,44 @@ class {name}(Fmi2Slave):
 '''
 
 
+def build_native_systems(tmp: Path, log) -> dict[str, Path]:
+    """SSP files of the native families and their pass-through floors."""
+    from orchestrator.build_native import build_native, build_native_fmu
+
+    systems = {}
+    for family, paths in build_native(tmp / "native", log=lambda *_: None, windows=False).items():
+        name = "native" if family == "fmi2" else family
+        systems[f"full-{name}"] = paths["ssp"]
+        out = tmp / f"floor-{name}"
+        out.mkdir()
+        fmus = {m: build_native_fmu(m, family, out, windows=False, model_source=ROOT / "benchmarks" / "floor_model.c")
+                for m in FMU_NAMES}
+        systems[f"floor-{name}"] = write_ssp(out / "TAPMP.ssp", fmus)
+        log(f"built the native {family} systems")
+    return systems
+
+
+def time_c_master(fmi2_ssp: Path, scenario, tmp: Path) -> float:
+    """Wall seconds of the native FMI 2.0 loop stepped by benchmarks/c_master.c."""
+    import subprocess
+    import zipfile
+
+    from orchestrator.build_native import fmi_headers_dir
+    exe = tmp / "c_master"
+    if not exe.exists():
+        subprocess.run(["gcc", "-O2", f"-I{fmi_headers_dir()}", "-o", str(exe), str(ROOT / "benchmarks" / "c_master.c"),
+                        "-ldl"], check=True)
+        with zipfile.ZipFile(fmi2_ssp) as z:
+            for model in FMU_NAMES:
+                z.extract(f"resources/{model}.fmu", tmp / "cm")
+                with zipfile.ZipFile(tmp / "cm" / "resources" / f"{model}.fmu") as f:
+                    f.extractall(tmp / "cm" / model)
+    dirs = [str(tmp / "cm" / m) for m in ("TAPMP_Trajectory", "TAPMP_Controller", "TAPMP_Plant")]
+    order = "gs" if scenario.ordering == "gauss-seidel" else "jacobi"
+    out = subprocess.run([str(exe), *dirs, str(scenario.n_steps), order], check=True, capture_output=True, text=True)
+    return float(out.stdout.split()[0])
+
+
 def build_systems(tmp: Path, log) -> dict[str, Path]:
     """SSP files of the real system and of the two pass-through floors."""
     from pythonfmu import FmuBuilder
@@ -136,12 +179,15 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_") as tmp:
         tmp = Path(tmp)
         systems = build_systems(tmp, log=lambda m: print(m, file=sys.stderr))
+        systems.update(build_native_systems(tmp, log=lambda m: print(m, file=sys.stderr)))
         configs = []
         for ordering in ("gauss-seidel", "jacobi"):
             sc = base.with_changes(ordering=ordering)
-            for kind in ("full", "floor", "floor-pythonfmu"):
+            for kind in ("full", "floor", "floor-pythonfmu", "full-native", "floor-native", "full-fmi3",
+                         "floor-fmi3"):
                 configs.append((kind, ordering, lambda s=systems[kind], sc=sc: time_loop(s, sc)))
             configs.append(("plain", ordering, lambda sc=sc: time_plain(sc)))
+            configs.append(("c-master", ordering, lambda sc=sc: time_c_master(systems["full-native"], sc, tmp)))
         configs.append(("tapmp run (csv)", "gauss-seidel",
                         lambda: time_run(systems["full"], base, tmp / "run")))
         best = {}
@@ -155,6 +201,12 @@ def main(argv=None) -> int:
     rows = [{"config": k, "ordering": o, "wall_s": w, "us_per_step": w / n * 1e6,
              "real_time_factor": w / sim_time} for (k, o), w in best.items()]
     ratios = {o: best[("full", o)] / best[("floor", o)] for o in ("gauss-seidel", "jacobi")}
+    native = {o: {"full_native_over_floor_native": best[("full-native", o)] / best[("floor-native", o)],
+                  "full_fmi3_over_floor_fmi3": best[("full-fmi3", o)] / best[("floor-fmi3", o)],
+                  "speedup_native_over_pythonfmu": best[("full", o)] / best[("full-native", o)],
+                  "speedup_fmi3_over_pythonfmu": best[("full", o)] / best[("full-fmi3", o)],
+                  "python_master_over_c_master": best[("full-native", o)] / best[("c-master", o)]}
+              for o in ("gauss-seidel", "jacobi")}
     ratios_pythonfmu = {o: best[("full", o)] / best[("floor-pythonfmu", o)] for o in ("gauss-seidel", "jacobi")}
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     report = {
@@ -162,6 +214,7 @@ def main(argv=None) -> int:
                     "platform": platform.platform(), "processor": platform.processor()},
         "scenario": "paper_simulation", "simulated_s": sim_time, "steps": n, "repeat": args.repeat,
         "rows": rows, "full_over_floor": ratios, "full_over_floor_pythonfmu": ratios_pythonfmu,
+        "native": native,
         "peak_rss_mib": peak_mib,
     }
     print(f"\npaper scenario, {sim_time:g} s simulated = {n} macro steps of {base.step:g} s; "
@@ -172,6 +225,7 @@ def main(argv=None) -> int:
               f"{row['wall_s']:8.3f} {row['real_time_factor']:7.3f}")
     for o in ratios:
         print(f"full / floor ({o}): {ratios[o]:.2f}   full / pythonfmu floor: {ratios_pythonfmu[o]:.2f}")
+        print("  " + ", ".join(f"{k} {v:.2f}" for k, v in native[o].items()))
     print(f"peak memory (max RSS of this process): {peak_mib:.0f} MiB")
     path = Path(args.json)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -109,10 +109,12 @@ def model_vars_header(model: str) -> str:
     return "\n".join(lines)
 
 
-def source_files(model: str, family: str) -> dict[str, bytes]:
-    """Every file of the FMU's sources/ folder, by name."""
-    files = {p.name: p.read_bytes() for p in (*COMMON_SOURCES, *COMMON_HEADERS, *MODEL_FILES[model],
-                                               API[family])}
+def source_files(model: str, family: str, model_source: Path | None = None) -> dict[str, bytes]:
+    """Every file of the FMU's sources/ folder, by name; ``model_source`` replaces the model
+    file (the benchmark's pass-through floor)."""
+    source, header = MODEL_FILES[model]
+    files = {p.name: p.read_bytes() for p in (*COMMON_SOURCES, *COMMON_HEADERS, header, API[family])}
+    files[source.name] = Path(model_source or source).read_bytes()
     files["model_vars.h"] = model_vars_header(model).encode()
     headers = fmi_headers_dir()
     for name in FMI_HEADERS[family]:
@@ -284,14 +286,16 @@ def have_mingw() -> bool:
     return shutil.which(MINGW) is not None
 
 
-def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = True) -> Path:
-    """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic."""
+def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = True,
+                     model_source: Path | None = None) -> Path:
+    """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic.
+    ``model_source`` replaces the model's C file (benchmarks/floor_model.c)."""
     out_dir = Path(out_dir)
     fmu = out_dir / f"{model}.fmu"
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
-        files = source_files(model, family)
+        files = source_files(model, family, model_source)
         for name, data in files.items():
             (src / name).write_bytes(data)
         binaries = {}
