@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# The test command of the README, on a fresh Debian machine: bash tests/run.sh [PYTEST ARGS...]
+#
+# 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
+#    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), gcc-mingw-w64-x86-64 and
+#    wine64 (build the native FMUs' Windows binaries and run them). As root directly, else
+#    through sudo; `apt-get update` only if installing fails (empty or stale package lists).
+# 2. Creates .venv with the package and its test extras and runs every test with pytest.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export DEBIAN_FRONTEND=noninteractive
+PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64)
+
+missing=()
+for package in "${PACKAGES[@]}"; do
+    dpkg -s "$package" >/dev/null 2>&1 || missing+=("$package")
+done
+
+as_root() {
+    if [ "$(id -u)" -eq 0 ]; then
+        "$@"
+    else
+        sudo DEBIAN_FRONTEND=noninteractive "$@"
+    fi
+}
+
+if [ "${#missing[@]}" -gt 0 ]; then
+    if [ "$(id -u)" -ne 0 ] && ! command -v sudo >/dev/null 2>&1; then
+        echo "tests/run.sh: the Debian packages ${missing[*]} are missing and this user is not root and has no sudo: install them as root (apt-get install ${missing[*]}) and run this again" >&2
+        exit 1
+    fi
+    as_root apt-get install -y "${missing[@]}" \
+        || { as_root apt-get update && as_root apt-get install -y "${missing[@]}"; }
+fi
+
+python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && exec .venv/bin/python -m pytest -q "$@"
