@@ -11,12 +11,19 @@ from pathlib import Path
 
 from . import build as build_mod
 from .master import CoSimulationError, remove_stale_folders
+from .families import DEFAULT_FAMILY, FAMILIES, FamilyNotBuilt, resolve_ssp
 from .results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
                       one_line, output_lock, run_scenario)
 from .scenario import ScenarioError, load
 from .study import StudyError
 
 DEFAULT_SSP = build_mod.DEFAULT_BUILD_DIR / build_mod.SSP_NAME
+
+
+def _ssp(args, scenario=None) -> Path:
+    """--ssp, else the SSP of --fmus, else of the scenario's ``fmus`` (default native)."""
+    fmus = args.fmus or (scenario.fmus if scenario is not None else DEFAULT_FAMILY)
+    return resolve_ssp(args.ssp, fmus)
 
 
 def _progress_bar(desc: str, enabled: bool):
@@ -71,7 +78,7 @@ def cmd_run(args) -> int:
     scenario = load(args.scenario, args.set)
     warn_if_unstable(scenario)
     out = Path(args.out or scenario.output)
-    m = _run_one(scenario, Path(args.ssp), out, args.overwrite, not args.no_progress, scenario.name)
+    m = _run_one(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
     print("tracking MAE [um]: " + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]))
     print("sync MAE [um]:     " + ", ".join(f"{v:.4f}" for v in m["sync_mae_um"]))
@@ -96,7 +103,7 @@ def cmd_compare(args) -> int:
     results = {}
     with output_lock(out):  # the runs write subfolders; comparison.md and figures go here
         for name, sc in compare_runs(scenario).items():
-            results[name] = _run_one(sc, Path(args.ssp), out / name, args.overwrite,
+            results[name] = _run_one(sc, _ssp(args, scenario), out / name, args.overwrite,
                                      not args.no_progress, f"{scenario.name} {name}")
         command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
         text = write_comparison(out / "comparison.md", scenario, results, command)
@@ -115,7 +122,7 @@ def cmd_reproduce(args) -> int:
         scenario = load(Path(args.scenarios) / f"{name}.toml")
         out = Path(args.results) / name
         with output_lock(out):
-            results = {run: _run_one(sc, Path(args.ssp), out / run, True, not args.no_progress, f"{name} {run}")
+            results = {run: _run_one(sc, _ssp(args, scenario), out / run, True, not args.no_progress, f"{name} {run}")
                        for run, sc in compare_runs(scenario).items()}
             plot(out)
         tables[name] = (scenario, results)
@@ -127,8 +134,9 @@ def cmd_reproduce(args) -> int:
 def cmd_study(args) -> int:
     from .study import close_client, load_study, open_client, run_study
     study = load_study(args.study)
-    if not Path(args.ssp).exists():  # before starting a cluster
-        raise StudyError(f"SSP file {args.ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
+    ssp = _ssp(args)  # before starting a cluster
+    if not ssp.exists():
+        raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
                          "or tapmp build) or pass --ssp")
     if args.workers is not None and args.workers < 1:
         raise StudyError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
@@ -137,7 +145,7 @@ def cmd_study(args) -> int:
         client = open_client(args.scheduler, args.workers)
         try:
             command = "tapmp study " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-            s = run_study(study, Path(args.ssp), client, out, args.resume, args.overwrite,
+            s = run_study(study, ssp, client, out, args.resume, args.overwrite,
                           not args.no_progress, command)
         finally:
             close_client(client)
@@ -182,7 +190,10 @@ def parser() -> argparse.ArgumentParser:
         sp.add_argument("--out", help="output folder (overrides the scenario's 'output')")
         sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
-        sp.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
+        sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
+        sp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
+                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
+                    "scenario's fmus; paths relative to the repository root")
         sp.add_argument("--overwrite", action="store_true", help="replace results in an existing output folder")
         sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -198,6 +209,9 @@ def parser() -> argparse.ArgumentParser:
     ck.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="override a scenario value, e.g. --set gains='\"paper_simulation\"'")
     ck.add_argument("--eigenvalues", action="store_true", help="list every eigenvalue")
+    ck.add_argument("--fmus", choices=list(FAMILIES), help="accepted for symmetry with run: the check linearizes "
+                    "the FMI-free model, which every FMU family reproduces bit for bit (tests), so the verdict "
+                    "is the same for all")
     ck.set_defaults(func=cmd_check)
     c = sub.add_parser("compare", help="run a scenario with SC-DC and with APD-DC",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41) and APD-DC with matched "
@@ -210,7 +224,10 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", default="docs/paper-reproduction.md", help="page to write")
     rp.add_argument("--scenarios", default="scenarios", help="folder with paper_simulation.toml, paper_experiment.toml")
     rp.add_argument("--results", default="results", help="folder for the runs (overwritten)")
-    rp.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
+    rp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
+    rp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
+                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
+                    "scenario's fmus; paths relative to the repository root")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
     rp.set_defaults(func=cmd_reproduce)
     st = sub.add_parser("study", help="run a parameter study on Dask",
@@ -221,7 +238,10 @@ def parser() -> argparse.ArgumentParser:
                     "(default: a LocalCluster on this machine)")
     st.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default: one per core)")
     st.add_argument("--out", help="output folder (overrides the study's 'output')")
-    st.add_argument("--ssp", default=str(DEFAULT_SSP), help="SSP system file (default: build/TAPMP.ssp)")
+    st.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
+    st.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
+                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
+                    "scenario's fmus; paths relative to the repository root")
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -8,7 +8,9 @@ always use every step), clock and connection_start (conventions of other masters
 orchestrator.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's),
 open_inputs (a list of "element.variable" FMU inputs that no connection of the SSP
 drives, deliberately: they keep their start values; the master refuses any other
-undriven input, and an entry that is no input of the system or that a connection drives).
+undriven input, and an entry that is no input of the system or that a connection drives),
+fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
+see orchestrator.families; `--fmus` and `--ssp` on the command line override it).
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
@@ -42,7 +44,7 @@ CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-        "open_inputs": list}
+        "open_inputs": list, "fmus": str}
 _TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
@@ -137,6 +139,7 @@ class Scenario:
     limits: dict = field(default_factory=dict)
     record_every: int = 1
     open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
+    fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.families)
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -282,6 +285,9 @@ def validate(s: Scenario) -> Scenario:
             raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
                                 f"[{LIMITS[k][1]}] (0 = no limit)")
     _check_open_inputs(s.open_inputs)
+    from .families import FAMILIES
+    if s.fmus not in FAMILIES:
+        raise ScenarioError(f"fmus = {s.fmus!r} is invalid: allowed are {', '.join(FAMILIES)}")
     if s.record_every < 1:
         raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)
