@@ -44,7 +44,7 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # end a run at a 
 
 
 LOCK_FILE = ".tapmp.lock"  # in every output folder while a tapmp writer holds it
-_HELD = {}  # (real path of a locked folder, thread id) -> [fd, depth]: re-entrant per thread
+_HELD = set()  # (real path, thread id) of the folders this process has locked: re-entrant per thread
 
 
 class OutputExistsError(RuntimeError):
@@ -93,14 +93,10 @@ def output_lock(folder):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     key = (os.path.realpath(folder), threading.get_ident())
-    if key in _HELD:  # this thread holds it already
-        _HELD[key][1] += 1
-        try:
-            yield folder
-        finally:
-            _HELD[key][1] -= 1
+    if key in _HELD:  # this thread holds it already (e.g. a study, then its run)
+        yield folder
         return
-    if any(path == key[0] for path, _ in _HELD):
+    if any(path == key[0] for path, _ in list(_HELD)):
         raise OutputInUseError(f"output folder {folder} is in use by another thread of this process "
                                f"(pid {os.getpid()}): allowed is one writer per output folder")
     fd = os.open(folder / LOCK_FILE, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
@@ -116,11 +112,11 @@ def output_lock(folder):
             os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         except OSError:
             pass  # a full disk: the lock holds all the same, only the pid is not on record
-        _HELD[key] = [fd, 1]
+        _HELD.add(key)
         try:
             yield folder
         finally:
-            del _HELD[key]
+            _HELD.discard(key)
             try:
                 os.ftruncate(fd, 0)  # no stale pid on record once released
             except OSError:
