@@ -233,6 +233,23 @@ def _check_open_inputs(entries) -> None:
             raise ScenarioError(f"open_inputs[{i}] = {entry!r} is listed twice: allowed is each input once")
 
 
+STEP_TOLERANCE = 1e-9  # relative: how far (stop_time - start_time) / step may be from a whole number
+
+
+def _check_whole_steps(s: Scenario) -> None:
+    """stop_time - start_time must be a whole number (>= 1) of steps: a run never goes past
+    stop_time and never completes zero steps; otherwise the nearest valid stop times are named."""
+    n = (s.stop_time - s.start_time) / s.step
+    k = round(n)
+    if k >= 1 and abs(n - k) <= STEP_TOLERANCE * max(1.0, k):
+        return
+    lo, hi = max(1, math.floor(n)), max(1, math.ceil(n))
+    nearest = sorted({s.start_time + lo * s.step, s.start_time + hi * s.step})
+    raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: stop_time - start_time = "
+                        f"{s.stop_time - s.start_time!r} s is not a whole number of steps of {s.step!r} s: "
+                        f"allowed are e.g. {' or '.join(f'{t:.12g}' for t in nearest)}")
+
+
 def validate(s: Scenario) -> Scenario:
     """Check every value of a scenario; raise ScenarioError naming the key."""
     if s.law not in LAWS:
@@ -253,6 +270,7 @@ def validate(s: Scenario) -> Scenario:
     if not (math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time):
         raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: allowed is a number > start_time "
                             f"= {s.start_time!r} [s]")
+    _check_whole_steps(s)
     for k, v in s.gain_overrides.items():
         if k not in GAIN_NAMES:
             raise ScenarioError(f"gain_overrides.{k} is unknown: allowed are {', '.join(GAIN_NAMES)}")
