@@ -17,7 +17,8 @@ def tapmp(*args, cwd=None):
 
 @pytest.mark.parametrize("stop_time,nearest", [("0.00035", "0.0003 or 0.0004"), ("1e-9", "0.0001")])
 def test_a_stop_time_that_is_no_whole_number_of_steps_is_refused_with_the_nearest_valid(stop_time, nearest, tmp_path):
-    proc = tapmp("run", str(PAPER), "--set", f"stop_time={stop_time}", "--out", str(tmp_path / "out"))
+    proc = tapmp("run", str(PAPER), "--set", f"stop_time={stop_time}", "--ssp", str(tmp_path / "none.ssp"),
+                 "--out", str(tmp_path / "out"))
     err = proc.stderr.strip()
     assert proc.returncode == 2 and "\n" not in err, err
     assert f"is not a whole number of steps of 0.0001 s: allowed are e.g. {nearest}" in err, err
@@ -31,20 +32,23 @@ def _one_line_exit_2(proc, *words):
     assert all(w in err for w in words), err
 
 
-def test_an_output_folder_that_is_a_file_is_one_line(tmp_path):
+def run_into(built, out):
+    return tapmp("run", str(PAPER), "--set", "stop_time=0.001", "--ssp", str(built["ssp"]), "--out", str(out))
+
+
+def test_an_output_folder_that_is_a_file_is_one_line(built, tmp_path):
     target = tmp_path / "out"
     target.write_text("a user's file\n")
-    _one_line_exit_2(tapmp("run", str(PAPER), "--set", "stop_time=0.001", "--out", str(target)), str(target))
+    _one_line_exit_2(run_into(built, target), str(target))
     assert target.read_text() == "a user's file\n"
 
 
-def test_an_output_folder_under_a_file_is_one_line(tmp_path):
+def test_an_output_folder_under_a_file_is_one_line(built, tmp_path):
     (tmp_path / "file").write_text("x")
-    _one_line_exit_2(tapmp("run", str(PAPER), "--set", "stop_time=0.001", "--out", str(tmp_path / "file" / "out")),
-                     "file")
+    _one_line_exit_2(run_into(built, tmp_path / "file" / "out"), "file")
 
 
-def test_an_output_folder_on_a_read_only_file_system_is_one_line(tmp_path):
+def test_an_output_folder_on_a_read_only_file_system_is_one_line(built, tmp_path):
     ro = tmp_path / "ro"
     ro.mkdir()
     mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m,ro", "tmpfs", str(ro)],
@@ -52,7 +56,7 @@ def test_an_output_folder_on_a_read_only_file_system_is_one_line(tmp_path):
     try:
         if not mounted:  # no mount rights: a folder without write permission for a non-root child
             os.chmod(ro, 0o555)
-        proc = tapmp("run", str(PAPER), "--set", "stop_time=0.001", "--out", str(ro / "out"))
+        proc = run_into(built, ro / "out")
         if not mounted and os.geteuid() == 0:
             pytest.fail("cannot make a read-only folder: mount failed and root ignores permissions")
         _one_line_exit_2(proc, str(ro / "out"))
@@ -61,5 +65,6 @@ def test_an_output_folder_on_a_read_only_file_system_is_one_line(tmp_path):
             subprocess.run(["umount", str(ro)], check=True)
 
 
-def test_a_scenario_path_that_is_a_directory_is_one_line(tmp_path):
-    _one_line_exit_2(tapmp("run", str(tmp_path), "--out", str(tmp_path / "out")), str(tmp_path))
+def test_a_scenario_path_that_is_a_directory_is_one_line(built, tmp_path):
+    _one_line_exit_2(tapmp("run", str(tmp_path), "--ssp", str(built["ssp"]), "--out", str(tmp_path / "out")),
+                     str(tmp_path))
