@@ -10,7 +10,6 @@
 
 #define R(name) inst->reals[VR_##name]
 
-static const char *const PARAMS[] = {"m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g"};
 static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
 static const int GAIN_VR[5] = {VR_Lambda_p1, VR_Lambda_v1, VR_b1, VR_D1, VR_K_T1};
 
@@ -18,11 +17,7 @@ static const int GAIN_VR[5] = {VR_Lambda_p1, VR_Lambda_v1, VR_b1, VR_D1, VR_K_T1
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     char v[40];
-    for (int i = 0; i < 7; i++) {
-        double x = inst->reals[PARAM_VR[i]];
-        if (!(isfinite(x) && x > 0.0))
-            return tapmp_invalid_text(msg, size, PARAMS[i], tapmp_repr(x, v), "a finite number > 0", 0, 0);
-    }
+    if (!tapmp_require_positive(inst, PARAM_VR, 7, msg, size)) return 0;  /* ModelParams.validated */
     for (int k = 0; k < 5; k++)
         for (int i = 0; i < 3; i++) {
             int vr = GAIN_VR[k] + i;  /* motors 1..3 are consecutive in the table */

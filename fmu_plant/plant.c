@@ -9,7 +9,6 @@
 #define HALF_PI 1.5707963267948966
 #define R(name) inst->reals[VR_##name]
 
-static const char *const PARAMS[] = {"m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g"};
 static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
 static const int CONFIG_VR[] = {VR_encoder_resolution, VR_c_v1, VR_c_v2, VR_c_v3, VR_F_c1, VR_F_c2,
                                 VR_F_c3, VR_v_s, VR_force_limit, VR_k_pull};
@@ -19,11 +18,7 @@ static const int INITIAL_VR[] = {VR_X0, VR_Z0, VR_B0, VR_dX0, VR_dZ0, VR_dB0};
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     char v[40];
-    for (int i = 0; i < 7; i++) {
-        double x = inst->reals[PARAM_VR[i]];
-        if (!(isfinite(x) && x > 0.0))
-            return tapmp_invalid_text(msg, size, PARAMS[i], tapmp_repr(x, v), "a finite number > 0", 0, 0);
-    }
+    if (!tapmp_require_positive(inst, PARAM_VR, 7, msg, size)) return 0;  /* ModelParams.validated */
     for (int i = 0; i < 10; i++) {
         double x = inst->reals[CONFIG_VR[i]];
         if (!(isfinite(x) && x >= 0.0))

@@ -139,6 +139,14 @@ def _units_element(tag: str, used: set) -> ET.Element:
     return units
 
 
+def _categories_and_experiment(root: ET.Element, error_status: str) -> None:
+    """LogCategories and DefaultExperiment, the same in both FMI versions."""
+    cats = ET.SubElement(root, "LogCategories")
+    ET.SubElement(cats, "Category", name="logStatusError", description=f"Log messages with {error_status} status.")
+    ET.SubElement(cats, "Category", name="logAll", description="Log all messages.")
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(STOP), stepSize=repr(STEP))
+
+
 def _common_attributes(v: Var, integer: bool) -> dict:
     attrs = {}
     if v.causality != "output":
@@ -174,10 +182,7 @@ def model_description_fmi2(model: str) -> bytes:
     for name in c_sources(model, "fmi2"):
         ET.SubElement(files, "File", name=name)
     root.append(_units_element("UnitDefinitions", {v.unit for v in table if v.unit}))
-    cats = ET.SubElement(root, "LogCategories")
-    ET.SubElement(cats, "Category", name="logStatusError", description="Log messages with fmi2Error status.")
-    ET.SubElement(cats, "Category", name="logAll", description="Log all messages.")
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(STOP), stepSize=repr(STEP))
+    _categories_and_experiment(root, "fmi2Error")
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
     for vr, v in enumerate(table):
@@ -212,10 +217,7 @@ def model_description_fmi3(model: str) -> bytes:
         "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false",
         "hasEventMode": "false", "providesEvaluateDiscreteStates": "false"})
     root.append(_units_element("UnitDefinitions", {v.unit for v in table if v.unit}))
-    cats = ET.SubElement(root, "LogCategories")
-    ET.SubElement(cats, "Category", name="logStatusError", description="Log messages with fmi3Error status.")
-    ET.SubElement(cats, "Category", name="logAll", description="Log all messages.")
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(STOP), stepSize=repr(STEP))
+    _categories_and_experiment(root, "fmi3Error")
     variables = ET.SubElement(root, "ModelVariables")
     ET.SubElement(variables, "Float64", name="time", valueReference=str(len(table)), causality="independent",
                   variability="continuous", description="simulation time")

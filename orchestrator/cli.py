@@ -17,7 +17,6 @@ from .results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseE
 from .scenario import ScenarioError, load
 from .study import StudyError
 
-DEFAULT_SSP = build_mod.DEFAULT_BUILD_DIR / build_mod.SSP_NAME
 
 
 def _ssp(args, scenario=None) -> Path:

@@ -182,6 +182,17 @@ int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed
                       MODE_NAMES[inst->mode], allowed);
 }
 
+int tapmp_require_positive(const tapmp_instance *inst, const int vrs[], int n, char *msg, size_t size)
+{
+    char v[40];
+    for (int i = 0; i < n; i++) {
+        double x = inst->reals[vrs[i]];
+        if (!(isfinite(x) && x > 0.0))
+            return tapmp_invalid_text(msg, size, VARS[vrs[i]].name, tapmp_repr(x, v), "a finite number > 0", 0, 0);
+    }
+    return 1;
+}
+
 /* Range of a parameter, declared as min/max in the modelDescription (tapmp/interface.py). */
 static int check_ranges(const tapmp_instance *inst, char *msg, size_t size)
 {
@@ -617,27 +628,12 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
         s->error[sizeof s->error - 1] = 0;
         memcpy(c->error, s->error, sizeof c->error);
         memset(&c->m, 0, sizeof c->m);
-        if (c->has_model) {
-            /* validate the hidden values before rebuilding the model from the parameters */
-            char v[40];
-            for (int i = 0; i < MODEL_N_HIDDEN && ok; i++)
-                if (!isfinite(s->hidden[i])) {
-                    snprintf(msg, sizeof msg, "FMU state: hidden state value %d = %s is invalid: allowed "
-                             "is a finite number", i, tapmp_repr(s->hidden[i], v));
-                    ok = 0;
-                }
-            if (ok && (s->mode < MODE_INSTANTIATED || s->mode > MODE_TERMINATED)) {
-                snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to 3", s->mode);
-                ok = 0;
-            }
-            if (ok && !(model_validate(c, msg, sizeof msg) && check_ranges(c, msg, sizeof msg))) ok = 0;
-            if (ok) {  /* the serialized outputs stand: setup may publish its own */
-                model_setup(c);
-                model_set_hidden(c, s->hidden);
-                memcpy(c->reals, s->reals, sizeof c->reals);
-            }
+        if (c->has_model) {  /* rebuilt from the parameters; validate_state checks it all below */
+            model_setup(c);
+            model_set_hidden(c, s->hidden);
+            memcpy(c->reals, s->reals, sizeof c->reals);  /* the serialized outputs stand */
         }
-        if (ok) ok = validate_state(c, msg, sizeof msg);
+        ok = validate_state(c, msg, sizeof msg);
     }
     free(s);
     if (!ok) {

@@ -76,6 +76,8 @@ int tapmp_invalid(tapmp_instance *inst, const char *name, const char *value, con
 /* The same with the message only written to buf (no logging); returns 0. */
 int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
                        const char *allowed, int has_time, double time);
+/* errors.require_positive on the Real parameters vrs[0..n-1], in that order; 0 + msg on the first failure. */
+int tapmp_require_positive(const tapmp_instance *inst, const int vrs[], int n, char *msg, size_t size);
 int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);
 
 /* FMI operations, version neutral; each returns a status. */
