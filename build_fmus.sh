@@ -12,7 +12,7 @@ PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] && PY=.venv/bin/python
 OUT=${1:-build}
 "$PY" -m orchestrator build --out "$OUT"
-"$PY" -m orchestrator.build_native --out "$OUT/native"
+"$PY" -m orchestrator.engine.build_native --out "$OUT/native"
 for fmu in "$OUT"/TAPMP_*.fmu "$OUT"/native/fmi2/TAPMP_*.fmu "$OUT"/native/fmi3/TAPMP_*.fmu; do
     "$PY" -m fmpy.cli validate "$fmu" >/dev/null || { echo "fmpy validate failed for $fmu" >&2; "$PY" -m fmpy.cli validate "$fmu"; exit 1; }
 done

@@ -33,11 +33,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from orchestrator import build  # noqa: E402
-from orchestrator.master import CoSimulation  # noqa: E402
-from orchestrator.results import run_scenario  # noqa: E402
-from orchestrator.scenario import load  # noqa: E402
-from orchestrator.ssp import write_ssp  # noqa: E402
+from orchestrator.engine import build  # noqa: E402
+from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.results import run_scenario  # noqa: E402
+from orchestrator.experiments.scenario import load  # noqa: E402
+from orchestrator.engine.ssp import write_ssp  # noqa: E402
 from tapmp.closed_loop import simulate  # noqa: E402
 from tapmp.interface import FMU_NAMES  # noqa: E402
 
@@ -83,7 +83,7 @@ class {name}(Fmi2Slave):
 
 def build_native_systems(tmp: Path, log) -> dict[str, Path]:
     """SSP files of the native families and their pass-through floors."""
-    from orchestrator.build_native import build_native, build_native_fmu
+    from orchestrator.engine.build_native import build_native, build_native_fmu
 
     systems = {}
     for family, paths in build_native(tmp / "native", log=lambda *_: None, windows=False).items():
@@ -103,7 +103,7 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path) -> float:
     import subprocess
     import zipfile
 
-    from orchestrator.build_native import fmi_headers_dir
+    from orchestrator.engine.build_native import fmi_headers_dir
     exe = tmp / "c_master"
     if not exe.exists():
         subprocess.run(["gcc", "-O2", f"-I{fmi_headers_dir()}", "-o", str(exe), str(ROOT / "benchmarks" / "c_master.c"),

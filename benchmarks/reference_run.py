@@ -13,9 +13,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.build import build_all  # noqa: E402
-from orchestrator.master import CoSimulation  # noqa: E402
-from orchestrator.scenario import load  # noqa: E402
+from orchestrator.engine.build import build_all  # noqa: E402
+from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.scenario import load  # noqa: E402
 
 REFERENCE = ROOT / "tests" / "data" / "reference_run.csv"
 CASES = (("sc-dc", "gauss-seidel"), ("apd-dc", "gauss-seidel"), ("sc-dc", "jacobi"))

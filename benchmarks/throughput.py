@@ -20,8 +20,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.study import (close_client, load_study, open_client, read_study_csv,  # noqa: E402
-                                run_case, run_study, scenario_data)
+from orchestrator.studies.run import run_study  # noqa: E402
+from orchestrator.studies.study import (close_client, load_study, open_client, read_study_csv,  # noqa: E402
+                                        run_case, scenario_data)
 
 
 def warm_up(client, study, ssp: Path, folder: Path) -> None:

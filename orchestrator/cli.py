@@ -9,13 +9,13 @@ import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
-from . import build as build_mod
-from .master import CoSimulationError, remove_stale_folders
-from .families import DEFAULT_FAMILY, FAMILIES, FamilyNotBuilt, resolve_ssp
-from .results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
+from .engine import build as build_mod
+from .engine.master import CoSimulationError, remove_stale_folders
+from .engine.families import DEFAULT_FAMILY, FAMILIES, resolve_ssp
+from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
                       one_line, output_lock, run_scenario)
-from .scenario import ScenarioError, load
-from .study import StudyError
+from .experiments.scenario import ScenarioError, load
+from .studies.study import StudyError
 
 
 
@@ -54,7 +54,7 @@ def cmd_build(args) -> int:
 
 def warn_if_unstable(scenario) -> None:
     """One line on stderr if the stability pre-check finds the scenario's loop unstable."""
-    from .stability import check
+    from .experiments.stability import check
     report = check(scenario)
     if not report.stable:
         print(f"warning: {scenario.name}: the sampled closed loop is {report.verdict} (spectral radius "
@@ -63,7 +63,7 @@ def warn_if_unstable(scenario) -> None:
 
 
 def cmd_check(args) -> int:
-    from .stability import check
+    from .experiments.stability import check
     scenario = load(args.scenario, args.set)
     report = check(scenario)
     print(f"{scenario.name}: {report.summary()}")
@@ -94,8 +94,8 @@ def compare_runs(scenario):
 
 
 def cmd_compare(args) -> int:
-    from .plots import plot
-    from .report import write_comparison
+    from .experiments.plots import plot
+    from .experiments.report import write_comparison
 
     scenario = load(args.scenario, args.set)
     out = Path(args.out or scenario.output)
@@ -113,8 +113,8 @@ def cmd_compare(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from .plots import plot
-    from .report import write_reproduction
+    from .experiments.plots import plot
+    from .experiments.report import write_reproduction
 
     tables = {}
     for name in ("paper_simulation", "paper_experiment"):
@@ -131,7 +131,8 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_study(args) -> int:
-    from .study import close_client, load_study, open_client, run_study
+    from .studies.run import run_study
+    from .studies.study import close_client, load_study, open_client
     study = load_study(args.study)
     ssp = _ssp(args)  # before starting a cluster
     if not ssp.exists():
@@ -165,7 +166,7 @@ def cmd_study(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    from .plots import plot
+    from .experiments.plots import plot
     for path in plot(Path(args.result_dir)):
         print(f"wrote {path}")
     return 0

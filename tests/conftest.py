@@ -10,7 +10,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.logging import addLoggerProxy
 
-from orchestrator.build import build_all
+from orchestrator.engine.build import build_all
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -25,7 +25,7 @@ def built(tmp_path_factory):
 def native_built(tmp_path_factory):
     """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real (gcc and
     mingw-w64) into a temporary folder laid out as build/native/."""
-    from orchestrator.build_native import build_native
+    from orchestrator.engine.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=True)
 
 
@@ -117,7 +117,7 @@ COMMANDS = tuple(f"controller.F{i}" for i in (1, 2, 3))
 
 def paper_scenario(stop_time=0.2, *overrides):
     """The paper's simulation scenario, shortened (0.2 s = 2,000 steps of 0.1 ms)."""
-    from orchestrator.scenario import load
+    from orchestrator.experiments.scenario import load
     return load(PAPER, [f"stop_time={stop_time}", *overrides])
 
 
@@ -126,7 +126,7 @@ def orchestrator_rows(ssp, scenario, names, ordering="jacobi", **conventions):
     communication point; ``conventions`` are CoSimulation's clock / connection_start."""
     import numpy as np
 
-    from orchestrator.master import CoSimulation
+    from orchestrator.engine.master import CoSimulation
     rows = []
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
                       **conventions) as sim:

@@ -1,7 +1,7 @@
 """fmu_common/binding.py: each FMU runs its own adapter code, even when two FMUs in one
 process have adapters of the same module name."""
 
-from orchestrator.build import build_fmu
+from orchestrator.engine.build import build_fmu
 from tapmp.interface import PLANT
 
 FROZEN_PLANT = '''

@@ -16,7 +16,7 @@ import numpy as np
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from fmpy import read_model_description
 
-from orchestrator.container import CONTAINER
+from orchestrator.engine.container import CONTAINER
 from tapmp.interface import ELEMENT, FMU_NAMES, VARIABLES
 
 FMPY = Path(sys.executable).with_name("fmpy")  # the fmpy command of this environment

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
-from orchestrator import families
+from orchestrator.engine import families
 from orchestrator.cli import main
 
 TRUE_POSITIONS = MOTOR_POSITIONS[:3]

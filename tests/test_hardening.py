@@ -177,10 +177,10 @@ class TAPMP_Plant(_RealPlant):
 
 
 def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
-    from orchestrator.build import SCRIPTS, build_fmu
-    from orchestrator.master import CoSimulation
-    from orchestrator.scenario import load
-    from orchestrator.ssp import write_ssp
+    from orchestrator.engine.build import SCRIPTS, build_fmu
+    from orchestrator.engine.master import CoSimulation
+    from orchestrator.experiments.scenario import load
+    from orchestrator.engine.ssp import write_ssp
     from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
 
     real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.results import run_scenario
-from orchestrator.scenario import load
+from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.experiments.results import run_scenario
+from orchestrator.experiments.scenario import load
 from tapmp.closed_loop import simulate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -118,8 +118,8 @@ class TAPMP_Plant(_RealPlant):
 
 
 def test_a_non_finite_output_of_any_fmu_stops_the_run(built, tmp_path):
-    from orchestrator.build import SCRIPTS, build_fmu
-    from orchestrator.ssp import write_ssp
+    from orchestrator.engine.build import SCRIPTS, build_fmu
+    from orchestrator.engine.ssp import write_ssp
     from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
 
     real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")

@@ -1,9 +1,9 @@
-"""Streaming metrics (orchestrator/metrics.py) equal numpy over the whole table."""
+"""Streaming metrics (orchestrator/experiments/metrics.py) equal numpy over the whole table."""
 
 import numpy as np
 import pytest
 
-from orchestrator.metrics import ErrorStatistics, compute
+from orchestrator.experiments.metrics import ErrorStatistics, compute
 
 COLUMNS = ["time"] + [f"trajectory.q{i}_d" for i in (1, 2, 3)] + [f"plant.q{i}_true" for i in (1, 2, 3)] \
     + ["trajectory.X_d", "trajectory.Z_d", "trajectory.B_d", "plant.X", "plant.Z", "plant.B"]

@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.build_native import CFLAGS
-from orchestrator.scenario import load
+from orchestrator.engine.build_native import CFLAGS
+from orchestrator.experiments.scenario import load
 from tapmp import dynamics, kinematics
 from tapmp.closed_loop import simulate
 from tapmp.control import APDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, ControllerModel, Gains

@@ -1,4 +1,4 @@
-"""Result folders (orchestrator/results.py): nothing lost on Ctrl-C, decimation that leaves
+"""Result folders (orchestrator/experiments/results.py): nothing lost on Ctrl-C, decimation that leaves
 the dynamics alone, determinism and isolation of closed loops in one process."""
 
 import csv
@@ -9,9 +9,9 @@ import sys
 import time
 from pathlib import Path
 
-from orchestrator.master import CoSimulation
-from orchestrator.results import run_scenario
-from orchestrator.scenario import load
+from orchestrator.engine.master import CoSimulation
+from orchestrator.experiments.results import run_scenario
+from orchestrator.experiments.scenario import load
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"

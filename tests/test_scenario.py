@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.scenario import ScenarioError, load
+from orchestrator.experiments.scenario import ScenarioError, load
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"

@@ -1,4 +1,4 @@
-"""TAPMP.ssp and the SSP loader (orchestrator.master.CoSimulation): bad files give one
+"""TAPMP.ssp and the SSP loader (orchestrator.engine.master.CoSimulation): bad files give one
 clear error naming the file, bad connections are rejected before any FMU runs."""
 
 import re
@@ -12,8 +12,8 @@ import pytest
 from fmpy.ssp.ssd import read_ssd
 
 from orchestrator.cli import main
-from orchestrator import master
-from orchestrator.master import CoSimulation, CoSimulationError
+from orchestrator.engine import master
+from orchestrator.engine.master import CoSimulation, CoSimulationError
 from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES
 
 ROOT = Path(__file__).resolve().parent.parent

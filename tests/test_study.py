@@ -8,9 +8,10 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.scenario import ScenarioError, load, load_gain_file
-from orchestrator.study import (StudyError, cases, close_client, load_study, open_client, read_study_csv,
-                                run_study)
+from orchestrator.experiments.scenario import ScenarioError, load, load_gain_file
+from orchestrator.studies.run import run_study
+from orchestrator.studies.study import (StudyError, cases, close_client, load_study, open_client,
+                                        read_study_csv)
 
 ROOT = Path(__file__).resolve().parent.parent
 BASE = ROOT / "scenarios" / "paper_simulation.toml"

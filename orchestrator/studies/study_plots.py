@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .study import PENALTY_UM, STUDY_CSV, case_value, read_study_csv  # noqa: E402
+
 _MAE = (("tracking_mae_um_mean", "tracking MAE (mean of q1-q3) [um]"),
         ("sync_mae_um_mean", "synchronization MAE (mean of q1-q3) [um]"))
 
@@ -21,7 +23,6 @@ def _numeric(values) -> bool:
 
 def plot_study(out: Path, study, params: list) -> list:
     """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
-    from .study import STUDY_CSV, read_study_csv
     rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
     done = [r for r in rows if r["status"] == "completed"]
     if not done:
@@ -111,10 +112,9 @@ def _heatmaps(path, study, groups, group_keys, keys):
 
 def plot_objective(path: Path, results: dict) -> Path:
     """Objective of every tuning evaluation (log scale) and the best so far, one panel per law."""
-    from .tuning import PENALTY_UM, _value
     fig, axes = plt.subplots(1, len(results), figsize=(5.5 * len(results), 4), squeeze=False)
     for ax, (law, r) in zip(axes[0], results.items()):
-        vals = np.array([_value(row) for row in r["rows"]])
+        vals = np.array([case_value(row) for row in r["rows"]])
         ok = vals < PENALTY_UM
         n = np.arange(len(vals))
         ax.semilogy(n[ok], vals[ok], ".", label="candidate")

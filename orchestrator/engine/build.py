@@ -1,6 +1,6 @@
 """Build the TAPMP FMUs with pythonfmu, complete their modelDescription.xml, give them
 their own binary, and write the SSP system TAPMP.ssp and the closed-loop container FMU
-TAPMP_ClosedLoop.fmu (orchestrator/container.py).
+TAPMP_ClosedLoop.fmu (orchestrator/engine/container.py).
 
 pythonfmu 0.7 writes no units and no initial unknowns; :func:`complete_model_description`
 adds them from the variable tables in ``tapmp.interface`` (one source of truth).
@@ -24,7 +24,7 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, UNITS, VARIABLES
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = {
     PLANT: ROOT / "fmu_plant" / "TAPMP_Plant.py",
     CONTROLLER: ROOT / "fmu_controller" / "TAPMP_Controller.py",

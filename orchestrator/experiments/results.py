@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics
-from .master import CoSimulation
+from ..engine.master import CoSimulation
 from .scenario import Scenario
 
 BLOCK = 1000  # steps between writes of results.csv and metric updates

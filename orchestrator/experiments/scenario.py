@@ -5,12 +5,12 @@ tapmp.params.GAIN_PRESETS), gains_file (a gain preset file, see load_gain_file; 
 replaces the preset named by gains), stop_time, start_time, step, ordering, output,
 start_on_trajectory, record_every (store every Nth step in results.csv; metrics
 always use every step), clock and connection_start (conventions of other masters, see
-orchestrator.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's),
+orchestrator.engine.master; e.g. ordering = "jacobi" with clock = "accumulated" is Ecos's),
 open_inputs (a list of "element.variable" FMU inputs that no connection of the SSP
 drives, deliberately: they keep their start values; the master refuses any other
 undriven input, and an entry that is no input of the system or that a connection drives),
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
-see orchestrator.families; `--fmus` and `--ssp` on the command line override it).
+see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it).
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
@@ -31,7 +31,7 @@ from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import TrajectoryParams, reference
 
-from .clocks import CLOCKS
+from ..engine.clocks import CLOCKS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -139,7 +139,7 @@ class Scenario:
     limits: dict = field(default_factory=dict)
     record_every: int = 1
     open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
-    fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.families)
+    fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.engine.families)
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -303,7 +303,7 @@ def validate(s: Scenario) -> Scenario:
             raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
                                 f"[{LIMITS[k][1]}] (0 = no limit)")
     _check_open_inputs(s.open_inputs)
-    from .families import FAMILIES
+    from ..engine.families import FAMILIES
     if s.fmus not in FAMILIES:
         raise ScenarioError(f"fmus = {s.fmus!r} is invalid: allowed are {', '.join(FAMILIES)}")
     if s.record_every < 1:

@@ -19,7 +19,7 @@ Orderings of one macro step from t to t + h:
 
 Conventions of other masters, to reproduce them bit for bit (tests/test_libcosim.py,
 test_ecos.py, test_fmpy_ssp.py):
-* ``clock``: how t_k and h_k are computed (``orchestrator.clocks``): ``exact``
+* ``clock``: how t_k and h_k are computed (``orchestrator.engine.clocks``): ``exact``
   (default, t0 + k h), ``accumulated`` (FMPy, Ecos) or ``nanoseconds`` (libcosim).
 * ``connection_start``: ``propagated`` (default; also libcosim and Ecos, which iterate
   the transfers in Initialization Mode) or ``zero``: FMPy's ``simulate_ssp``, which
@@ -79,7 +79,7 @@ class DivergenceError(CoSimulationError):
 
 HINT = ("hint: gains unstable at this step size? `tapmp check` tells before a run; "
         "use stable gains or a smaller step")
-# Envelope signals per limit name (see orchestrator.scenario.LIMITS): (element, output, unit).
+# Envelope signals per limit name (see orchestrator.experiments.scenario.LIMITS): (element, output, unit).
 ENVELOPE = {"motor_travel": [("plant", f"q{i}_true", "m") for i in (1, 2, 3)],
             "platform_angle": [("plant", "B", "rad")]}
 

@@ -6,9 +6,9 @@ A study file (TOML) names a base scenario and what varies:
 * ``[monte_carlo]``: ``samples`` draws of the factors in ``[monte_carlo.vary.NAME]`` from
   stated distributions with a ``seed`` (combined with a grid: the same draws for every
   grid point, so the laws of a robustness study see the same plants);
-* ``[tune]``: minimize the objective over the gains of each law (orchestrator.tuning).
+* ``[tune]``: minimize the objective over the gains of each law (orchestrator.studies.tuning).
 
-Every case runs through the real FMUs (orchestrator.results.run_scenario) in a Dask
+Every case runs through the real FMUs (orchestrator.experiments.results.run_scenario) in a Dask
 worker process, into its own folder ``OUTPUT/cases/CASE``. Workers get only plain data
 (the base scenario as a dict, the changes, paths); each loads the FMUs itself. Rows
 (parameters, metrics, status, wall time) are appended to ``OUTPUT/study.csv`` as cases
@@ -37,7 +37,7 @@ import numpy as np
 
 from tapmp.params import GAIN_NAMES
 
-from .scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, read_toml, validate
+from ..experiments.scenario import _SECTION_PARAMS, LAWS, Scenario, ScenarioError, load, read_toml, validate
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -214,7 +214,6 @@ def load_study(path) -> Study:
     if "tune" in data:
         _require(not study.grid and not study.samples,
                  f"{path}: [tune] cannot be combined with [grid] or [monte_carlo]: use separate studies")
-        from .tuning import validate_tune
         study.tune = validate_tune(data["tune"], path)
     _require(study.grid or study.samples or study.tune,
              f"{path}: nothing varies: allowed is a [grid], a [monte_carlo] or a [tune] table")
@@ -297,6 +296,62 @@ def objective(metrics: dict) -> float:
     return 0.5 * (float(np.mean(metrics["tracking_mae_um"])) + float(np.mean(metrics["sync_mae_um"])))
 
 
+PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
+_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
+_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
+
+
+def validate_tune(table, path) -> dict:
+    """Check a study's [tune] table; returns it as plain data. StudyError names the key."""
+    where = f"{path}: tune"
+    _require(isinstance(table, dict), f"{where} must be a table")
+    for key in table:
+        _require(key in _KEYS, f"{where}.{key} is unknown: allowed are {', '.join(_KEYS)}")
+    laws = table.get("laws", list(LAWS))
+    _require(isinstance(laws, list) and laws and all(law in LAWS for law in laws),
+             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(LAWS)}")
+    bounds = table.get("bounds", {})
+    out_bounds = {}
+    for law in laws:
+        b = bounds.get(law)
+        _require(isinstance(b, dict) and b, f"{where}.bounds.{law} is missing: allowed is a table of "
+                 f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
+        out_bounds[law] = {}
+        for gain, lim in b.items():
+            _require(gain in _TUNABLE[law], f"{where}.bounds.{law}.{gain} is invalid: allowed are "
+                     f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
+                     + "K_T is not tuned: only Lambda / K_T matters)")
+            ok = (isinstance(lim, list) and len(lim) == 2
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim)
+                  and 0.0 < lim[0] < lim[1])
+            _require(ok, f"{where}.bounds.{law}.{gain} = {lim!r} is invalid: allowed is [low, high] with "
+                     "0 < low < high (searched on a log scale)")
+            out_bounds[law][gain] = [float(lim[0]), float(lim[1])]
+    spec = {"laws": laws, "bounds": out_bounds}
+    for key, default, lo in (("population", 6, 2), ("generations", 5, 1), ("seed", 0, 0)):
+        v = table.get(key, default)
+        _require(isinstance(v, int) and not isinstance(v, bool) and v >= lo,
+                 f"{where}.{key} = {v!r} is invalid: allowed is an integer >= {lo}")
+        spec[key] = v
+    w = table.get("write_to")
+    _require(isinstance(w, str) and w, f"{where}.write_to is missing: allowed is a folder for the preset "
+             "files, comparison.md and objective.png (relative to the working directory)")
+    spec["write_to"] = w
+    cst = table.get("compare_stop_time", 2.5)
+    _require(isinstance(cst, (int, float)) and not isinstance(cst, bool) and cst > 0,
+             f"{where}.compare_stop_time = {cst!r} is invalid: allowed is a number > 0 [s]")
+    spec["compare_stop_time"] = float(cst)
+    return spec
+
+
+def case_value(row) -> float:
+    """Objective of a study.csv row [um]; PENALTY_UM for a case that did not complete."""
+    v = row.get("objective")
+    if row.get("status") != "completed" or v in (None, ""):
+        return PENALTY_UM
+    return float(v)
+
+
 def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: bool = False,
              reject_unstable: bool = False, stop_token: str | None = None) -> dict:
     """Run one case in this process (a Dask worker): returns its row as plain data.
@@ -308,8 +363,8 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
     After results.request_stop(stop_token) (the study was stopped) the case ends at a
     step boundary, or does not start, with status "interrupted" (never a study.csv row).
     """
-    from .results import run_scenario, stop_requested
-    from .stability import check
+    from ..experiments.results import run_scenario, stop_requested
+    from ..experiments.stability import check
 
     start = time.perf_counter()
     row = {"status": "failed", "error": "", "worker": f"{os.uname().nodename}:{os.getpid()}"}
@@ -471,7 +526,7 @@ class CaseRunner:
         them, and record the rows of cases that finished meanwhile."""
         from dask.distributed import wait
 
-        from .results import request_stop
+        from ..experiments.results import request_stop
         try:
             self.client.run(request_stop, self.token, signum, on_error="ignore")
             wait(list(futures), timeout=STOP_WAIT_S)
@@ -509,50 +564,6 @@ def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> 
     out.mkdir(parents=True, exist_ok=True)
 
 
-def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
-              overwrite: bool = False, progress: bool = True, command: str = "") -> dict:
-    """Run a study on a Dask client; returns a summary (counts, paths, wall time). The
-    output folder is locked for the whole study (results.OutputInUseError if in use)."""
-    ssp = Path(ssp)
-    if not ssp.exists():
-        raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
-                         "tapmp build) or pass --ssp")
-    out = Path(out or study.output)
-    from .results import output_lock
-    with output_lock(out):  # one writer per study folder (cases lock their own folders)
-        if study.tune:
-            from .tuning import run_tuning
-            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command)
-        return _run_cases(study, ssp, client, out, resume, overwrite, progress, command)
-
-
-def _run_cases(study: Study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
-               command: str) -> dict:
-    """run_study for a grid / Monte Carlo study, in the locked output folder ``out``."""
-    case_list = cases(study)
-    fp = fingerprint(study, case_list)
-    prepare(study, out, resume, overwrite, fp)
-    out.mkdir(parents=True, exist_ok=True)
-    from .results import write_json
-    write_json(out / STUDY_JSON, {"name": study.name, "source": study.source, "kind": study.kind,
-                                  "fingerprint": fp, "command": command, "cases": case_list})
-    params = list(case_list[0]["params"])
-    table = StudyTable(out / STUDY_CSV, params)
-    done_before = len(table.rows)
-    start = time.perf_counter()
-    try:
-        rows = CaseRunner(client, study.base_scenario(), ssp, out, table, study.keep_results,
-                          progress, study.name).run(case_list)
-    finally:
-        table.close()
-    wall = time.perf_counter() - start
-    from .study_plots import plot_study
-    figures = plot_study(out, study, params)
-    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
-    return {"out": out, "cases": len(case_list), "ran": len(case_list) - done_before, "counts": counts,
-            "wall_time_s": wall, "figures": figures}
-
-
 def read_study_csv(path) -> list[dict]:
     """Rows of a study.csv with numbers as floats (empty cells as None)."""
     with open(path, newline="") as f:
@@ -568,5 +579,5 @@ def read_study_csv(path) -> list[dict]:
     return rows
 
 
-__all__ = ["Study", "StudyError", "load_study", "cases", "run_case", "run_study", "open_client",
+__all__ = ["Study", "StudyError", "load_study", "cases", "run_case", "open_client",
            "close_client", "objective", "read_study_csv"]

@@ -3,12 +3,12 @@
 scipy.optimize.differential_evolution searches the base-10 logarithm of the tuned gains
 (the same value on all three motors) within stated bounds. It hands each generation to
 ``workers`` as one batch; ``TuneObjective.map`` runs the batch as cases on the Dask
-workers (through the real FMUs, orchestrator.study.run_case) and records every
+workers (through the real FMUs, orchestrator.studies.study.run_case) and records every
 evaluation as a row of study.csv. A candidate that the stability pre-check
-(orchestrator.stability) finds not stable is rejected without running (status
+(orchestrator.experiments.stability) finds not stable is rejected without running (status
 "rejected"); rejected and failed candidates score PENALTY_UM.
 
-The objective is orchestrator.study.objective: (mean tracking MAE + mean synchronization
+The objective is orchestrator.studies.study.objective: (mean tracking MAE + mean synchronization
 MAE) / 2 over the three motors [um], on the study's base scenario (with its [set], e.g. a
 short stop_time). K_T is not tuned: F = u / K_T, so only the ratios Lambda / K_T matter.
 
@@ -27,64 +27,9 @@ from scipy.optimize import differential_evolution
 
 from tapmp.params import GAIN_NAMES
 
-from .scenario import LAWS, load_gain_file
-from .study import (STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, _require, apply_changes, fingerprint,
-                    prepare)
-
-PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
-_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
-_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
-
-
-def validate_tune(table, path) -> dict:
-    """Check a study's [tune] table; returns it as plain data. StudyError names the key."""
-    where = f"{path}: tune"
-    _require(isinstance(table, dict), f"{where} must be a table")
-    for key in table:
-        _require(key in _KEYS, f"{where}.{key} is unknown: allowed are {', '.join(_KEYS)}")
-    laws = table.get("laws", list(LAWS))
-    _require(isinstance(laws, list) and laws and all(law in LAWS for law in laws),
-             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(LAWS)}")
-    bounds = table.get("bounds", {})
-    out_bounds = {}
-    for law in laws:
-        b = bounds.get(law)
-        _require(isinstance(b, dict) and b, f"{where}.bounds.{law} is missing: allowed is a table of "
-                 f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
-        out_bounds[law] = {}
-        for gain, lim in b.items():
-            _require(gain in _TUNABLE[law], f"{where}.bounds.{law}.{gain} is invalid: allowed are "
-                     f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
-                     + "K_T is not tuned: only Lambda / K_T matters)")
-            ok = (isinstance(lim, list) and len(lim) == 2
-                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim)
-                  and 0.0 < lim[0] < lim[1])
-            _require(ok, f"{where}.bounds.{law}.{gain} = {lim!r} is invalid: allowed is [low, high] with "
-                     "0 < low < high (searched on a log scale)")
-            out_bounds[law][gain] = [float(lim[0]), float(lim[1])]
-    spec = {"laws": laws, "bounds": out_bounds}
-    for key, default, lo in (("population", 6, 2), ("generations", 5, 1), ("seed", 0, 0)):
-        v = table.get(key, default)
-        _require(isinstance(v, int) and not isinstance(v, bool) and v >= lo,
-                 f"{where}.{key} = {v!r} is invalid: allowed is an integer >= {lo}")
-        spec[key] = v
-    w = table.get("write_to")
-    _require(isinstance(w, str) and w, f"{where}.write_to is missing: allowed is a folder for the preset "
-             "files, comparison.md and objective.png (relative to the working directory)")
-    spec["write_to"] = w
-    cst = table.get("compare_stop_time", 2.5)
-    _require(isinstance(cst, (int, float)) and not isinstance(cst, bool) and cst > 0,
-             f"{where}.compare_stop_time = {cst!r} is invalid: allowed is a number > 0 [s]")
-    spec["compare_stop_time"] = float(cst)
-    return spec
-
-
-def _value(row) -> float:
-    v = row.get("objective")
-    if row.get("status") != "completed" or v in (None, ""):
-        return PENALTY_UM
-    return float(v)
-
+from ..experiments.scenario import load_gain_file
+from .study import (PENALTY_UM, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, _require, apply_changes,
+                    case_value, fingerprint, prepare)
 
 class TuneObjective:
     """The objective of one law's candidates x = log10(gains), evaluated as study cases."""
@@ -114,7 +59,7 @@ class TuneObjective:
         """scipy's ``workers`` protocol: [func(x) for x in xs], here one batch of cases on Dask
         (func is this objective, wrapped by scipy; its batch is run instead of one by one)."""
         rows = self.runner.run([self.case(x) for x in xs], reject_unstable=True)
-        return [_value(r) for r in rows]
+        return [case_value(r) for r in rows]
 
     def __call__(self, x) -> float:
         return self.map(None, [x])[0]
@@ -135,7 +80,7 @@ def _preset_text(law, gains, objective_start, objective_tuned, base, command) ->
 def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
                command: str) -> dict:
     """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png."""
-    from .results import write_json
+    from ..experiments.results import write_json
 
     spec = study.tune
     fp = fingerprint(study, [])
@@ -166,14 +111,14 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
                                          updating="deferred", workers=obj.map, tol=0.0)
             rows = [table.rows[c["case"]] for c in obj.cases]
             start_row = rows[0]  # differential_evolution evaluates x0 first
-            best_row = min(rows, key=_value)
+            best_row = min(rows, key=case_value)
             tuned = {n: tuple(float(v) for v in getattr(g0, n)) for n in GAIN_NAMES}
             for n in names:
                 tuned[n] = (float(best_row[n]),) * 3
             preset = write_to / f"{law}.toml"
-            preset.write_text(_preset_text(law, tuned, _value(start_row), _value(best_row), scenario, command))
+            preset.write_text(_preset_text(law, tuned, case_value(start_row), case_value(best_row), scenario, command))
             load_gain_file(preset)  # what we wrote must be a valid preset file
-            results[law] = {"preset": preset, "start": _value(start_row), "tuned": _value(best_row),
+            results[law] = {"preset": preset, "start": case_value(start_row), "tuned": case_value(best_row),
                             "evaluations": len(rows), "result_fun": float(res.fun),
                             "rows": rows, "start_gains": {n: list(getattr(g0, n)) for n in GAIN_NAMES},
                             "tuned_gains": tuned}
@@ -219,7 +164,7 @@ def _compare(study, ssp, client, out, table, results, spec, progress) -> dict:
 
 def _comparison_md(path: Path, study, short, results, compare, spec, command) -> str:
     """comparison.md: starting vs tuned gains per law, and SC-DC vs APD-DC with both laws tuned."""
-    from .report import comparison_tables
+    from ..experiments.report import comparison_tables
     from .study import objective
 
     base = compare["base"]

@@ -9,7 +9,7 @@
 
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / "build"
 FAMILIES = {"python": BUILD / "TAPMP.ssp", "native": BUILD / "native" / "fmi2" / "TAPMP.ssp",
             "fmi3": BUILD / "native" / "fmi3" / "TAPMP.ssp"}

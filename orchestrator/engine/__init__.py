@@ -1,0 +1,1 @@
+"""The co-simulation engine: FMU builds, SSP systems, the master loop and its clocks."""

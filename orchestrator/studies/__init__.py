@@ -1,0 +1,1 @@
+"""Studies on Dask: parameter sweeps, Monte-Carlo robustness, gain tuning."""
