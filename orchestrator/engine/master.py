@@ -531,8 +531,9 @@ class CoSimulation:
         when = "" if t is None else f" at t = {t:.6g} s"
         detail = [m for m in self.log if m.startswith(("[ERROR]", "[FATAL]"))]
         reason = detail[0] if detail else str(err)
+        cause = err if isinstance(err, BaseException) else None  # a status or log is no exception
         raise CoSimulationError(f"{unit.name}: {what} failed{when}: {reason}", unit.name, t,
-                                list(self.log)) from err
+                                list(self.log)) from cause
 
     # --- stepping ------------------------------------------------------------------
     @property
