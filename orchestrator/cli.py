@@ -165,6 +165,21 @@ def cmd_study(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    """`tapmp export`: the scenario's SSP with its parameter set, and the container's start values."""
+    from .experiments.export import export
+    scenario = load(args.scenario, args.set)
+    source = _ssp(args, scenario)
+    ssp, values = export(scenario, source, Path(args.out), args.overwrite)
+    pairs = values.read_text().split()
+    print(f"wrote {ssp} (SSP 1.0: the FMUs of {source}, parameter set "
+          f"{scenario.name!r} bound to every element, {scenario.n_steps} steps of {scenario.step:g} s to "
+          f"{scenario.stop_time:g} s)")
+    print(f"wrote {values} (--start-values for fmpy simulate on TAPMP_ClosedLoop.fmu):")
+    print(" ".join(pairs))
+    return 0
+
+
 def cmd_plot(args) -> int:
     from .experiments.plots import plot
     for path in plot(Path(args.result_dir)):
@@ -246,6 +261,24 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.set_defaults(func=cmd_study)
+    ex = sub.add_parser("export", help="write a scenario as an SSP with its parameter set",
+                        description="Write the SSP of the FMU family with the scenario's parameter set (SSP "
+                        "ParameterValues, resources/<element>.ssv, bound to every element; the plant's initial "
+                        "state included) and its start time, stop time and step in the DefaultExperiment, so that "
+                        "libcosim, Ecos or FMPy run the scenario; and FILE.start-values.txt, the same values as "
+                        "--start-values for `fmpy simulate` on TAPMP_ClosedLoop.fmu (also printed). Relative "
+                        "paths are relative to the current directory; the default SSP of --fmus is found in the "
+                        "repository's build/.")
+    ex.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    ex.add_argument("--out", required=True, help="SSP file to write, ending in .ssp, e.g. export/paper.ssp")
+    ex.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scenario value, e.g. --set stop_time=0.2")
+    ex.add_argument("--ssp", help="SSP system file to start from (default: the built SSP of --fmus)")
+    ex.add_argument("--fmus", choices=list(FAMILIES), help="FMU family whose SSP is exported: native (default, "
+                    "build/native/fmi2/TAPMP.ssp), fmi3 (build/native/fmi3/TAPMP.ssp) or python (build/TAPMP.ssp); "
+                    "overrides the scenario's fmus")
+    ex.add_argument("--overwrite", action="store_true", help="replace an existing FILE.ssp and its start values")
+    ex.set_defaults(func=cmd_export)
     pl = sub.add_parser("plot", help="plot a run or a comparison",
                         description="Write the figures (cf. paper Fig. 4-7) of a result folder as PNG.")
     pl.add_argument("result_dir", help="a run folder or a comparison folder")
