@@ -1,22 +1,24 @@
-"""FMI adapter of the SC-DC / APD-DC controller: maps FMU variables to
+"""FMI adapter of the SC-DC / APD-DC / PID-DC controller: maps FMU variables to
 tapmp.control.ControllerModel."""
 
 import math
 
 from fmu_common.slave import TapmpSlave
-from tapmp.control import ControllerModel, Gains
+from tapmp.control import ControllerModel, Gains, ModalGains
 from tapmp.interface import CONTROLLER_VARS
 from tapmp.params import GAIN_NAMES, ModelParams
 
 
 class TAPMP_Controller(TapmpSlave):
-    """Discrete-time SC-DC controller (Eq. 15-26) with the APD-DC baseline (Eq. 38-39).
+    """Discrete-time SC-DC controller (Eq. 15-26) with the APD-DC baseline (Eq. 38-39) and
+    the PID-DC baseline (modal PID on e, same feedforward).
 
     On doStep(t, h) it samples its inputs, computes the command and holds it."""
 
     VARIABLES = CONTROLLER_VARS
-    description = ("SC-DC synchronization controller with dynamics compensation (law 0) and the "
-                   "APD-DC baseline (law 1) for the TAPMP; outputs force commands F = u / K_T")
+    description = ("SC-DC synchronization controller with dynamics compensation (law 0), the "
+                   "APD-DC baseline (law 1) and the modal PID-DC baseline (law 2) for the TAPMP; "
+                   "outputs force commands F = u / K_T")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -25,13 +27,14 @@ class TAPMP_Controller(TapmpSlave):
     def _build(self):
         params = ModelParams(*(getattr(self, n) for n in ModelParams._fields))
         gains = Gains(*(tuple(getattr(self, f"{n}{i}") for i in (1, 2, 3)) for n in GAIN_NAMES))
-        return ControllerModel(params, gains, self.law, self.velocity_source, self.force_limit)
+        modal = ModalGains(*(getattr(self, n) for n in ModalGains._fields))
+        return ControllerModel(params, gains, self.law, self.velocity_source, self.force_limit, modal)
 
     def setup_model(self):
         self.model = self._build()
 
     def check_parameters(self):
-        self._build()  # the model's own checks (Gains.validated, law, velocity_source, force_limit)
+        self._build()  # the model's own checks (Gains, ModalGains, law, velocity_source, force_limit)
         super().check_parameters()
 
     def check_hidden_state(self, hidden):

@@ -1,4 +1,4 @@
-/* Native TAPMP_Controller FMU: maps the FMU variables to the SC-DC / APD-DC controller of
+/* Native TAPMP_Controller FMU: maps the FMU variables to the SC-DC / APD-DC / PID-DC controller of
  * tapmp_model.c, as fmu_controller/TAPMP_Controller.py maps them to
  * tapmp.control.ControllerModel. On doStep(t, h) it samples its inputs, computes the
  * command and holds it. */
@@ -12,8 +12,10 @@
 
 static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
 static const int GAIN_VR[5] = {VR_Lambda_p1, VR_Lambda_v1, VR_b1, VR_D1, VR_K_T1};
+static const int MODAL_VR[6] = {VR_kp_c, VR_kv_c, VR_ki_c, VR_kp_d, VR_kv_d, VR_ki_d};
 
-/* tapmp.params.ModelParams.validated, tapmp.control.Gains.validated, ControllerModel.__init__ */
+/* tapmp.params.ModelParams.validated, tapmp.control.Gains.validated, ModalGains.validated,
+ * ControllerModel.__init__ */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     char v[40];
@@ -27,10 +29,16 @@ int model_validate(const tapmp_instance *inst, char *msg, size_t size)
                 return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(x, v),
                                           k_t ? "a finite number > 0" : "a finite number >= 0", 0, 0);
         }
+    for (int k = 0; k < 6; k++) {  /* ModalGains.validated */
+        double x = inst->reals[MODAL_VR[k]];
+        if (!(isfinite(x) && x >= 0.0))
+            return tapmp_invalid_text(msg, size, VARS[MODAL_VR[k]].name, tapmp_repr(x, v),
+                                      "a finite number >= 0", 0, 0);
+    }
     int law = inst->ints[VR_law], vs = inst->ints[VR_velocity_source];
-    if (law != TAPMP_SCDC && law != TAPMP_APDDC) {
+    if (law != TAPMP_SCDC && law != TAPMP_APDDC && law != TAPMP_PIDDC) {
         snprintf(v, sizeof v, "%d", law);
-        return tapmp_invalid_text(msg, size, "law", v, "0 (SC-DC) or 1 (APD-DC)", 0, 0);
+        return tapmp_invalid_text(msg, size, "law", v, "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)", 0, 0);
     }
     if (vs != 0 && vs != 1) {
         snprintf(v, sizeof v, "%d", vs);
@@ -55,6 +63,12 @@ static void build(tapmp_instance *inst)
         m->g.D[i] = inst->reals[VR_D1 + i];
         m->g.K_T[i] = inst->reals[VR_K_T1 + i];
     }
+    m->g.kp_c = R(kp_c);
+    m->g.kv_c = R(kv_c);
+    m->g.ki_c = R(ki_c);
+    m->g.kp_d = R(kp_d);
+    m->g.kv_d = R(kv_d);
+    m->g.ki_d = R(ki_d);
     m->law = inst->ints[VR_law];
     m->velocity_source = inst->ints[VR_velocity_source];
     m->force_limit = R(force_limit);

@@ -1,4 +1,5 @@
-"""Control laws: SC-DC (paper Section 4, Eq. 15-26) and the APD-DC baseline (Eq. 38-39).
+"""Control laws: SC-DC (paper Section 4, Eq. 15-26), the APD-DC baseline (Eq. 38-39) and
+PID-DC, a PID on e with modal gains and the same feedforward (a fair baseline, issue 14).
 
 Units: positions [m], velocities [m/s], motor forces [N]. The command u relates to
 the motor force by K_T F = u (the closed-loop setting K_T u_1 = u_sc in the proof
@@ -11,10 +12,12 @@ from typing import NamedTuple
 from .dynamics import generalized_force
 from .errors import ModelInputError, require_finite
 from .kinematics import forward, inverse, joint_velocity, solve_transpose, task_velocity
-from .params import GAIN_NAMES, ModelParams
+from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, ModelParams, scdc_modal_image
 
 SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
 APDDC = 1  # law: augmented PD with dynamics compensation (Eq. 38)
+PIDDC = 2  # law: PID on e with modal gains and dynamics compensation (pid_command)
+LAW_TEXT = "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)"
 VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
 _INPUT_NAMES = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d",
@@ -44,6 +47,37 @@ class Gains(NamedTuple):
     def from_preset(cls, preset: dict) -> "Gains":
         """Build from a preset dict as in tapmp.params.GAIN_PRESETS."""
         return cls(*(tuple(float(x) for x in preset[n]) for n in GAIN_NAMES))
+
+
+_MG = DEFAULT_MODAL_GAINS
+
+
+class ModalGains(NamedTuple):
+    """PID-DC gains per mode: common mode (1, 1, 1)/sqrt(3) (suffix _c) and the two
+    differential modes (suffix _d), K = k_c Pi_c + k_d Pi_d. Units as Lambda (u scaled by
+    K_T, F = u / K_T): kp [N/m], kv [N s/m], ki [N/(m s)]. Defaults: the modal image of
+    the default SC-DC gains (tapmp.params.DEFAULT_MODAL_GAINS)."""
+
+    kp_c: float = _MG["kp_c"]
+    kv_c: float = _MG["kv_c"]
+    ki_c: float = _MG["ki_c"]
+    kp_d: float = _MG["kp_d"]
+    kv_d: float = _MG["kv_d"]
+    ki_d: float = _MG["ki_d"]
+
+    def validated(self) -> "ModalGains":
+        """Return self if every gain is finite and >= 0 (ModelInputError otherwise)."""
+        for name, v in zip(self._fields, self):
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ModelInputError(name, v, "a finite number >= 0")
+        return self
+
+    @classmethod
+    def matching_scdc(cls, g: "Gains") -> "ModalGains":
+        """The gains with which PID-DC equals SC-DC with uniform gains g (see
+        tapmp.params.scdc_modal_image); ValueError for non-uniform gains."""
+        image = scdc_modal_image(g._asdict())
+        return cls(*(image[n] for n in MODAL_GAIN_NAMES))
 
 
 def sync_errors(e1: float, e2: float, e3: float) -> tuple[float, float, float]:
@@ -91,22 +125,45 @@ def apd_command(e, de, u_d, g: Gains) -> tuple[float, float, float]:
     return tuple(g.K_T[i] * u_d[i] + g.Lambda_v[i] * de[i] + g.Lambda_p[i] * e[i] for i in range(3))
 
 
+def _modal(k_c: float, k_d: float, x, i: int, mean: float) -> float:
+    """Row i of (k_c Pi_c + k_d Pi_d) x, with mean = (x1 + x2 + x3) / 3 (Pi_c x = mean 1)."""
+    return k_c * mean + k_d * (x[i] - mean)
+
+
+def pid_command(e, de, integral_e, u_d, m: ModalGains, K_T) -> tuple[float, float, float]:
+    """PID-DC command u = K_T u_d + K_P e + K_V de + K_I int(e) (one value per motor).
+
+    Each K = k_c Pi_c + k_d Pi_d acts on the common mode (the mean of the three motors)
+    with k_c and on the differential modes (the deviations from the mean) with k_d.
+    e [m], de [m/s], integral_e [m s] (right-rectangle sum of e), u_d [N] (Eq. 26/39),
+    K_T per motor. With ModalGains.matching_scdc(g) it equals scdc_command for uniform g.
+    """
+    me = (e[0] + e[1] + e[2]) / 3.0
+    mv = (de[0] + de[1] + de[2]) / 3.0
+    mi = (integral_e[0] + integral_e[1] + integral_e[2]) / 3.0
+    return tuple(K_T[i] * u_d[i] + _modal(m.kp_c, m.kp_d, e, i, me) + _modal(m.kv_c, m.kv_d, de, i, mv)
+                 + _modal(m.ki_c, m.ki_d, integral_e, i, mi) for i in range(3))
+
+
 class ControllerModel:
     """The discrete-time controller: samples, computes and holds the command.
 
     On each sample it uses q_d = IK(x_d), dq_d = J(x_d) xd_d, e = q_d - q (Eq. 15),
-    e_s (Eq. 18), c (Eq. 21). The integral of c (Eq. 22) is a right-rectangle sum
-    I_k = I_{k-1} + h c_k, so it includes the current sample. Joint velocity is the
+    e_s (Eq. 18), c (Eq. 21). The integral (of c for SC-DC, Eq. 22; of e for PID-DC;
+    unused by APD-DC) is a right-rectangle sum I_k = I_{k-1} + h x_k, so it includes
+    the current sample. Joint velocity is the
     backward difference (q_k - q_{k-1}) / h (velocity_source 0) or the dq inputs (1);
     the very first sample, which has no predecessor, takes the dq inputs.
     """
 
     def __init__(self, params: ModelParams, gains: Gains, law: int = SCDC,
-                 velocity_source: int = VELOCITY_DIFFERENCE, force_limit: float = 0.0):
+                 velocity_source: int = VELOCITY_DIFFERENCE, force_limit: float = 0.0,
+                 modal: ModalGains = ModalGains()):
         self.p = params.validated()
         self.g = gains.validated()
-        if law not in (SCDC, APDDC):
-            raise ModelInputError("law", law, "0 (SC-DC) or 1 (APD-DC)")
+        self.modal = modal.validated()
+        if law not in (SCDC, APDDC, PIDDC):
+            raise ModelInputError("law", law, LAW_TEXT)
         if velocity_source not in (VELOCITY_DIFFERENCE, VELOCITY_INPUT):
             raise ModelInputError("velocity_source", velocity_source,
                                   "0 (backward difference of q) or 1 (dq inputs)")
@@ -148,6 +205,11 @@ class ControllerModel:
             if advance:
                 integral = [integral[i] + h * c[i] for i in range(3)]
             u = scdc_command(e, de, c, integral, u_d, self.g)
+        elif self.law == PIDDC:
+            integral = self.integral
+            if advance:
+                integral = [integral[i] + h * e[i] for i in range(3)]
+            u = pid_command(e, de, integral, u_d, self.modal, self.g.K_T)
         else:
             integral = self.integral
             u = apd_command(e, de, u_d, self.g)

@@ -7,7 +7,7 @@ Defaults come from the model's own parameter tuples, so nothing is typed twice.
 
 from typing import NamedTuple
 
-from .params import GAIN_NAMES, PAPER_MODEL, GAIN_PRESETS
+from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, PAPER_MODEL, GAIN_PRESETS
 from .plant import PlantConfig
 from .trajectory import TrajectoryParams
 
@@ -38,7 +38,8 @@ UNITS = {
     "m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s2": {"m": 1, "s": -2},
     "rad": {"rad": 1}, "rad/s": {"rad": 1, "s": -1}, "rad/s2": {"rad": 1, "s": -2},
     "N": {"kg": 1, "m": 1, "s": -2}, "kg": {"kg": 1}, "kg.m2": {"kg": 1, "m": 2},
-    "N.s/m": {"kg": 1, "s": -1}, "N/m": {"kg": 1, "s": -2}, "1/s": {"s": -1},
+    "N.s/m": {"kg": 1, "s": -1}, "N/m": {"kg": 1, "s": -2}, "N/(m.s)": {"kg": 1, "s": -3},
+    "1/s": {"s": -1},
     "Hz": {"s": -1}, "1": {},
 }
 
@@ -82,7 +83,16 @@ _PLANT_CFG_DOC = {
     "F_c3": ("N", "Coulomb friction force of mover 3"),
     "v_s": ("m/s", "velocity scale of the tanh-smoothed Coulomb friction"),
     "force_limit": ("N", "motor force saturation |F_i| <= force_limit; 0 = no saturation"),
-    "k_pull": ("N/m", "mutual pulling stiffness between adjacent movers (change of gap q2-q1, q3-q2); 0 = off"),
+    "k_pull": ("N/m", "mutual pulling stiffness between adjacent movers on the change of gap q2-q1, q3-q2 "
+                      "(> 0 restoring, < 0 negative stiffness); 0 = off"),
+    "attraction_force": ("N", "magnetic attraction between adjacent movers at the initial gap, "
+                              "attraction_force (g_a/g)^2 pulling each pair together; 0 = off"),
+    "attraction_gap": ("m", "clear gap g_a between adjacent movers at the initial pose (attraction law)"),
+    "cogging_amplitude": ("N", "force ripple (cogging) amplitude, A sin(2 pi q_i/cogging_pitch + phase_i); 0 = off"),
+    "cogging_pitch": ("m", "force ripple (cogging) period in the motor position"),
+    "cogging_phase1": ("rad", "force ripple (cogging) phase of motor 1"),
+    "cogging_phase2": ("rad", "force ripple (cogging) phase of motor 2"),
+    "cogging_phase3": ("rad", "force ripple (cogging) phase of motor 3"),
 }
 
 PLANT_VARS: tuple[Var, ...] = tuple(
@@ -107,6 +117,10 @@ _GAIN_DOC = {
     "K_T": ("1", "feedforward gain; force command F = u / K_T"),
 }
 _DEFAULT_GAINS = GAIN_PRESETS["default"]
+_MODE = {"c": "common mode (1,1,1)/sqrt(3)", "d": "differential modes (I - 1 1^T/3)"}
+_MODAL_DOC = {f"k{k}_{m}": (unit, f"PID-DC (law 2) {what} gain on the {_MODE[m]}")
+              for k, unit, what in (("p", "N/m", "proportional"), ("v", "N.s/m", "derivative"),
+                                    ("i", "N/(m.s)", "integral")) for m in "cd"}
 
 CONTROLLER_VARS: tuple[Var, ...] = tuple(
     _pose("_d", "input", "desired")
@@ -121,14 +135,16 @@ CONTROLLER_VARS: tuple[Var, ...] = tuple(
     + [Var(f"es{i}", "output", "m", f"synchronization error of motor {i} (Eq. 18)") for i in (1, 2, 3)]
     + [Var(f"{n}{i}", "parameter", _GAIN_DOC[n][0], f"{_GAIN_DOC[n][1]}, motor {i}",
            _DEFAULT_GAINS[n][i - 1], variability="tunable") for n in GAIN_NAMES for i in (1, 2, 3)]
-    + [Var("law", "parameter", "", "control law: 0 = SC-DC (Eq. 25), 1 = APD-DC (Eq. 38)", 0,
-           type="Integer", variability="tunable"),
+    + [Var("law", "parameter", "", "control law: 0 = SC-DC (Eq. 25), 1 = APD-DC (Eq. 38), "
+           "2 = PID-DC (modal PID on e)", 0, type="Integer", variability="tunable"),
        Var("velocity_source", "parameter", "",
            "joint velocity: 0 = backward difference of q, 1 = dq inputs", 0,
            type="Integer", variability="tunable"),
        Var("force_limit", "parameter", "N", "force command limit |F_i| <= force_limit; 0 = no limit",
            0.0, variability="tunable")]
     + _model_params("controller nominal", "fixed")
+    + [Var(n, "parameter", _MODAL_DOC[n][0], _MODAL_DOC[n][1], DEFAULT_MODAL_GAINS[n], variability="tunable")
+       for n in MODAL_GAIN_NAMES]
 )
 
 _TP = TrajectoryParams()
@@ -160,13 +176,17 @@ RANGES: dict[str, tuple[float, float]] = {
     "dX0": (-1e3, 1e3), "dZ0": (-1e3, 1e3), "dB0": (-1e3, 1e3),
     "encoder_resolution": (0.0, 1.0), "c_v1": (0.0, 1e9), "c_v2": (0.0, 1e9), "c_v3": (0.0, 1e9),
     "F_c1": (0.0, 1e9), "F_c2": (0.0, 1e9), "F_c3": (0.0, 1e9), "v_s": (1e-12, 1e3),
-    "force_limit": (0.0, 1e9), "k_pull": (0.0, 1e12),
+    "force_limit": (0.0, 1e9), "k_pull": (-1e12, 1e12),
+    "attraction_force": (0.0, 1e6), "attraction_gap": (1e-6, 1.0),
+    "cogging_amplitude": (0.0, 1e6), "cogging_pitch": (1e-6, 1.0),
+    "cogging_phase1": (-1e6, 1e6), "cogging_phase2": (-1e6, 1e6), "cogging_phase3": (-1e6, 1e6),
     # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
     # stays below a millisecond of CPU per step or so
     "substeps": (1, 10000),
     **{f"{n}{i}": r for n, r in (("Lambda_p", (0.0, 1e12)), ("Lambda_v", (0.0, 1e12)), ("b", (0.0, 1e9)),
                                  ("D", (0.0, 1e9)), ("K_T", (1e-12, 1e12))) for i in (1, 2, 3)},
-    "law": (0, 1), "velocity_source": (0, 1),
+    "law": (0, 2), "velocity_source": (0, 1),
+    **{f"k{k}_{m}": (0.0, 1e15) for k in "pvi" for m in "cd"},
     "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),
     "phase_xz": (-1e6, 1e6), "B_amplitude": (0.0, 1.5), "f_B": (0.0, 1e4), "phase_B": (-1e6, 1e6),
     "B_offset": (-1.5, 1.5),

@@ -61,6 +61,38 @@ GAIN_PRESETS: dict[str, dict[str, tuple[float, float, float]]] = {
 
 GAIN_NAMES = ("Lambda_p", "Lambda_v", "b", "D", "K_T")
 
+# PID-DC (law 2) modal gains: K = k_c Pi_c + k_d Pi_d with Pi_c = 1 1^T / 3 (common mode) and
+# Pi_d = I - Pi_c (the two differential modes of L = 3 I - 1 1^T = 3 Pi_d); same units and
+# K_T scaling as Lambda: kp [N/m], kv [N s/m], ki [N/(m s)] on u, F = u / K_T.
+MODAL_GAIN_NAMES = ("kp_c", "kv_c", "ki_c", "kp_d", "kv_d", "ki_d")
+
+
+def scdc_modal_image(preset: dict) -> dict[str, float]:
+    """The PID-DC gains that reproduce SC-DC exactly, for uniform SC-DC gains.
+
+    Written in e, SC-DC (Eq. 22-25) is u = K_T u_d + Lambda_v de + [Lambda_v D I +
+    (Lambda_v b + Lambda_p) L] e + Lambda_v D b L int(e) with L = 3 Pi_d, so per mode:
+    common kp_c = Lambda_v D, kv_c = Lambda_v, ki_c = 0; differential
+    kp_d = Lambda_v D + 3 (Lambda_v b + Lambda_p), kv_d = Lambda_v, ki_d = 3 Lambda_v D b.
+    ``preset`` maps Lambda_p, Lambda_v, b, D to (motor 1, 2, 3); ValueError if a gain
+    differs between motors (then the modes of L are not the modes of the law).
+    """
+    v = {}
+    for name in ("Lambda_p", "Lambda_v", "b", "D"):
+        values = tuple(float(x) for x in preset[name])
+        if not values[0] == values[1] == values[2]:
+            raise ValueError(f"{name} = {values!r} is not uniform: allowed are equal gains on all motors "
+                             "(only then is SC-DC a modal PID)")
+        v[name] = values[0]
+    lp, lv, b, D = v["Lambda_p"], v["Lambda_v"], v["b"], v["D"]
+    return {"kp_c": lv * D, "kv_c": lv, "ki_c": 0.0,
+            "kp_d": lv * D + 3.0 * (lv * b + lp), "kv_d": lv, "ki_d": 3.0 * lv * D * b}
+
+
+# The PID-DC defaults are the modal image of the default SC-DC gains, so that law = 2 on
+# its own runs "PID-DC mode-matched": kp_c 324, kv 0.36, ki_c 0, kp_d 1278, ki_d 48600.
+DEFAULT_MODAL_GAINS = scdc_modal_image(GAIN_PRESETS["default"])
+
 
 def gain_preset(name: str) -> dict[str, tuple[float, float, float]]:
     """Return a copy of the named gain preset; ValueError lists the known names."""

@@ -6,11 +6,21 @@ F1..F3 [N], held over a step. Non-idealities, each switched off by a zero:
 * force saturation: |F_i| <= force_limit [N] (0 = off);
 * friction per motor: c_v_i qd_i + F_c_i tanh(qd_i / v_s) [N]; the tanh smooths the
   Coulomb sign() so RK4 sees a Lipschitz right-hand side (v_s [m/s] is its width);
-* mutual pulling between adjacent movers on the common stator: a linearized
-  attraction k_pull [N/m] times the change of each adjacent gap (q2 - q1, q3 - q2)
-  from its initial value, acting equal and opposite on the two movers of a pair;
+* mutual pulling between adjacent movers on the common stator, linear: k_pull [N/m]
+  times the change of each adjacent gap (q2 - q1, q3 - q2) from its initial value,
+  acting equal and opposite on the two movers of a pair. k_pull > 0 is a restoring
+  spring (the pair is pulled back to its initial gap), k_pull < 0 a negative
+  stiffness (a widening gap is pushed wider, a shrinking one pulled closer);
+* magnetic attraction between adjacent movers: F_a = attraction_force (g_a / g)^2
+  pulling the two movers of a pair together [N], g = attraction_gap + change of the
+  gap (g_a = attraction_gap [m] is the clear gap at the initial pose); its stiffness
+  there is -2 attraction_force / attraction_gap (negative: it grows as g shrinks);
+* force ripple (cogging) of iron-core linear motors, periodic in the motor position:
+  cogging_amplitude sin(2 pi q_i / cogging_pitch + cogging_phase_i) [N] on mover i;
 * encoder quantization of the measured positions to encoder_resolution [m]
   (grating ruler, 100 nm in the paper; 0 = off).
+
+docs/disturbances.md gives each term's source or marks it as an assumption.
 """
 
 import math
@@ -22,6 +32,7 @@ from .kinematics import inverse, joint_velocity, rotation_column, S3
 from .params import ModelParams
 
 HALF_PI = 0.5 * math.pi
+TWO_PI = 2.0 * math.pi
 
 
 class PlantConfig(NamedTuple):
@@ -36,15 +47,26 @@ class PlantConfig(NamedTuple):
     F_c3: float = 2.0                 # Coulomb friction, mover 3 [N]
     v_s: float = 1e-3                 # Coulomb smoothing velocity [m/s]
     force_limit: float = 600.0        # motor force saturation [N], 0 = off
-    k_pull: float = 200.0             # adjacent-mover pulling stiffness [N/m], 0 = off
+    k_pull: float = 200.0             # adjacent-mover pulling stiffness [N/m] (< 0: negative), 0 = off
+    attraction_force: float = 0.0     # adjacent-mover magnetic attraction at the initial gap [N], 0 = off
+    attraction_gap: float = 0.01      # clear gap between adjacent movers at the initial pose [m]
+    cogging_amplitude: float = 0.0    # force ripple amplitude per motor [N], 0 = off
+    cogging_pitch: float = 0.024      # force ripple period in the motor position [m]
+    cogging_phase1: float = 0.0       # force ripple phase, motor 1 [rad]
+    cogging_phase2: float = 0.0       # force ripple phase, motor 2 [rad]
+    cogging_phase3: float = 0.0       # force ripple phase, motor 3 [rad]
     substeps: int = 1                 # RK4 steps per communication step
 
     def validated(self) -> "PlantConfig":
         """Return self after checking the ranges (ModelInputError names the offender)."""
         for name in self._fields[:-1]:
-            require_nonnegative(name, getattr(self, name))
-        if self.v_s <= 0.0:
-            raise ModelInputError("v_s", self.v_s, "a finite number > 0")
+            if name == "k_pull" or name.startswith("cogging_phase"):
+                require_finite(name, getattr(self, name))
+            else:
+                require_nonnegative(name, getattr(self, name))
+        for name in ("v_s", "attraction_gap", "cogging_pitch"):
+            if getattr(self, name) <= 0.0:
+                raise ModelInputError(name, getattr(self, name), "a finite number > 0")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ModelInputError("substeps", self.substeps, "an integer >= 1")
         return self
@@ -59,6 +81,17 @@ def quantize(q: float, resolution: float) -> float:
     if resolution == 0.0:
         return q
     return resolution * math.floor(q / resolution + 0.5)
+
+
+def _attraction(force: float, gap: float, d12: float, d23: float) -> tuple[float, float]:
+    """Attraction force [N] of the pairs (1, 2) and (2, 3): force (gap / g)^2 with the clear
+    gap g = gap + d [m] (d: change of the gap from the initial pose); NaN once g <= 0
+    (the movers touch), which the step reports as a state leaving the domain."""
+    s12 = gap + d12
+    s23 = gap + d23
+    r12 = gap / s12 if s12 > 0.0 else math.nan
+    r23 = gap / s23 if s23 > 0.0 else math.nan
+    return force * (r12 * r12), force * (r23 * r23)
 
 
 class PlantModel:
@@ -79,7 +112,8 @@ class PlantModel:
         self._rhs = self._make_rhs()
 
     def joint_forces(self, F1: float, F2: float, F3: float, q, dq) -> tuple[float, float, float]:
-        """Net force on each mover [N]: saturated command - friction + pulling."""
+        """Net force on each mover [N]: saturated command - friction + pulling + attraction
+        + cogging, at true motor positions q [m] and rates dq [m/s]."""
         c = self.cfg
         lim = c.force_limit
         if lim > 0.0:
@@ -96,6 +130,17 @@ class PlantModel:
             F1 += p12
             F2 += p23 - p12
             F3 -= p23
+        if c.attraction_force:
+            a12, a23 = _attraction(c.attraction_force, c.attraction_gap, q[1] - q[0] - self.gap12_0,
+                                   q[2] - q[1] - self.gap23_0)
+            F1 += a12                                       # pulls mover 1 towards mover 2
+            F2 += a23 - a12
+            F3 -= a23
+        if c.cogging_amplitude:
+            A, pitch = c.cogging_amplitude, c.cogging_pitch
+            F1 += A * math.sin(TWO_PI * q[0] / pitch + c.cogging_phase1)
+            F2 += A * math.sin(TWO_PI * q[1] / pitch + c.cogging_phase2)
+            F3 += A * math.sin(TWO_PI * q[2] / pitch + c.cogging_phase3)
         return F1, F2, F3
 
     def derivatives(self, s, F1: float, F2: float, F3: float):
@@ -167,6 +212,10 @@ class PlantModel:
         I_y = p.I_y
         cv1, cv2, cv3, Fc1, Fc2, Fc3, vs = c.c_v1, c.c_v2, c.c_v3, c.F_c1, c.F_c2, c.F_c3, c.v_s
         k_pull, g12, g23 = c.k_pull, self.gap12_0, self.gap23_0
+        F_att, gap_att = c.attraction_force, c.attraction_gap
+        A_cog, pitch = c.cogging_amplitude, c.cogging_pitch
+        ph1, ph2, ph3 = c.cogging_phase1, c.cogging_phase2, c.cogging_phase3
+        positions = bool(k_pull or F_att or A_cog)
         cos, sin, tanh = math.cos, math.sin, math.tanh
 
         def rhs(X, Z, B, dX, dZ, dB, F1, F2, F3):
@@ -179,14 +228,24 @@ class PlantModel:
             F1 -= cv1 * dq1 + Fc1 * tanh(dq1 / vs)       # joint_forces: friction
             F2 -= cv2 * dX + Fc2 * tanh(dX / vs)
             F3 -= cv3 * dq3 + Fc3 * tanh(dq3 / vs)
-            if k_pull:                                   # joint_forces: mutual pulling
+            if positions:
                 q1 = X + S3 * Z + L1 * (1.0 - cB + S3 * sB)   # inverse (Eq. 2)
                 q3 = X - S3 * Z - L1 * (1.0 - cB - S3 * sB)
-                p12 = k_pull * (X - q1 - g12)
-                p23 = k_pull * (q3 - X - g23)
-                F1 += p12
-                F2 += p23 - p12
-                F3 -= p23
+                if k_pull:                               # joint_forces: mutual pulling
+                    p12 = k_pull * (X - q1 - g12)
+                    p23 = k_pull * (q3 - X - g23)
+                    F1 += p12
+                    F2 += p23 - p12
+                    F3 -= p23
+                if F_att:                                # joint_forces: attraction
+                    a12, a23 = _attraction(F_att, gap_att, X - q1 - g12, q3 - X - g23)
+                    F1 += a12
+                    F2 += a23 - a12
+                    F3 -= a23
+                if A_cog:                                # joint_forces: cogging
+                    F1 += A_cog * sin(TWO_PI * q1 / pitch + ph1)
+                    F2 += A_cog * sin(TWO_PI * X / pitch + ph2)
+                    F3 += A_cog * sin(TWO_PI * q3 / pitch + ph3)
             d1 = L1 * (cB - S3 * sB)                     # rotation_column_dB
             d3 = -L1 * (S3 * sB + cB)
             w1 = m1 * d1 * dB * dB                       # coriolis_times (C xd)

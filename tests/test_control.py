@@ -1,4 +1,4 @@
-"""Control laws: SC-DC (Eq. 15-26), APD-DC (Eq. 38-39) and the discrete controller."""
+"""Control laws: SC-DC (Eq. 15-26), APD-DC (Eq. 38-39), PID-DC (modal PID) and the discrete controller."""
 
 import math
 
@@ -6,11 +6,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tapmp.control import (APDDC, SCDC, ControllerModel, Gains, apd_command, feedforward, scdc_command,
-                           sync_deviation, sync_errors)
+import numpy as np
+
+from tapmp.control import (APDDC, PIDDC, SCDC, ControllerModel, Gains, ModalGains, apd_command, feedforward,
+                           pid_command, scdc_command, sync_deviation, sync_errors)
 from tapmp.errors import ModelInputError
 from tapmp.kinematics import inverse, joint_velocity
-from tapmp.params import PAPER_MODEL, gain_preset
+from tapmp.params import DEFAULT_MODAL_GAINS, PAPER_MODEL, gain_preset, scdc_modal_image
 from tapmp.plant import IDEAL, PlantModel
 from tapmp.trajectory import TrajectoryParams, reference
 
@@ -59,8 +61,8 @@ def test_scdc_with_zero_coupling_reduces_to_pd_on_e():
         pytest.approx(apd_command(e, de, u_d, matched), rel=1e-12)
 
 
-def _controller(law=SCDC, velocity_source=0, gains=G):
-    return ControllerModel(PAPER_MODEL, gains, law, velocity_source)
+def _controller(law=SCDC, velocity_source=0, gains=G, modal=ModalGains()):
+    return ControllerModel(PAPER_MODEL, gains, law, velocity_source, modal=modal)
 
 
 def test_integral_of_c_is_a_right_rectangle_sum_over_samples():
@@ -119,7 +121,9 @@ def test_feedforward_is_the_exact_inverse_of_the_plant_dynamics(t):
 @pytest.mark.parametrize("kwargs,match", [
     ({"gains": G._replace(K_T=(0.0, 1e-5, 1e-5))}, r"K_T1 = 0.0 is invalid: allowed is a finite number > 0"),
     ({"gains": G._replace(Lambda_v=(1.0, -1.0, 1.0))}, r"Lambda_v2 = -1.0 .* >= 0"),
-    ({"law": 2}, r"law = 2 is invalid: allowed is 0 \(SC-DC\) or 1 \(APD-DC\)"),
+    ({"law": 3}, r"law = 3 is invalid: allowed is 0 \(SC-DC\), 1 \(APD-DC\) or 2 \(PID-DC\)"),
+    ({"modal": ModalGains(ki_d=-1.0)}, r"ki_d = -1.0 is invalid: allowed is a finite number >= 0"),
+    ({"modal": ModalGains(kp_c=math.inf)}, r"kp_c = inf is invalid"),
     ({"velocity_source": 3}, r"velocity_source = 3 is invalid"),
 ])
 def test_invalid_controller_settings_are_named(kwargs, match):
@@ -140,3 +144,86 @@ def test_presets_hold_the_paper_gains():
     assert gain_preset("paper_experiment")["K_T"] == (3e-5, 3e-5, 3e-5)          # Eq. 42
     with pytest.raises(ValueError, match="allowed are default, paper_experiment, paper_simulation"):
         gain_preset("fast")
+
+
+# --- PID-DC (law 2): modal PID on e -----------------------------------------------------
+
+M = ModalGains(kp_c=10.0, kv_c=1.0, ki_c=100.0, kp_d=40.0, kv_d=2.0, ki_d=1000.0)
+
+
+def test_pid_command_by_hand():
+    # e = (3, 0, 0) um: mean 1 um, deviations (2, -1, -1) um
+    # K_P e = 10 * 1 + 40 * (2, -1, -1) = (90, -30, -30) [u per um]
+    # de = (0, 0, 3) mm/s: mean 1, deviations (-1, -1, 2): K_V de = 1 * 1 + 2 * dev = (-1, -1, 5) [u per mm/s]
+    # int e = (1, 1, 1) nm s: common only: K_I = 100 * 1 nm s = 1e-7 each
+    e, de, ie, u_d, K_T = (3e-6, 0.0, 0.0), (0.0, 0.0, 3e-3), (1e-9, 1e-9, 1e-9), (10.0, 20.0, 30.0), G.K_T
+    expected = (1e-3 + 90e-6 - 1e-3 + 1e-7, 4e-3 - 30e-6 - 1e-3 + 1e-7, 1.5e-3 - 30e-6 + 5e-3 + 1e-7)
+    assert pid_command(e, de, ie, u_d, M, K_T) == pytest.approx(expected, rel=1e-12)
+
+
+def test_pid_gain_matrices_are_k_c_on_the_common_and_k_d_on_the_differential_modes():
+    """K = k_c 1 1^T / 3 + k_d (I - 1 1^T / 3) as matrices, applied to random vectors."""
+    rng = np.random.default_rng(7)
+    ones = np.ones((3, 3)) / 3.0
+    K = {k: getattr(M, f"{k}_c") * ones + getattr(M, f"{k}_d") * (np.eye(3) - ones) for k in ("kp", "kv", "ki")}
+    for _ in range(100):
+        e, de, ie = rng.normal(0, 1e-6, 3), rng.normal(0, 1e-3, 3), rng.normal(0, 1e-7, 3)
+        want = K["kp"] @ e + K["kv"] @ de + K["ki"] @ ie
+        got = pid_command(tuple(e), tuple(de), tuple(ie), (0.0,) * 3, M, G.K_T)
+        assert got == pytest.approx(tuple(want), rel=1e-12, abs=1e-22)
+
+
+def test_pid_dc_with_the_modal_image_reproduces_scdc_for_uniform_gains_on_random_states():
+    """The identity of issue 14: SC-DC = K_T u_d + Lambda_v de + [Lambda_v D I + (Lambda_v b +
+    Lambda_p) L] e + Lambda_v D b L int(e), L = 3 I - 1 1^T; so with c = L e and int(c) = L int(e),
+    scdc_command equals pid_command with kp_c = Lambda_v D, kp_d = Lambda_v D + 3 (Lambda_v b +
+    Lambda_p), kv = Lambda_v, ki_c = 0, ki_d = 3 Lambda_v D b."""
+    rng = np.random.default_rng(14)
+    L = 3.0 * np.eye(3) - np.ones((3, 3))
+    worst = 0.0
+    for _ in range(2000):
+        lp, lv, b, D, kt = (float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) for lo, hi in
+                            ((1.0, 1e4), (0.01, 200.0), (1e-4, 100.0), (10.0, 1e3), (1e-5, 1e-4)))
+        g = Gains((lp,) * 3, (lv,) * 3, (b,) * 3, (D,) * 3, (kt,) * 3)
+        e, de, ie = rng.normal(0, 1e-5, 3), rng.normal(0, 1e-3, 3), rng.normal(0, 1e-6, 3)
+        u_d = tuple(rng.normal(0, 50.0, 3))
+        c, ic = L @ e, L @ ie
+        u_sc = scdc_command(tuple(e), tuple(de), tuple(c), tuple(ic), u_d, g)
+        u_pid = pid_command(tuple(e), tuple(de), tuple(ie), u_d, ModalGains.matching_scdc(g), g.K_T)
+        # relative to the size of the terms summed (|K_T u_d| + |Lambda_v n| + |Lambda_p c|): u itself
+        # may cancel to far less than its terms, and no ordering of the sum can do better than that
+        n = de + b * c + D * (e + b * ic)
+        scale = np.abs(kt * np.array(u_d)) + np.abs(lv * n) + np.abs(lp * c)
+        worst = max(worst, float(np.max(np.abs(np.array(u_sc) - np.array(u_pid)) / scale)))
+    assert worst < 1e-12
+
+
+def test_modal_image_of_the_default_preset_is_the_pid_dc_default():
+    # Lambda_v 0.36, D 900, Lambda_p 300, b 50: kp_c = 324, kp_d = 324 + 3 (18 + 300) = 1278,
+    # kv = 0.36, ki_c = 0, ki_d = 3 * 0.36 * 900 * 50 = 48600 (issue 14: X 324 N/m, differential 1278 N/m)
+    assert tuple(ModalGains()) == pytest.approx((324.0, 0.36, 0.0, 1278.0, 0.36, 48600.0), rel=1e-12)
+    assert ModalGains() == ModalGains(**DEFAULT_MODAL_GAINS)
+    with pytest.raises(ValueError, match=r"Lambda_p = \(1.0, 2.0, 1.0\) is not uniform"):
+        scdc_modal_image({"Lambda_p": (1.0, 2.0, 1.0), "Lambda_v": (1.0,) * 3, "b": (1.0,) * 3, "D": (1.0,) * 3})
+
+
+def test_pid_dc_controller_integrates_e_and_follows_scdc_sample_by_sample():
+    """Same inputs, default gains: law 2 with the modal image gives SC-DC's commands to round-off,
+    and its integral is the right-rectangle sum of e (SC-DC's is L times it)."""
+    g = Gains.from_preset(gain_preset("default"))
+    sc = ControllerModel(PAPER_MODEL, g, SCDC)
+    pid = ControllerModel(PAPER_MODEL, g, PIDDC, modal=ModalGains.matching_scdc(g))
+    rng = np.random.default_rng(3)
+    h, ie = 1e-4, np.zeros(3)
+    L = 3.0 * np.eye(3) - np.ones((3, 3))
+    for k in range(50):
+        t = k * h
+        ref = reference(t, TrajectoryParams())
+        q = np.array(inverse(*ref[:3], PAPER_MODEL.L_1)) + rng.normal(0, 2e-6, 3)
+        F_sc, u_sc, e, _ = sc.sample(t, h, ref, tuple(q), (0.0,) * 3)
+        F_pid, u_pid, e2, _ = pid.sample(t, h, ref, tuple(q), (0.0,) * 3)
+        ie = ie + h * np.array(e)
+        assert e2 == e
+        assert pid.integral == pytest.approx(list(ie), rel=1e-12, abs=1e-24)
+        assert sc.integral == pytest.approx(list(L @ ie), rel=1e-9, abs=1e-22)
+        assert F_pid == pytest.approx(F_sc, rel=1e-10)

@@ -29,8 +29,8 @@ from orchestrator.engine.build_native import CFLAGS
 from orchestrator.experiments.scenario import load
 from tapmp import dynamics, kinematics
 from tapmp.closed_loop import simulate
-from tapmp.control import APDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, ControllerModel, Gains
-from tapmp.control import apd_command, feedforward, scdc_command
+from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, ControllerModel, Gains
+from tapmp.control import ModalGains, apd_command, feedforward, pid_command, scdc_command
 from tapmp.errors import KinematicDomainError
 from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel, quantize
@@ -63,7 +63,9 @@ class CParams(ctypes.Structure):
 
 class CPlantConfig(ctypes.Structure):
     _fields_ = [("encoder_resolution", c_double), ("c_v", c_double * 3), ("F_c", c_double * 3),
-                ("v_s", c_double), ("force_limit", c_double), ("k_pull", c_double), ("substeps", c_int)]
+                ("v_s", c_double), ("force_limit", c_double), ("k_pull", c_double),
+                ("attraction_force", c_double), ("attraction_gap", c_double), ("cogging_amplitude", c_double),
+                ("cogging_pitch", c_double), ("cogging_phase", c_double * 3), ("substeps", c_int)]
 
 
 class CPlant(ctypes.Structure):
@@ -72,7 +74,8 @@ class CPlant(ctypes.Structure):
 
 
 class CGains(ctypes.Structure):
-    _fields_ = [(name, c_double * 3) for name in ("Lambda_p", "Lambda_v", "b", "D", "K_T")]
+    _fields_ = ([(name, c_double * 3) for name in ("Lambda_p", "Lambda_v", "b", "D", "K_T")]
+                + [(name, c_double) for name in ("kp_c", "kv_c", "ki_c", "kp_d", "kv_d", "ki_d")])
 
 
 class CTrajectory(ctypes.Structure):
@@ -107,6 +110,7 @@ PROTOTYPES = {  # name: (restype, argtypes), as declared in tapmp_model.h
     "tapmp_feedforward": (c_int, [_dp, _dp, _dp, _dp, POINTER(CParams), _dp, _dp]),
     "tapmp_scdc_command": (None, [_dp, _dp, _dp, _dp, _dp, POINTER(CGains), _dp]),
     "tapmp_apd_command": (None, [_dp, _dp, _dp, POINTER(CGains), _dp]),
+    "tapmp_pid_command": (None, [_dp, _dp, _dp, _dp, POINTER(CGains), _dp]),
     "tapmp_controller_sample": (c_int, [POINTER(CParams), POINTER(CGains), c_int, c_int, c_double,
                                         POINTER(CControllerState), c_double, _dp, _dp, _dp, c_int, _dp,
                                         POINTER(CControllerState), _dp]),
@@ -120,11 +124,13 @@ def c_params(p: ModelParams) -> CParams:
 
 def c_config(cfg: PlantConfig) -> CPlantConfig:
     return CPlantConfig(cfg.encoder_resolution, D3(cfg.c_v1, cfg.c_v2, cfg.c_v3),
-                        D3(cfg.F_c1, cfg.F_c2, cfg.F_c3), cfg.v_s, cfg.force_limit, cfg.k_pull, cfg.substeps)
+                        D3(cfg.F_c1, cfg.F_c2, cfg.F_c3), cfg.v_s, cfg.force_limit, cfg.k_pull,
+                        cfg.attraction_force, cfg.attraction_gap, cfg.cogging_amplitude, cfg.cogging_pitch,
+                        D3(cfg.cogging_phase1, cfg.cogging_phase2, cfg.cogging_phase3), cfg.substeps)
 
 
-def c_gains(g: Gains) -> CGains:
-    return CGains(*(D3(*values) for values in g))
+def c_gains(g: Gains, m: ModalGains = ModalGains()) -> CGains:
+    return CGains(*(D3(*values) for values in g), *map(float, m))
 
 
 def c_trajectory(tp: TrajectoryParams) -> CTrajectory:
@@ -216,6 +222,11 @@ class Native:
     def scdc_command(self, e, de, c, integral_c, u_d, g):
         u = D3()
         self.lib.tapmp_scdc_command(D3(*e), D3(*de), D3(*c), D3(*integral_c), D3(*u_d), c_gains(g), u)
+        return tuple(u)
+
+    def pid_command(self, e, de, integral_e, u_d, g, m):
+        u = D3()
+        self.lib.tapmp_pid_command(D3(*e), D3(*de), D3(*integral_e), D3(*u_d), c_gains(g, m), u)
         return tuple(u)
 
     def apd_command(self, e, de, u_d, g):
@@ -353,21 +364,32 @@ def random_gains(rng) -> Gains:
                    for lo, hi in (ranges[n] for n in GAIN_NAMES)))
 
 
+def random_modal_gains(rng) -> ModalGains:
+    """Log-uniform over ranges spanning the modal images of the presets; a gain is 0 one time in five."""
+    ranges = {"kp": (1.0, 1e5), "kv": (0.1, 200.0), "ki": (1.0, 1e6)}
+    return ModalGains(*(0.0 if rng.random() < 0.2 else float(math.exp(rng.uniform(*map(math.log, ranges[n[:2]]))))
+                        for n in ModalGains._fields))
+
+
 def random_trajectory(rng) -> TrajectoryParams:
     return TrajectoryParams(u(rng, -0.01, 0.01), u(rng, -0.02, 0.0), u(rng, 0.0, 0.02), u(rng, 0.0, 2.0),
                             u(rng, -math.pi, math.pi), u(rng, 0.0, 0.2), u(rng, 0.0, 2.0),
                             u(rng, -math.pi, math.pi), u(rng, -0.1, 0.1))
 
 
-# Plant non-idealities: each switched on alone, all together, or none (paper values +-20 %).
-PLANT_VARIANTS = ("ideal", "friction", "pulling", "force_limit", "all")
+# Plant non-idealities: each switched on alone, all together, or none (paper values +-20 %;
+# attraction and cogging at random levels; "repulsion" is k_pull < 0, a negative stiffness).
+PLANT_VARIANTS = ("ideal", "friction", "pulling", "repulsion", "attraction", "cogging", "force_limit", "all")
 
 
 def random_config(rng, variant: str, substeps: int = 1) -> PlantConfig:
     friction = variant in ("friction", "all")
     pulling = variant in ("pulling", "all")
     limited = variant in ("force_limit", "all")
+    attracting = variant in ("attraction", "all")
+    cogging = variant in ("cogging", "all")
     d = PlantConfig()
+    k_pull = d.k_pull * u(rng, 0.8, 1.2) if pulling else (-u(rng, 100.0, 5000.0) if variant == "repulsion" else 0.0)
     return IDEAL._replace(
         encoder_resolution=d.encoder_resolution * u(rng, 0.8, 1.2) if variant == "all" else 0.0,
         c_v1=d.c_v1 * u(rng, 0.8, 1.2) if friction else 0.0,
@@ -378,7 +400,13 @@ def random_config(rng, variant: str, substeps: int = 1) -> PlantConfig:
         F_c3=d.F_c3 * u(rng, 0.8, 1.2) if friction else 0.0,
         v_s=d.v_s * u(rng, 0.8, 1.2),
         force_limit=u(rng, 50.0, 600.0) if limited else 0.0,  # below 300 N it saturates often
-        k_pull=d.k_pull * u(rng, 0.8, 1.2) if pulling else 0.0,
+        k_pull=k_pull,
+        attraction_force=u(rng, 1.0, 50.0) if attracting else 0.0,
+        attraction_gap=u(rng, 0.1, 0.3),  # above the random gap changes (|q| < 0.05 m): no contact
+        cogging_amplitude=u(rng, 0.5, 10.0) if cogging else 0.0,
+        cogging_pitch=u(rng, 0.005, 0.05),
+        cogging_phase1=u(rng, -math.pi, math.pi), cogging_phase2=u(rng, -math.pi, math.pi),
+        cogging_phase3=u(rng, -math.pi, math.pi),
         substeps=substeps)
 
 
@@ -698,6 +726,16 @@ def test_scdc_command_matches_python(native):
     check.done()
 
 
+def test_pid_command_matches_python(native):
+    rng, check = np.random.default_rng(405), Agreement("tapmp_pid_command")
+    for _ in range(N_STATES):
+        e, de, integral = u(rng, -0.02, 0.02, 3), random_rates(rng), u(rng, -1e-3, 1e-3, 3)
+        u_d, g, m = random_forces(rng), random_gains(rng), random_modal_gains(rng)
+        check.check(native.pid_command(e, de, integral, u_d, g, m), pid_command(e, de, integral, u_d, m, g.K_T),
+                    (e, de, integral, u_d, g, m))
+    check.done()
+
+
 def test_apd_command_matches_python(native):
     rng, check = np.random.default_rng(404), Agreement("tapmp_apd_command")
     for _ in range(N_STATES):
@@ -722,7 +760,7 @@ SEQUENCE = 5  # samples per random controller
 
 @pytest.mark.parametrize("velocity_source", (VELOCITY_DIFFERENCE, VELOCITY_INPUT),
                          ids=("backward_difference", "dq_inputs"))
-@pytest.mark.parametrize("law", (SCDC, APDDC), ids=("scdc", "apddc"))
+@pytest.mark.parametrize("law", (SCDC, APDDC, PIDDC), ids=("scdc", "apddc", "piddc"))
 def test_controller_sample_sequences_match_python(native, law, velocity_source):
     """Random controllers, each sampled SEQUENCE times along a moving platform; the first sample
     is an initialization (advance False) half of the time, later ones advance 80 % of the time,
@@ -736,8 +774,9 @@ def test_controller_sample_sequences_match_python(native, law, velocity_source):
         lim = u(rng, 50.0, 600.0) if rng.random() < 0.5 else 0.0
         h = 1e-4 * u(rng, 0.5, 2.0)
         resolution = 1e-7 if rng.random() < 0.5 else 0.0
-        ctrl = ControllerModel(p, g, law, velocity_source, lim)
-        cp, cg, st = c_params(p), c_gains(g), CControllerState()
+        m = random_modal_gains(rng)
+        ctrl = ControllerModel(p, g, law, velocity_source, lim, m)
+        cp, cg, st = c_params(p), c_gains(g, m), CControllerState()
         pose, rate = random_pose(rng), random_rates(rng)
         for i in range(SEQUENCE):
             advance = rng.random() < (0.5 if i == 0 else 0.8)
@@ -824,7 +863,7 @@ def c_closed_loop(native, scenario, n_steps):
     sample, plant step, quantized outputs. Rows (t, ref, F, q_meas, q_true) as recorded there."""
     plant, ctrl, traj = scenario.plain_models()  # only for the parameters and the initial state
     pl = native.plant(plant.p, plant.cfg, plant.state[:3], plant.state[3:])
-    cp, cg, tp, st = c_params(ctrl.p), c_gains(ctrl.g), c_trajectory(traj), CControllerState()
+    cp, cg, tp, st = c_params(ctrl.p), c_gains(ctrl.g, ctrl.modal), c_trajectory(traj), CControllerState()
     law, vs, lim = ctrl.law, ctrl.velocity_source, ctrl.force_limit
     t0, h = scenario.start_time, scenario.step
     gauss_seidel = scenario.ordering == "gauss-seidel"
@@ -854,11 +893,17 @@ def c_closed_loop(native, scenario, n_steps):
 
 
 @pytest.mark.parametrize("ordering", ("gauss-seidel", "jacobi"))
-@pytest.mark.parametrize("law", ("sc-dc", "apd-dc"))
+@pytest.mark.parametrize("law", ("sc-dc", "apd-dc", "pid-dc", "sc-dc+disturbances"))
 def test_closed_loop_through_the_c_functions_follows_the_python_loop(native, law, ordering):
     """Paper scenario, 2,000 steps of 0.1 ms: true motor positions within 1e-12 m and commands
-    within 1e-6 N at every communication point (reference and encoder readings reported too)."""
-    scenario = load(PAPER_SCENARIO).with_changes(law=law, ordering=ordering)
+    within 1e-6 N at every communication point (reference and encoder readings reported too).
+    "+disturbances": attraction, cogging, negative k_pull and a 10 % mass mismatch on top."""
+    overrides, label = [], law
+    if law.endswith("+disturbances"):
+        law = law.split("+")[0]
+        overrides = ["plant.k_pull=-300.0", "plant.attraction_force=5.0", "plant.attraction_gap=0.01",
+                     "plant.cogging_amplitude=2.0", "plant.cogging_phase2=1.0", "mismatch.m_p=1.1"]
+    scenario = load(PAPER_SCENARIO, overrides).with_changes(law=law, ordering=ordering)
     plant, ctrl, traj = scenario.plain_models()
     py_rows = []
     simulate(plant, ctrl, traj, scenario.start_time, CLOSED_LOOP_STEPS, scenario.step, scenario.ordering,
@@ -875,6 +920,6 @@ def test_closed_loop_through_the_c_functions_follows_the_python_loop(native, law
     for n in ("ref", "q_meas", "t"):
         assert diff[n] <= RTOL * max(float(np.abs(py_arr[n]).max()), TINY), diff
     for n in ("q_true", "F"):
-        key = f"closed loop {law} {ordering}: {n} (max abs diff)"
+        key = f"closed loop {label} {ordering}: {n} (max abs diff)"
         MEASURED[key] = {"states": CLOSED_LOOP_STEPS + 1, "worst": diff[n],
                          "identical": bool(np.array_equal(c_arr[n], py_arr[n]))}

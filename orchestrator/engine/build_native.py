@@ -53,8 +53,9 @@ STEP, STOP = 1e-4, 2.5
 DESCRIPTIONS = {
     PLANT: "Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
            "in, encoder positions and platform pose out (native C, no Python at run time)",
-    CONTROLLER: "SC-DC synchronization controller with dynamics compensation (law 0) and the APD-DC baseline "
-                "(law 1) for the TAPMP; outputs force commands F = u / K_T (native C, no Python at run time)",
+    CONTROLLER: "SC-DC synchronization controller with dynamics compensation (law 0), the APD-DC baseline "
+                "(law 1) and the modal PID-DC baseline (law 2) for the TAPMP; outputs force commands "
+                "F = u / K_T (native C, no Python at run time)",
     TRAJECTORY: "TAPMP reference trajectory (paper Section 5.2 / 6.2): XZ circle and B sinusoid "
                 "(native C, no Python at run time)",
 }

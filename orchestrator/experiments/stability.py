@@ -8,9 +8,13 @@ takes the loop state at a communication point t to the state at t + h [s]:
 
 * the plant state (X, Z, B, dX, dZ, dB) [m, m, rad, m/s, m/s, rad/s], integrated by
   RK4 over the step under the held force (rigid-body dynamics with the exact mass
-  matrix, viscous friction c_v and the mover pulling k_pull, both linear);
-* the controller's discrete states: the integral of c (Eq. 22, SC-DC only, motors
-  with b_i > 0; the right-rectangle sum of ControllerModel) [m s] and the previous
+  matrix, viscous friction c_v and the mover pulling k_pull, both linear, and the
+  smooth position-dependent forces: the mover attraction, whose stiffness at the
+  start is -2 attraction_force / attraction_gap, and the cogging, whose local
+  stiffness at the start pose is +-2 pi A / pitch and varies along the path);
+* the controller's discrete states: the integral of c (Eq. 22, SC-DC, motors
+  with b_i > 0) or of e (PID-DC, all three motors unless ki_c = ki_d = 0; the
+  right-rectangle sum of ControllerModel) [m s] and the previous
   encoder sample of the backward-difference velocity [m] (velocity_source = 0);
 * with the ``jacobi`` ordering, the command held from the previous sample [N]
   (the extra step of delay); ``gauss-seidel`` has only the zero-order hold.
@@ -34,10 +38,14 @@ Nonlinear parts of the plant and controller are left out of the linearization:
   about small signals inside the limits. With saturation an unstable loop does
   not blow up but runs into the limit and chatters there (a limit cycle).
 
-One structural eigenvalue is removed: c sums to zero (Eq. 21), so the sum of the
-three integrals of c never changes. It is an exact eigenvalue 1 of the map that
-is no growth mode; the loop is analysed on the invariant subspace where that sum
-is zero (the one the loop starts in, with the integral at zero).
+Structural eigenvalues 1 are removed. SC-DC: c sums to zero (Eq. 21), so the sum
+of the three integrals of c never changes; the loop is analysed on the invariant
+subspace where that sum is zero (the one the loop starts in, with the integral at
+zero). PID-DC: an integral mode whose gain is zero (the common mode (1, 1, 1) if
+ki_c = 0, the two differential modes if ki_d = 0) is summed but never fed back, an
+exact eigenvector with eigenvalue 1 that is no growth mode of the loop; the loop is
+analysed on the quotient by it. Either way the eigenvalues are those of T^T A T with
+T an orthonormal basis of the complement of the removed directions.
 """
 
 import math
@@ -46,7 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import linalg
 
-from tapmp.control import SCDC, VELOCITY_DIFFERENCE, ControllerModel
+from tapmp.control import PIDDC, SCDC, VELOCITY_DIFFERENCE, ControllerModel, ModalGains
 from tapmp.params import ModelParams
 from tapmp.plant import PlantConfig, PlantModel
 from tapmp.trajectory import TrajectoryParams, reference
@@ -128,7 +136,8 @@ def loop_models(scenario: Scenario, linear: bool = False):
                        tuple(pl.get(k, 0.0) for k in ("X0", "Z0", "B0")),
                        tuple(pl.get(k, 0.0) for k in ("dX0", "dZ0", "dB0")))
     ctrl = ControllerModel(model_tuple(ModelParams, ct), scenario.gain_values(), ct["law"],
-                           ct.get("velocity_source", VELOCITY_DIFFERENCE), force_limit)
+                           ct.get("velocity_source", VELOCITY_DIFFERENCE), force_limit,
+                           model_tuple(ModalGains, ct))
     return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
 
@@ -145,11 +154,18 @@ class OneStepMap:
         self.t = scenario.start_time
         self.jacobi = scenario.ordering == "jacobi"
         g = self.ctrl.g
-        self.integrals = ([i for i in range(3) if g.b[i] != 0.0] if self.ctrl.law == SCDC else [])
+        mg = self.ctrl.modal
+        if self.ctrl.law == SCDC:
+            self.integrals = [i for i in range(3) if g.b[i] != 0.0]
+        elif self.ctrl.law == PIDDC and (mg.ki_c != 0.0 or mg.ki_d != 0.0):
+            self.integrals = [0, 1, 2]
+        else:
+            self.integrals = []
         self.difference = self.ctrl.velocity_source == VELOCITY_DIFFERENCE
         names = ["X", "Z", "B", "dX", "dZ", "dB"]
         kinds = ["pose"] * 3 + ["rate"] * 3
-        names += [f"integral_c{i + 1}" for i in self.integrals]
+        which = "e" if self.ctrl.law == PIDDC else "c"
+        names += [f"integral_{which}{i + 1}" for i in self.integrals]
         kinds += ["integral"] * len(self.integrals)
         if self.difference:
             names += ["q1_prev", "q2_prev", "q3_prev"]
@@ -217,14 +233,35 @@ class OneStepMap:
         return A
 
 
-def _invariant_basis(m: OneStepMap) -> np.ndarray:
-    """Orthonormal basis (scaled coordinates) of the subspace where the integrals of c sum to zero."""
-    n = len(m.names)
+def _removed_directions(m: OneStepMap) -> list:
+    """The integral directions (over the three integral states) that carry a structural
+    eigenvalue 1 (module doc): SC-DC the sum; PID-DC each mode whose integral gain is 0."""
     if len(m.integrals) < 3:
+        return []
+    common = [(1.0, 1.0, 1.0)]
+    if m.ctrl.law == SCDC:
+        return common
+    mg = m.ctrl.modal
+    return ((common if mg.ki_c == 0.0 else [])
+            + ([(1.0, -1.0, 0.0), (1.0, 1.0, -2.0)] if mg.ki_d == 0.0 else []))
+
+
+def _invariant_basis(m: OneStepMap) -> np.ndarray:
+    """Orthonormal basis (scaled coordinates) of the complement of the removed directions."""
+    n = len(m.names)
+    removed = _removed_directions(m)
+    if not removed:
         return np.eye(n)
-    ones = np.zeros(n)
-    ones[6:9] = 1.0 / math.sqrt(3.0)
-    return linalg.null_space(ones[None, :])
+    rows = np.zeros((len(removed), n))
+    for r, d in enumerate(removed):
+        rows[r, 6:9] = d
+    return linalg.null_space(rows)
+
+
+def verdict_for(rho: float) -> str:
+    """The verdict for a spectral radius ``rho``: "stable" if rho < 1 - MARGIN, "unstable" if
+    rho > 1 + MARGIN, "marginal" between (inclusive)."""
+    return "stable" if rho < 1.0 - MARGIN else ("unstable" if rho > 1.0 + MARGIN else "marginal")
 
 
 def check(scenario: Scenario) -> StabilityReport:
@@ -242,7 +279,7 @@ def check(scenario: Scenario) -> StabilityReport:
     rho = float(abs(eig[0])) if eig else 0.0
     if not math.isfinite(rho):
         rho = math.inf
-    verdict = "stable" if rho < 1.0 - MARGIN else ("unstable" if rho > 1.0 + MARGIN else "marginal")
+    verdict = verdict_for(rho)
     return StabilityReport(spectral_radius=rho, stable=verdict == "stable", verdict=verdict,
                            ordering=scenario.ordering, h=scenario.step, law=scenario.law,
                            time=scenario.start_time, states=m.names, eigenvalues=[complex(z) for z in eig])

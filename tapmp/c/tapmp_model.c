@@ -163,8 +163,18 @@ void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0
     pl->gap23_0 = q[2] - q[1];
 }
 
+/* plant._attraction: force (gap / g)^2 per pair, g = gap + d; NaN once g <= 0 */
+static void attraction(double force, double gap, double d12, double d23, double *a12, double *a23)
+{
+    double s12 = gap + d12, s23 = gap + d23;
+    double r12 = s12 > 0.0 ? gap / s12 : NAN;
+    double r23 = s23 > 0.0 ? gap / s23 : NAN;
+    *a12 = force * (r12 * r12);
+    *a23 = force * (r23 * r23);
+}
+
 /* plant.PlantModel._make_rhs: the fused right-hand side (Eq. 2-4, 11-14 with friction
- * and pulling), forces already saturated */
+ * pulling, attraction and cogging), forces already saturated */
 void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6])
 {
     const tapmp_params *p = &pl->p;
@@ -183,14 +193,30 @@ void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3]
     F1 -= c->c_v[0] * dq1 + c->F_c[0] * tanh(dq1 / vs);  /* friction */
     F2 -= c->c_v[1] * dX + c->F_c[1] * tanh(dX / vs);
     F3 -= c->c_v[2] * dq3 + c->F_c[2] * tanh(dq3 / vs);
-    if (c->k_pull != 0.0) {                               /* mutual pulling */
+    if (c->k_pull != 0.0 || c->attraction_force != 0.0 || c->cogging_amplitude != 0.0) {
         double q1 = X + S3 * Z + L1 * (1.0 - cB + S3 * sB);   /* inverse (Eq. 2) */
         double q3 = X - S3 * Z - L1 * (1.0 - cB - S3 * sB);
-        double p12 = c->k_pull * (X - q1 - pl->gap12_0);
-        double p23 = c->k_pull * (q3 - X - pl->gap23_0);
-        F1 += p12;
-        F2 += p23 - p12;
-        F3 -= p23;
+        if (c->k_pull != 0.0) {                           /* mutual pulling */
+            double p12 = c->k_pull * (X - q1 - pl->gap12_0);
+            double p23 = c->k_pull * (q3 - X - pl->gap23_0);
+            F1 += p12;
+            F2 += p23 - p12;
+            F3 -= p23;
+        }
+        if (c->attraction_force != 0.0) {                 /* attraction */
+            double a12, a23;
+            attraction(c->attraction_force, c->attraction_gap, X - q1 - pl->gap12_0,
+                       q3 - X - pl->gap23_0, &a12, &a23);
+            F1 += a12;
+            F2 += a23 - a12;
+            F3 -= a23;
+        }
+        if (c->cogging_amplitude != 0.0) {                /* cogging */
+            double A = c->cogging_amplitude, pitch = c->cogging_pitch;
+            F1 += A * sin(TWO_PI * q1 / pitch + c->cogging_phase[0]);
+            F2 += A * sin(TWO_PI * X / pitch + c->cogging_phase[1]);
+            F3 += A * sin(TWO_PI * q3 / pitch + c->cogging_phase[2]);
+        }
     }
     double d1 = L1 * (cB - S3 * sB);                      /* rotation_column_dB */
     double d3 = -L1 * (S3 * sB + cB);
@@ -294,6 +320,24 @@ void tapmp_apd_command(const double e[3], const double de[3], const double u_d[3
         u[i] = g->K_T[i] * u_d[i] + g->Lambda_v[i] * de[i] + g->Lambda_p[i] * e[i];
 }
 
+/* control._modal: row i of (k_c Pi_c + k_d Pi_d) x, mean = (x1 + x2 + x3) / 3 */
+static double modal(double k_c, double k_d, const double x[3], int i, double mean)
+{
+    return k_c * mean + k_d * (x[i] - mean);
+}
+
+/* control.pid_command */
+void tapmp_pid_command(const double e[3], const double de[3], const double integral_e[3],
+                       const double u_d[3], const tapmp_gains *g, double u[3])
+{
+    double me = (e[0] + e[1] + e[2]) / 3.0;
+    double mv = (de[0] + de[1] + de[2]) / 3.0;
+    double mi = (integral_e[0] + integral_e[1] + integral_e[2]) / 3.0;
+    for (int i = 0; i < 3; i++)
+        u[i] = g->K_T[i] * u_d[i] + modal(g->kp_c, g->kp_d, e, i, me) + modal(g->kv_c, g->kv_d, de, i, mv)
+               + modal(g->ki_c, g->ki_d, integral_e, i, mi);
+}
+
 /* control.ControllerModel.sample */
 int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
                             int velocity_source, double force_limit,
@@ -321,6 +365,10 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
         if (advance)
             for (int i = 0; i < 3; i++) integral[i] = integral[i] + h * c[i];
         tapmp_scdc_command(e, de, c, integral, u_d, g, u);
+    } else if (law == TAPMP_PIDDC) {
+        if (advance)
+            for (int i = 0; i < 3; i++) integral[i] = integral[i] + h * e[i];
+        tapmp_pid_command(e, de, integral, u_d, g, u);
     } else {
         tapmp_apd_command(e, de, u_d, g, u);
     }

@@ -1,5 +1,5 @@
 /* The TAPMP model in C: kinematics (Eq. 1-4), task-space dynamics (Eq. 5-14), the plant
- * with its non-idealities, the SC-DC (Eq. 15-26) and APD-DC (Eq. 38-39) control laws and
+ * with its non-idealities, the SC-DC (Eq. 15-26), APD-DC (Eq. 38-39) and PID-DC control laws and
  * the reference trajectory. Plain functions on doubles, SI units, nothing but libm.
  *
  * This is a hand-written twin of the Python package tapmp/ (kinematics.py, dynamics.py,
@@ -24,7 +24,12 @@ typedef struct {
     double F_c[3];              /* Coulomb friction [N] */
     double v_s;                 /* tanh smoothing velocity [m/s] */
     double force_limit;         /* [N] */
-    double k_pull;              /* adjacent-mover pulling stiffness [N/m] */
+    double k_pull;              /* adjacent-mover pulling stiffness [N/m] (< 0: negative stiffness) */
+    double attraction_force;    /* adjacent-mover attraction at the initial gap [N] */
+    double attraction_gap;      /* clear gap between adjacent movers at the initial pose [m] */
+    double cogging_amplitude;   /* force ripple amplitude [N] */
+    double cogging_pitch;       /* force ripple period in the motor position [m] */
+    double cogging_phase[3];    /* force ripple phase per motor [rad] */
     int substeps;               /* RK4 steps per communication step */
 } tapmp_plant_config;
 
@@ -36,9 +41,11 @@ typedef struct {
     double s[6];
 } tapmp_plant;
 
-/* Controller gains per motor (tapmp.control.Gains). */
+/* Controller gains per motor (tapmp.control.Gains) and the PID-DC modal gains
+ * (tapmp.control.ModalGains: common mode _c, differential modes _d). */
 typedef struct {
     double Lambda_p[3], Lambda_v[3], b[3], D[3], K_T[3];
+    double kp_c, kv_c, ki_c, kp_d, kv_d, ki_d;
 } tapmp_gains;
 
 /* Reference trajectory parameters (tapmp.trajectory.TrajectoryParams): m, Hz, rad. */
@@ -84,7 +91,7 @@ int tapmp_plant_step(const tapmp_plant *pl, double h, const double F[3], double 
 void tapmp_plant_outputs(const tapmp_plant *pl, double out[15]);
 
 /* --- control (tapmp/control.py) --- */
-enum { TAPMP_SCDC = 0, TAPMP_APDDC = 1 };
+enum { TAPMP_SCDC = 0, TAPMP_APDDC = 1, TAPMP_PIDDC = 2 };
 /* Dynamics compensation u_d of Eq. 26 / 39 [N]; returns 0 (and *arg) if q leaves Eq. 1's domain. */
 int tapmp_feedforward(const double q[3], const double dq[3], const double dx_d[3],
                       const double ddx_d[3], const tapmp_params *p, double u_d[3], double *arg);
@@ -96,9 +103,13 @@ void tapmp_scdc_command(const double e[3], const double de[3], const double c[3]
 void tapmp_apd_command(const double e[3], const double de[3], const double u_d[3],
                        const tapmp_gains *g, double u[3]);
 
+/* PID-DC command u = K_T u_d + K_P e + K_V de + K_I int(e), K = k_c Pi_c + k_d Pi_d. */
+void tapmp_pid_command(const double e[3], const double de[3], const double integral_e[3],
+                       const double u_d[3], const tapmp_gains *g, double u[3]);
+
 /* The discrete controller's state between samples. */
 typedef struct {
-    double integral[3];  /* running integral of c [m s] */
+    double integral[3];  /* running integral of c (SC-DC) or e (PID-DC) [m s] */
     double q_prev[3];    /* previous measured positions [m] */
     int has_q_prev;
 } tapmp_controller_state;

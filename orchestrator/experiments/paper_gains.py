@@ -1,0 +1,245 @@
+"""The paper's own gains (Eq. 40-43) run at fine steps, under both readings of the units.
+
+The paper states its simulation gains (Eq. 40-41) and experiment gains (Eq. 42-43) but
+not its simulation step; 0.1 ms is the experiment's sampling period. Fine steps (1 us,
+10 us) stand for its continuous-time simulation; 0.1 ms shows what the servo cycle does.
+
+Readings of the units (the paper gives none):
+
+* "A", as implemented (tapmp.control): u is in K_T-scaled units, the motor force is
+  F = u / K_T = u_d + (Lambda_v n + Lambda_p c) / K_T [N]: full feedforward, feedback
+  gains divided by K_T (4.1e-5 and 3e-5: N/m in the millions).
+* "B": u is the force in newtons and K_T only scales the feedforward:
+  F = K_T u_d + Lambda_v n + Lambda_p c [N] (feedback gains in N/m, N s/m directly; the
+  feedforward is 4.1e-5 of the model's, so the feedback holds gravity). Run exactly with
+  the unchanged controller: Lambda_p and Lambda_v multiplied by K_T, and the controller's
+  nominal masses and inertia (m_p, m_1, m_2, m_3, I_y) multiplied by K_T. u_d of Eq. 26 is
+  linear and homogeneous in those five (M, C and G are), so u_d' = K_T u_d and
+  F = u' / K_T = u_d' + K_T (Lambda_v n + Lambda_p c) / K_T = K_T u_d + Lambda_v n + Lambda_p c.
+  This needs K_T equal on the three motors (u_d mixes the motors through J^-T), as in
+  Eq. 40 and 42; other gains are refused.
+
+Plants: "encoder" is the scenario's plant as its TOML file gives it (100 nm encoder
+quantization, friction, pulling, 600 N saturation); "exact" is the same with the
+quantization off (encoder_resolution = 0), the measurement a continuous-time
+simulation would have. The loop is ``tapmp.closed_loop.simulate`` (plain Python, the
+FMUs' model functions in the same order): the FMUs at 1 us would take 100 times the
+steps of a 0.1 ms run through the co-simulation master.
+
+Per run: the metrics of orchestrator.experiments.metrics (tracking and synchronization
+MAE and STD per motor [um], every communication point from the start), the share of
+samples with the command at the plant's force limit per motor, the spectral radius
+of the linearized loop (orchestrator.experiments.stability.check) and the wall time.
+"""
+
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from tapmp.closed_loop import simulate
+from tapmp.control import Gains
+from tapmp.errors import ModelInputError
+from tapmp.kinematics import inverse
+from tapmp.params import ModelParams
+
+from . import stability
+from .metrics import ErrorStatistics
+from .scenario import Scenario, load, model_tuple
+
+ROOT = Path(__file__).resolve().parents[2]
+# case: (scenario file, gain preset, the paper's equations)
+CASES = {"Eq. 40-41": ("scenarios/paper_simulation.toml", "paper_simulation"),
+         "Eq. 42-43": ("scenarios/paper_experiment.toml", "paper_experiment")}
+READINGS = {"A": "F = u / K_T (as implemented)",
+            "B": "F = K_T u_d + Lambda_v n + Lambda_p c (u in N)"}
+PLANTS = {"encoder": {}, "exact": {"encoder_resolution": 0.0}}
+LAWS = ("sc-dc", "apd-dc")
+SATURATION_FLAG = 0.01   # a run with more than 1 % of samples at the force limit is not stable
+_MASSES = ("m_p", "m_1", "m_2", "m_3", "I_y")
+_COLUMNS = ["time", "trajectory.q1_d", "trajectory.q2_d", "trajectory.q3_d",
+            "plant.q1_true", "plant.q2_true", "plant.q3_true",
+            "trajectory.X_d", "trajectory.Z_d", "trajectory.B_d", "plant.X", "plant.Z", "plant.B"]
+_BLOCK = 20000
+
+
+def reading_b(gains: Gains, controller: dict) -> tuple[dict, dict]:
+    """(gain_overrides, controller table) that run reading B with the unchanged controller.
+
+    gains: the preset's gains; controller: the scenario's [controller] table. Returns
+    Lambda_p, Lambda_v times K_T and the nominal m_p, m_1..m_3 [kg], I_y [kg m^2] times K_T
+    (module doc). ValueError if K_T differs between motors.
+    """
+    kt = gains.K_T
+    if not kt[0] == kt[1] == kt[2]:
+        raise ValueError(f"K_T = {kt!r} is invalid for reading B: allowed is one K_T on all three motors "
+                         "(the feedforward u_d mixes the motors)")
+    k = kt[0]
+    overrides = {"Lambda_p": [k * x for x in gains.Lambda_p], "Lambda_v": [k * x for x in gains.Lambda_v]}
+    nominal = model_tuple(ModelParams, controller)
+    table = dict(controller)
+    for name in _MASSES:
+        table[name] = k * getattr(nominal, name)
+    return overrides, table
+
+
+def paper_scenario(case: str, law: str, step: float, stop_time: float, reading: str = "A",
+                   plant: str = "encoder", root: Path = ROOT) -> Scenario:
+    """The scenario of one run: the case's TOML file with its paper gains, law, step [s],
+    stop_time [s], reading ("A" or "B") and plant variant ("encoder" or "exact")."""
+    for name, value, allowed in (("case", case, CASES), ("law", law, LAWS), ("reading", reading, READINGS),
+                                 ("plant", plant, PLANTS)):
+        if value not in allowed:
+            raise ValueError(f"{name} = {value!r} is invalid: allowed are {', '.join(allowed)}")
+    path, preset = CASES[case]
+    sc = load(Path(root) / path)
+    sc = sc.with_changes(gains=preset, law=law, step=step, stop_time=stop_time, gain_overrides={},
+                         plant={**sc.plant, **PLANTS[plant]})
+    if reading == "B":
+        overrides, table = reading_b(sc.gain_values(), sc.controller)
+        sc = sc.with_changes(gain_overrides=overrides, controller=table)
+    return sc
+
+
+def run_scenario(sc: Scenario) -> dict:
+    """Run a scenario through the plain loop; metrics, saturation, stability and wall time.
+
+    Returns the metrics.json fields (tracking_mae_um, sync_mae_um, ... over the samples
+    reached), saturation_fraction (per motor, share of samples with |F_i| >= the plant's
+    force_limit), diverged_at [s] (None if the run finished; the divergence envelope of
+    the scenario's [limits] or a model error stops it), spectral_radius, verdict and
+    time_constant_s (-h / ln rho: decay > 0, growth < 0 [s]) of stability.check, stable (no divergence, at most SATURATION_FLAG of the samples at the
+    limit, verdict not "unstable"), status (in words) and wall_s (the loop alone) /
+    check_s (the stability check) [s].
+    """
+    plant, ctrl, traj = sc.plain_models()
+    L1 = sc.parameters()["trajectory"].get("L_1", ModelParams().L_1)  # the trajectory FMU's q_d
+    lim = sc.limit_values()
+    travel, angle = lim["motor_travel"] or math.inf, lim["platform_angle"] or math.inf
+    f_lim = plant.cfg.force_limit
+    stats = ErrorStatistics(_COLUMNS)
+    rows = []
+    sat = [0, 0, 0]
+
+    class _Diverged(Exception):
+        pass
+
+    def record(t, ref, F, q_meas, q_true):
+        qd = inverse(ref[0], ref[1], ref[2], L1)
+        s = plant.state
+        rows.append((t, *qd, *q_true, ref[0], ref[1], ref[2], s[0], s[1], s[2]))
+        if f_lim > 0.0:
+            for i in range(3):
+                if abs(F[i]) >= f_lim:
+                    sat[i] += 1
+        if len(rows) >= _BLOCK:
+            stats.add(rows)
+            rows.clear()
+        if abs(q_true[0]) > travel or abs(q_true[1]) > travel or abs(q_true[2]) > travel or abs(s[2]) > angle:
+            raise _Diverged(t)
+
+    diverged_at = None
+    t0 = time.perf_counter()
+    try:
+        simulate(plant, ctrl, traj, sc.start_time, sc.n_steps, sc.step, sc.ordering, record)
+    except _Diverged as d:
+        diverged_at = d.args[0]
+    except ModelInputError as err:  # KinematicDomainError: the plant left its domain
+        diverged_at = err.time if err.time is not None else float("nan")
+    wall = time.perf_counter() - t0
+    stats.add(rows)
+    out = stats.result()
+    n = out["samples"]
+    out["saturation_fraction"] = [s / n for s in sat]
+    t1 = time.perf_counter()
+    rep = stability.check(sc)
+    out["check_s"] = time.perf_counter() - t1
+    out["spectral_radius"] = rep.spectral_radius
+    out["verdict"] = rep.verdict
+    out["time_constant_s"] = rep.time_constant
+    out["diverged_at"] = diverged_at
+    saturated = max(out["saturation_fraction"]) > SATURATION_FLAG
+    out["stable"] = diverged_at is None and not saturated and rep.verdict != "unstable"
+    out["status"] = ("diverged" if diverged_at is not None else
+                     "chatters at the force limit" if saturated else
+                     "bounded over the run, but rho > 1" if rep.verdict == "unstable" else
+                     "stable" if rep.verdict == "stable" else "stable or marginal: |rho - 1| < 1e-6")
+    out["wall_s"] = wall
+    return out
+
+
+def _run_one(spec: dict) -> dict:
+    sc = paper_scenario(spec["case"], spec["law"], spec["step"], spec["stop_time"], spec["reading"],
+                        spec["plant"], spec["root"])
+    row = {k: v for k, v in spec.items() if k != "root"}
+    row.update(run_scenario(sc))
+    return row
+
+
+def run_paper_gains(steps=(1e-6, 1e-5, 1e-4), stop_time: float = 0.5, readings=("A", "B"),
+                    cases=tuple(CASES), laws=LAWS, plants=tuple(PLANTS), workers: int = 1,
+                    root: Path = ROOT) -> list[dict]:
+    """Run every combination of case x plant x reading x law x step [s] for stop_time [s].
+
+    Returns one dict per run: case, plant, reading, law, step, stop_time and the fields of
+    run_scenario. workers > 1 runs that many processes. ValueError names a bad argument.
+    """
+    if not (isinstance(workers, int) and workers >= 1):
+        raise ValueError(f"workers = {workers!r} is invalid: allowed is an integer >= 1")
+    specs = [{"case": c, "plant": p, "reading": r, "law": law, "step": float(h), "stop_time": float(stop_time),
+              "root": str(root)}
+             for c in cases for p in plants for r in readings for law in laws for h in steps]
+    for s in specs:  # validate everything before the first run
+        paper_scenario(s["case"], s["law"], s["step"], s["stop_time"], s["reading"], s["plant"], root)
+    if workers == 1:
+        return [_run_one(s) for s in specs]
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_run_one, specs))
+
+
+def _um(values) -> str:
+    return ", ".join(f"{v:.3g}" for v in values)
+
+
+def paper_gains_table(rows: list[dict]) -> str:
+    """Markdown table of run_paper_gains rows (MAE per motor in um, saturation in %)."""
+    lines = ["| gains | plant | reading | law | step | status | rho - 1 | tau [s] | tracking MAE q1, q2, q3 [um] "
+             "| sync MAE q1, q2, q3 [um] | at force limit [%] | wall [s] |",
+             "|---" * 12 + "|"]
+    for r in rows:
+        status = r["status"] + (f" at t = {r['diverged_at']:.4g} s" if r["diverged_at"] is not None else "")
+        lines.append(f"| {r['case']} | {r['plant']} | {r['reading']} | {r['law'].upper()} | {r['step'] * 1e6:g} us "
+                     f"| {status} | {r['spectral_radius'] - 1.0:+.3g} | {r['time_constant_s']:.3g} | {_um(r['tracking_mae_um'])} "
+                     f"| {_um(r['sync_mae_um'])} | {_um([100 * s for s in r['saturation_fraction']])} "
+                     f"| {r['wall_s']:.1f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """python -m orchestrator.experiments.paper_gains [--stop-time S] [--steps H ...] [--workers N]
+    [--json FILE]: run_paper_gains and print paper_gains_table (rows also to FILE as JSON)."""
+    import argparse
+    import json
+
+    ap = argparse.ArgumentParser(prog="python -m orchestrator.experiments.paper_gains",
+                                 description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop.")
+    ap.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s]")
+    ap.add_argument("--steps", type=float, nargs="+", default=[1e-6, 1e-5, 1e-4], help="steps [s]")
+    ap.add_argument("--readings", nargs="+", default=list(READINGS), choices=list(READINGS))
+    ap.add_argument("--plants", nargs="+", default=list(PLANTS), choices=list(PLANTS))
+    ap.add_argument("--workers", type=int, default=1, help="processes")
+    ap.add_argument("--json", help="also write the rows to this JSON file")
+    a = ap.parse_args(argv)
+    try:
+        rows = run_paper_gains(steps=tuple(a.steps), stop_time=a.stop_time, readings=tuple(a.readings),
+                               plants=tuple(a.plants), workers=a.workers)
+    except ValueError as err:
+        ap.exit(2, f"error: {err}\n")
+    print(paper_gains_table(rows))
+    if a.json:
+        Path(a.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
