@@ -13,8 +13,8 @@ from .engine import build as build_mod
 from .engine.master import CoSimulationError, remove_stale_folders
 from .engine.families import DEFAULT_FAMILY, FAMILIES, resolve_ssp
 from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
-                      one_line, output_lock, run_scenario)
-from .experiments.scenario import ScenarioError, load
+                      one_line, output_lock, prepare_output, run_scenario, write_comparison_status)
+from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
 from .studies.study import StudyError
 
 
@@ -47,6 +47,49 @@ def _run_one(scenario, ssp, out, overwrite, progress, label):
         close()
 
 
+def _load(args):
+    """The scenario of a run/compare command: the file, its --set overrides and --format."""
+    scenario = load(args.scenario, args.set)
+    if getattr(args, "format", None):
+        scenario = scenario.with_changes(format=args.format)
+    return scenario
+
+
+def result_base(scenario) -> Path:
+    """The scenario's result folder: its ``output``, else results/<name> (relative to the
+    current directory); `tapmp run` writes into <base>/<law>, `tapmp compare` into <base>/compare."""
+    return Path(scenario.output or Path("results") / scenario.name)
+
+
+@contextmanager
+def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
+    """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
+    for the duration; comparison.json records "running", then "completed", or "failed" /
+    "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
+    an unfinished one is replaced, its runs with it."""
+    laws = {name: sc.law for name, sc in runs.items()}
+    with output_lock(out):
+        prepare_output(out, overwrite, "comparison")
+        write_comparison_status(out, scenario.name, laws, "running")
+        try:
+            yield out
+        except BaseException as err:
+            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+            try:
+                write_comparison_status(out, scenario.name, laws, status, error=one_line(err))
+            except (OSError, ResultsWriteError):
+                pass  # e.g. a full disk: the error itself is raised all the same
+            raise
+        write_comparison_status(out, scenario.name, laws, "completed")
+
+
+def warn_if_implausible(scenario) -> None:
+    """One warning line on stderr per parameter far outside this machine's usual range."""
+    from .experiments.plausibility import implausible
+    for line in implausible(scenario):
+        print(f"warning: {line}", file=sys.stderr, flush=True)
+
+
 def cmd_build(args) -> int:
     build_mod.build_all(Path(args.out))
     return 0
@@ -74,9 +117,10 @@ def cmd_check(args) -> int:
 
 
 def cmd_run(args) -> int:
-    scenario = load(args.scenario, args.set)
+    scenario = _load(args)
+    warn_if_implausible(scenario)
     warn_if_unstable(scenario)
-    out = Path(args.out or scenario.output)
+    out = Path(args.out) if args.out else result_base(scenario) / scenario.law
     m = _run_one(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
     print("tracking MAE [um]: " + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]))
@@ -97,12 +141,14 @@ def cmd_compare(args) -> int:
     from .experiments.plots import plot
     from .experiments.report import write_comparison
 
-    scenario = load(args.scenario, args.set)
-    out = Path(args.out or scenario.output)
+    scenario = _load(args)
+    warn_if_implausible(scenario)
+    out = Path(args.out) if args.out else result_base(scenario) / "compare"
     results = {}
-    with output_lock(out):  # the runs write subfolders; comparison.md and figures go here
-        for name, sc in compare_runs(scenario).items():
-            results[name] = _run_one(sc, _ssp(args, scenario), out / name, args.overwrite,
+    runs = compare_runs(scenario)
+    with comparison_folder(out, args.overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
+        for name, sc in runs.items():
+            results[name] = _run_one(sc, _ssp(args, scenario), out / name, True,
                                      not args.no_progress, f"{scenario.name} {name}")
         command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
         text = write_comparison(out / "comparison.md", scenario, results, command)
@@ -119,10 +165,11 @@ def cmd_reproduce(args) -> int:
     tables = {}
     for name in ("paper_simulation", "paper_experiment"):
         scenario = load(Path(args.scenarios) / f"{name}.toml")
-        out = Path(args.results) / name
-        with output_lock(out):
+        out = Path(args.results) / name / "compare"  # as `tapmp compare --out`
+        runs = compare_runs(scenario)
+        with comparison_folder(out, True, scenario, runs):
             results = {run: _run_one(sc, _ssp(args, scenario), out / run, True, not args.no_progress, f"{name} {run}")
-                       for run, sc in compare_runs(scenario).items()}
+                       for run, sc in runs.items()}
             plot(out)
         tables[name] = (scenario, results)
     write_reproduction(Path(args.out), tables, "tapmp reproduce " + " ".join(sys.argv[2:]))
@@ -187,10 +234,16 @@ def cmd_plot(args) -> int:
     return 0
 
 
+RELATIVE = "a relative path is relative to the current directory"
+PATHS_HELP = ("Paths: scenario files, --out, --ssp and a scenario's 'output' are relative to the current "
+              "directory; a scenario's gains_file is relative to the scenario file; the default SSP of --fmus is "
+              "found in the repository's build/ folder, wherever tapmp runs from.")
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="tapmp", description=(
         "Co-simulate the TAPMP (three-axis parallel motion platform) FMUs: build them, run "
-        "scenarios, compare SC-DC with APD-DC, plot results."))
+        "scenarios, compare SC-DC with APD-DC, plot results."), epilog=PATHS_HELP)
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -202,18 +255,24 @@ def parser() -> argparse.ArgumentParser:
 
     def scenario_args(sp):
         sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
-        sp.add_argument("--out", help="output folder (overrides the scenario's 'output')")
+        sp.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, "
+                        f"then /<law> for run, /compare for compare); {RELATIVE}")
+        sp.add_argument("--format", choices=RESULT_FORMATS, help="result file: csv (results.csv, text) or mat "
+                        "(results.mat, MATLAB 5 MAT-file, about half the size and faster to write); overrides the "
+                        "scenario's format (default csv)")
         sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
         sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
         sp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
                     "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
                     "scenario's fmus; paths relative to the repository root")
-        sp.add_argument("--overwrite", action="store_true", help="replace results in an existing output folder")
+        sp.add_argument("--overwrite", action="store_true", help="replace a completed result in the output folder "
+                        "(a failed or interrupted one is replaced without it)")
         sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     r = sub.add_parser("run", help="run one scenario", description="Co-simulate one scenario and write "
-                       "results.csv, run.json and metrics.json into its output folder.")
+                       "results.csv (or results.mat), run.json and metrics.json into its output folder, by default "
+                       "<output>/<law>, e.g. results/paper_simulation/sc-dc.", epilog=PATHS_HELP)
     scenario_args(r)
     r.set_defaults(func=cmd_run)
     ck = sub.add_parser("check", help="stability pre-check of a scenario's sampled loop",
@@ -230,7 +289,9 @@ def parser() -> argparse.ArgumentParser:
     ck.set_defaults(func=cmd_check)
     c = sub.add_parser("compare", help="run a scenario with SC-DC and with APD-DC",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41) and APD-DC with matched "
-                       "stiffness; write comparison.md and figures and print the tables.")
+                       "stiffness; write comparison.md and figures and print the tables. Output folder by default "
+                       "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
+                       epilog=PATHS_HELP)
     scenario_args(c)
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write docs/paper-reproduction.md",
@@ -238,7 +299,8 @@ def parser() -> argparse.ArgumentParser:
                         "page: our Tables 1-6 beside the paper's and what differs.")
     rp.add_argument("--out", default="docs/paper-reproduction.md", help="page to write")
     rp.add_argument("--scenarios", default="scenarios", help="folder with paper_simulation.toml, paper_experiment.toml")
-    rp.add_argument("--results", default="results", help="folder for the runs (overwritten)")
+    rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
+                    f"overwritten; {RELATIVE}")
     rp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
     rp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
                     "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
@@ -280,8 +342,11 @@ def parser() -> argparse.ArgumentParser:
     ex.add_argument("--overwrite", action="store_true", help="replace an existing FILE.ssp and its start values")
     ex.set_defaults(func=cmd_export)
     pl = sub.add_parser("plot", help="plot a run or a comparison",
-                        description="Write the figures (cf. paper Fig. 4-7) of a result folder as PNG.")
-    pl.add_argument("result_dir", help="a run folder or a comparison folder")
+                        description="Write the figures (cf. paper Fig. 4-7, and the force commands) of a result "
+                        "folder as PNG: run_fig4_trajectory.png ... run_fig8_force_commands.png for a run folder, "
+                        "fig4_trajectory.png ... fig8_force_commands.png for a comparison folder; the folder says "
+                        "which it is (run.json or comparison.json).", epilog=PATHS_HELP)
+    pl.add_argument("result_dir", help=f"a run folder or a comparison folder; {RELATIVE}")
     pl.set_defaults(func=cmd_plot)
     return p
 

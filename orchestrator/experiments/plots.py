@@ -1,5 +1,14 @@
-"""Figures of a run or a comparison (matplotlib, PNG), after the paper's Fig. 4-7."""
+"""Figures of a run or a comparison (matplotlib, PNG), after the paper's Fig. 4-7, plus
+the force commands per motor.
 
+A folder says what it holds (results.folder_kind): a single run (run.json) gets
+run_fig4_trajectory.png ... run_fig8_force_commands.png, a comparison (comparison.json)
+fig4_trajectory.png ... fig8_force_commands.png with one trace per compared law, so a
+figure of one kind never overwrites one of the other. Errors are in µm (µrad for B),
+legends sit outside the axes (below them), titles name the laws shown.
+"""
+
+import math
 from pathlib import Path
 
 import matplotlib
@@ -8,60 +17,144 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from .metrics import error_signals  # noqa: E402
-from .results import read_results  # noqa: E402
+from .results import COMPARISON_JSON, ResultFolderError, _read_json, folder_kind, read_results  # noqa: E402
 
-_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched"}
+LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
+              "pid-dc": "PID-DC"}
+ERRORS = (  # key of error_signals, file stem, title, y labels, scale from SI
+    ("tracking", "fig5_tracking_errors", "Tracking error of each motor (cf. Fig. 5)",
+     ("e1 [µm]", "e2 [µm]", "e3 [µm]"), 1e6),
+    ("sync", "fig6_sync_errors", "Synchronization error of each motor (cf. Fig. 6)",
+     ("es1 [µm]", "es2 [µm]", "es3 [µm]"), 1e6),
+    ("axis", "fig7_axis_errors", "Tracking error of each drive axis (cf. Fig. 7)",
+     ("X [µm]", "Z [µm]", "B [µrad]"), 1e6))
 
 
-def _runs(folder: Path) -> dict[str, Path]:
-    """Run folders under a comparison folder, or the folder itself for a single run."""
+def label(name: str, law: str | None = None) -> str:
+    """Legend label of a run: by its comparison folder name, else by its law."""
+    return LAW_LABELS.get(name) or LAW_LABELS.get(law or "", (law or name).upper())
+
+
+def load_folder(folder: Path) -> tuple[str, dict[str, dict]]:
+    """(kind, {label: run}) of a result folder, kind "run" or "comparison"; each run is the
+    error_signals of its rows plus "columns" and "data". ResultFolderError (one line)
+    for a folder that is missing or holds no readable results."""
     folder = Path(folder)
-    if (folder / "results.csv").is_file():
-        return {folder.name: folder}
-    runs = {p.name: p for p in sorted(folder.iterdir()) if (p / "results.csv").is_file()}
+    if not folder.is_dir():
+        raise ResultFolderError(f"result folder {folder} does not exist{' (a file)' if folder.exists() else ''}: "
+                                "allowed is a folder written by tapmp run or tapmp compare")
+    kind = folder_kind(folder)
+    if kind == "run":
+        paths = {label(folder.name, (_read_json(folder / "run.json") or {}).get("scenario", {}).get("law")): folder}
+    elif kind == "comparison":
+        info = _read_json(folder / COMPARISON_JSON) or {}
+        names = info.get("runs") or {p.name: None for p in sorted(folder.iterdir())
+                                     if (p / "run.json").is_file()}
+        paths = {label(n, law): folder / n for n, law in names.items() if folder_kind(folder / n) == "run"}
+    else:
+        raise ResultFolderError(f"result folder {folder} holds no results of tapmp run or tapmp compare "
+                                "(no run.json, comparison.json or run folders)")
+    runs = {}
+    for name, path in paths.items():
+        try:
+            columns, data = read_results(path)
+        except ResultFolderError:
+            status = (_read_json(path / "run.json") or {}).get("status", "unknown")
+            raise ResultFolderError(f"{path} holds no rows to plot (its run is {status}; run.json says why)") from None
+        runs[name] = error_signals(columns, data) | {"columns": columns, "data": data}
     if not runs:
-        raise FileNotFoundError(f"{folder} holds no results.csv (neither itself nor a sub-folder)")
-    return runs
+        raise ResultFolderError(f"comparison folder {folder} holds none of its runs yet")
+    return kind, runs
+
+
+def _title(text: str, runs: dict) -> str:
+    return f"{text}: {' vs '.join(runs)}"
+
+
+def _legend_below(fig, axes) -> None:
+    """One legend for the figure, below the axes (never over a trace)."""
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=max(1, len(labels)), frameon=False)
+
+
+def trajectory_figure(runs: dict):
+    """Fig. 4: the desired trajectory (X-Z in mm, B in deg over time [s]) of the first run."""
+    name, run = next(iter(runs.items()))
+    c = {n: i for i, n in enumerate(run["columns"])}
+    data = run["data"]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), layout="constrained")
+    ax[0].plot(data[:, c["trajectory.X_d"]] * 1e3, data[:, c["trajectory.Z_d"]] * 1e3, label="desired")
+    ax[0].set(xlabel="X [mm]", ylabel="Z [mm]", title="(a) X- and Z-axis", aspect="equal")
+    ax[1].plot(data[:, 0], data[:, c["trajectory.B_d"]] * 180 / math.pi, label="desired")
+    ax[1].set(xlabel="time [s]", ylabel="B [deg]", title="(b) B-axis")
+    fig.suptitle(f"Desired trajectory in task space (cf. paper Fig. 4), the reference of: {' and '.join(runs)}")
+    return fig
+
+
+def error_figure(runs: dict, key: str):
+    """Fig. 5-7: the errors ``key`` ("tracking", "sync" or "axis") of every run, in µm (µrad)."""
+    _, _, title, ylabels, scale = next(e for e in ERRORS if e[0] == key)
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8.6), sharex=True, layout="constrained")
+    for name, sig in runs.items():
+        for i in range(3):
+            axes[i].plot(sig["time"], sig[key][:, i] * scale, label=name, lw=0.8)
+    for i in range(3):
+        axes[i].set_ylabel(ylabels[i])
+        axes[i].grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    _legend_below(fig, axes)
+    fig.suptitle(_title(title, runs))
+    return fig
+
+
+def force_columns(columns: list[str]) -> list[int]:
+    """Indices of the force commands F1, F2, F3 [N] (controller.F1.. if present, else any *.F1..)."""
+    out = []
+    for i in (1, 2, 3):
+        exact = [k for k, c in enumerate(columns) if c == f"controller.F{i}"]
+        anywhere = [k for k, c in enumerate(columns) if c.endswith(f".F{i}")]
+        if not (exact or anywhere):
+            raise ResultFolderError(f"the results hold no force command F{i} (a column controller.F{i})")
+        out.append((exact or anywhere)[0])
+    return out
+
+
+def force_figure(runs: dict):
+    """Fig. 8: the force command F_i [N] the controller sends to each motor, every run."""
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8.6), sharex=True, layout="constrained")
+    for name, run in runs.items():
+        cols = force_columns(run["columns"])
+        for i in range(3):
+            axes[i].plot(run["data"][:, 0], run["data"][:, cols[i]], label=name, lw=0.8)
+    for i in range(3):
+        axes[i].set_ylabel(f"F{i + 1} [N]")
+        axes[i].grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    _legend_below(fig, axes)
+    fig.suptitle(_title("Force command of each motor", runs))
+    return fig
+
+
+def figures(runs: dict) -> dict:
+    """{file stem: Figure} of Fig. 4-8 for ``runs`` ({label: run} as load_folder gives)."""
+    out = {"fig4_trajectory": trajectory_figure(runs)}
+    for key, stem, *_ in ERRORS:
+        out[stem] = error_figure(runs, key)
+    out["fig8_force_commands"] = force_figure(runs)
+    return out
 
 
 def plot(folder: Path) -> list[Path]:
-    """Write fig4_trajectory.png ... fig7_axis_errors.png into ``folder``; return their paths."""
+    """Write the figures of a run folder (run_fig4_trajectory.png ... run_fig8_force_commands.png)
+    or of a comparison folder (fig4_trajectory.png ... fig8_force_commands.png) into ``folder``;
+    return their paths."""
     folder = Path(folder)
-    runs = {name: error_signals(*read_results(p)) | {"data": read_results(p)} for name, p in _runs(folder).items()}
+    kind, runs = load_folder(folder)
+    prefix = "run_" if kind == "run" else ""
     written = []
-    cols, data = next(iter(runs.values()))["data"]
-    c = {n: i for i, n in enumerate(cols)}
-    t = data[:, 0]
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
-    ax[0].plot(data[:, c["trajectory.X_d"]] * 1e3, data[:, c["trajectory.Z_d"]] * 1e3)
-    ax[0].set(xlabel="X [mm]", ylabel="Z [mm]", title="(a) X- and Z-axis", aspect="equal")
-    ax[1].plot(t, data[:, c["trajectory.B_d"]] * 180 / 3.141592653589793)
-    ax[1].set(xlabel="time [s]", ylabel="B [deg]", title="(b) B-axis")
-    fig.suptitle("Desired trajectory in task space (cf. paper Fig. 4)")
-    written.append(_save(fig, folder / "fig4_trajectory.png"))
-    for key, name, title, ylabels, scale in (
-            ("tracking", "fig5_tracking_errors.png", "Tracking error of each motor (cf. Fig. 5)",
-             ("e1 [um]", "e2 [um]", "e3 [um]"), (1e6,) * 3),
-            ("sync", "fig6_sync_errors.png", "Synchronization error of each motor (cf. Fig. 6)",
-             ("es1 [um]", "es2 [um]", "es3 [um]"), (1e6,) * 3),
-            ("axis", "fig7_axis_errors.png", "Tracking error of each drive axis (cf. Fig. 7)",
-             ("X [um]", "Z [um]", "B [urad]"), (1e6,) * 3)):
-        fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-        for run, sig in runs.items():
-            for i in range(3):
-                axes[i].plot(sig["time"], sig[key][:, i] * scale[i], label=_LABELS.get(run, run), lw=0.8)
-        for i in range(3):
-            axes[i].set_ylabel(ylabels[i])
-            axes[i].grid(True, alpha=0.3)
-        axes[0].legend(loc="upper right")
-        axes[-1].set_xlabel("time [s]")
-        fig.suptitle(title)
-        written.append(_save(fig, folder / name))
+    for stem, fig in figures(runs).items():
+        path = folder / f"{prefix}{stem}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
     return written
-
-
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path

@@ -10,7 +10,10 @@ open_inputs (a list of "element.variable" FMU inputs that no connection of the S
 drives, deliberately: they keep their start values; the master refuses any other
 undriven input, and an entry that is no input of the system or that a connection drives),
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
-see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it).
+see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
+format (the result file: "csv" (default) or "mat", see orchestrator.experiments.results;
+`--format` overrides it). output is the scenario's result folder (default
+results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
@@ -49,7 +52,8 @@ CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-        "open_inputs": list, "fmus": str}
+        "open_inputs": list, "fmus": str, "format": str}
+RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
 _TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
@@ -134,7 +138,7 @@ class Scenario:
     stop_time: float = 2.5
     step: float = 1e-4
     ordering: str = "gauss-seidel"
-    output: str = "results"
+    output: str = ""  # "" = results/<name>
     start_on_trajectory: bool = True
     clock: str = "exact"
     connection_start: str = "propagated"
@@ -146,6 +150,7 @@ class Scenario:
     record_every: int = 1
     open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
     fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.engine.families)
+    format: str = "csv"   # result file: csv or mat (RESULT_FORMATS)
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -337,6 +342,8 @@ def validate(s: Scenario) -> Scenario:
     from ..engine.families import FAMILIES
     if s.fmus not in FAMILIES:
         raise ScenarioError(f"fmus = {s.fmus!r} is invalid: allowed are {', '.join(FAMILIES)}")
+    if s.format not in RESULT_FORMATS:
+        raise ScenarioError(f"format = {s.format!r} is invalid: allowed are {', '.join(RESULT_FORMATS)}")
     if s.record_every < 1:
         raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)
