@@ -141,3 +141,59 @@ def test_run_warns_on_one_stderr_line_before_running_an_unstable_scenario(built,
     stable = subprocess.run(cmd[:5] + cmd[7:-2] + [str(tmp_path / "stable"), "--no-progress"], capture_output=True, text=True, timeout=120)
     assert stable.returncode == 0 and "warning" not in stable.stderr
     assert math.isfinite(check(load(PAPER)).time_constant)
+
+
+# --- PID-DC (law 2) -----------------------------------------------------------------------------
+
+def _modal_image_overrides(scenario):
+    """[controller] kp_c .. ki_d set to the modal image of the scenario's (uniform) SC-DC gains."""
+    from tapmp.control import ModalGains
+    m = ModalGains.matching_scdc(scenario.gain_values())
+    return [f"controller.{n}={v!r}" for n, v in m._asdict().items()]
+
+
+@pytest.mark.parametrize("ordering", ("gauss-seidel", "jacobi"))
+@pytest.mark.parametrize("gains", ("default", "uniform_fast"))
+def test_pid_dc_with_the_modal_image_has_the_spectral_radius_of_scdc(ordering, gains):
+    """Uniform gains: PID-DC with kp_c = Lambda_v D, kp_d = Lambda_v D + 3 (Lambda_v b + Lambda_p),
+    kv = Lambda_v, ki_c = 0, ki_d = 3 Lambda_v D b is SC-DC written in e, so the linearized
+    discrete loops have the same spectrum (to the finite differences' error)."""
+    extra = ([] if gains == "default" else
+             ["gain_overrides.Lambda_v=2.0", "gain_overrides.D=400.0", "gain_overrides.b=20.0",
+              "gain_overrides.Lambda_p=600.0"])
+    sc = load(PAPER, [f'ordering="{ordering}"', *extra])
+    pid = load(PAPER, [f'ordering="{ordering}"', 'law="pid-dc"', *extra, *_modal_image_overrides(sc)])
+    r_sc, r_pid = check(sc), check(pid)
+    assert r_pid.law == "pid-dc" and "integral_e1" in r_pid.states
+    assert r_pid.spectral_radius == pytest.approx(r_sc.spectral_radius, abs=1e-9)
+    assert r_pid.verdict == r_sc.verdict
+    # the whole spectrum, not just its radius (sorted by magnitude, then angle)
+    key = lambda z: (round(abs(z), 7), round(np.angle(z), 5))  # noqa: E731
+    assert np.allclose(sorted(r_pid.eigenvalues, key=key), sorted(r_sc.eigenvalues, key=key), atol=1e-7)
+
+
+def test_pid_dc_check_refuses_an_unstable_gain_set_and_handles_every_integral_structure():
+    """A differential P gain far beyond what 0.1 ms sampling allows is unstable (as SC-DC with the
+    Eq. 40 gains); with a common integral (ki_c > 0) all three integral states feed back, with no
+    integral gain at all there is no integral state, and both are judged."""
+    unstable = check(load(PAPER, ['law="pid-dc"', "controller.kv_d=500.0"]))
+    assert unstable.verdict == "unstable" and unstable.spectral_radius > 1.0
+    with_common = check(load(PAPER, ['law="pid-dc"', "controller.ki_c=2000.0"]))
+    assert with_common.verdict == "stable" and [s for s in with_common.states if s.startswith("integral_e")] == [
+        "integral_e1", "integral_e2", "integral_e3"]
+    no_integral = check(load(PAPER, ['law="pid-dc"', "controller.ki_c=0.0", "controller.ki_d=0.0"]))
+    assert not any(s.startswith("integral") for s in no_integral.states) and no_integral.verdict == "stable"
+
+
+def test_stability_check_includes_the_attraction_and_the_mismatch():
+    """The attraction's negative stiffness (-2 F_a / g_a per gap) and a mass mismatch change the
+    linearized loop. The attraction is internal, so it acts on the differential modes only, whose
+    stiffness with the default gains is kp_d / K_T = 1278 / 4.1e-5 = 3.1e7 N/m: -2 * 1 / 0.01 =
+    -200 N/m leaves the loop stable, -2 * 1e5 / 1e-3 = -2e8 N/m overpowers it (unstable)."""
+    base = check(load(PAPER))
+    weak = check(load(PAPER, ["plant.attraction_force=1.0", "plant.attraction_gap=0.01"]))
+    strong = check(load(PAPER, ["plant.attraction_force=1e5", "plant.attraction_gap=0.001"]))
+    assert weak.spectral_radius != base.spectral_radius and weak.verdict == "stable"
+    assert strong.verdict == "unstable"
+    mism = check(load(PAPER, ["mismatch.m_1=1.5", "mismatch.m_3=1.5"]))
+    assert mism.spectral_radius != base.spectral_radius
