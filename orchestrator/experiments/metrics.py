@@ -4,11 +4,28 @@ Tracking error of motor i: e_i = q_di - q_i with the plant's true position q_i
 (the encoder reading is what the controller sees; accuracy is judged on the true
 motion). Synchronization errors follow Eq. 18. Axis errors are X_d - X, Z_d - Z
 in um and B_d - B in urad. MAE = mean |e|; STD = population standard deviation.
+Saturation of motor i: the share of samples whose force command |F_i| (the controller's
+output) is at the force limit (the plant's force_limit; the controller's if the plant's is 0).
 """
 
 import numpy as np
 
+from tapmp.interface import CONTROLLER_VARS, PLANT_VARS
+
 _GROUPS = ("tracking", "sync", "axis")
+_FORCES = tuple(f"controller.F{i}" for i in (1, 2, 3))
+AT_LIMIT = 1e-9  # |F| >= (1 - AT_LIMIT) force_limit counts as at the limit (a clipped value, to rounding)
+
+
+def saturation_limit(parameters: dict) -> float:
+    """The force limit [N] saturation is measured against, from the FMU parameters by element
+    ({"plant": {...}, "controller": {...}}): the plant's force_limit (its FMU default if not
+    set), else the controller's; 0 if both are 0 (no saturation)."""
+    limits = []
+    for element, variables in (("plant", PLANT_VARS), ("controller", CONTROLLER_VARS)):
+        default = next(v.start for v in variables if v.name == "force_limit")
+        limits.append(float(parameters.get(element, {}).get("force_limit", default)))
+    return limits[0] if limits[0] > 0.0 else limits[1]
 
 
 def error_signals(columns: list[str], data: np.ndarray) -> dict[str, np.ndarray]:
@@ -34,8 +51,11 @@ class ErrorStatistics:
     E[e^2] - E[e]^2 cancellation).
     """
 
-    def __init__(self, columns: list[str]):
+    def __init__(self, columns: list[str], force_limit: float = 0.0):
         self.columns = list(columns)
+        self.force_limit = float(force_limit)  # [N]; 0: no saturation is counted
+        self.saturated = np.zeros(3, dtype=np.int64)  # samples with |F_i| at the limit
+        self._forces = [self.columns.index(c) for c in _FORCES] if set(_FORCES) <= set(self.columns) else None
         self.n = 0
         self.abs_sum = {g: np.zeros(3) for g in _GROUPS}
         self.mean = {g: np.zeros(3) for g in _GROUPS}
@@ -46,7 +66,11 @@ class ErrorStatistics:
         data = np.asarray(rows, dtype=float)
         if data.size == 0:
             return
-        signals = error_signals(self.columns, data.reshape(-1, len(self.columns)))
+        data = data.reshape(-1, len(self.columns))
+        signals = error_signals(self.columns, data)
+        if self.force_limit > 0.0 and self._forces is not None:
+            at_limit = np.abs(data[:, self._forces]) >= self.force_limit * (1.0 - AT_LIMIT)
+            self.saturated += at_limit.sum(0)
         nb = signals["time"].shape[0]
         n = self.n + nb
         for g in _GROUPS:
@@ -59,7 +83,8 @@ class ErrorStatistics:
         self.n = n
 
     def result(self) -> dict:
-        """metrics.json content: lists for (q1, q2, q3) and (X um, Z um, B urad)."""
+        """metrics.json content: lists for (q1, q2, q3) and (X um, Z um, B urad); saturation_fraction
+    per motor (0 to 1) against force_limit_n [N]."""
         um = 1e6
         mae = {g: (self.abs_sum[g] / self.n * um).tolist() for g in _GROUPS}
         std = {g: (np.sqrt(self.m2[g] / self.n) * um).tolist() for g in _GROUPS}
@@ -69,11 +94,13 @@ class ErrorStatistics:
             "axis_mae": mae["axis"], "axis_std": std["axis"],
             "units": {"tracking": "um", "sync": "um", "axis": ["um", "um", "urad"]},
             "samples": int(self.n),
+            "saturation_fraction": (self.saturated / max(self.n, 1)).tolist(),
+            "force_limit_n": self.force_limit,
         }
 
 
-def compute(columns: list[str], data: np.ndarray) -> dict:
+def compute(columns: list[str], data: np.ndarray, force_limit: float = 0.0) -> dict:
     """metrics.json content of a whole results table (see ErrorStatistics.result)."""
-    stats = ErrorStatistics(columns)
+    stats = ErrorStatistics(columns, force_limit)
     stats.add(data)
     return stats.result()
