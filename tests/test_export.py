@@ -58,7 +58,7 @@ def assert_initial_state_matters(rows, rest, first=0):
     """The tool's positions are micrometres from the run without the initial state."""
     n = min(len(rows), len(rest) - first)
     gap = np.abs(rows[:n, :3] - rest[first:first + n, :3]).max()
-    assert gap > 1e-6, gap  # m; measured ~2.5e-6 m
+    assert gap > 1e-6, gap  # m; measured 1.1e-5 m (simulate_ssp: 1.6e-5 m), tests/measure_export.py
 
 
 def ssd_root(ssp):
@@ -124,27 +124,37 @@ def test_the_native_fmi3_ssp_exports_with_fmi3_types(native_built, tmp_path, cap
 
 # ---------------------------------------------------------------- libcosim
 
-def test_libcosim_runs_the_exported_ssp_alone_bit_identical_on_its_nanosecond_clock(built, exported,
-                                                                                  without_initial_state):
-    """libcosim applies each component's first parameter set from the SSD (its default set) and
-    takes the step size from the DefaultExperiment's OSP annotation: nothing is set by hand."""
+def run_libcosim_exported(ssp, names):
+    """libcosim's values of ``names`` at t_1 ... t_n, from the SSP alone: no parameter and no
+    step size given (libcosim takes them from the bindings and the OSP annotation)."""
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
-    scenario, ssp, _, _ = exported
+    start, stop, step = experiment(ssp)
+    n = int(round((stop - start) / step))
     log_output_level(CosimLogLevel.WARNING)
     execution = CosimExecution.from_ssp_file(str(ssp))  # no step size: the SSP's own
     observer = CosimObserver.create_last_value()
     execution.add_observer(observer)
     index = {s.name.decode(): s.index for s in execution.slave_infos()}
     refs = {e: {v.name.decode(): v.reference for v in execution.slave_variables(i)} for e, i in index.items()}
-    rows = np.zeros((scenario.n_steps, len(NAMES)))
-    for k in range(scenario.n_steps):
+    rows = np.zeros((n, len(names)))
+    for k in range(n):
         assert execution.step(1)
-        for j, name in enumerate(NAMES):
+        for j, name in enumerate(names):
             element, var = name.split(".")
             rows[k, j] = observer.last_real_values(index[element], [refs[element][var]])[0]
-    assert execution.status().current_time == round(0.2 * 1e9)  # 2,000 steps of 100,000 ns
+    assert execution.status().current_time == n * round(step * 1e9)
+    return rows
+
+
+def test_libcosim_runs_the_exported_ssp_alone_bit_identical_on_its_nanosecond_clock(built, exported,
+                                                                                  without_initial_state):
+    """libcosim applies each component's first parameter set from the SSD (its default set) and
+    takes the step size from the DefaultExperiment's OSP annotation: nothing is set by hand."""
+    scenario, ssp, _, _ = exported
+    rows = run_libcosim_exported(ssp, NAMES)
+    assert rows.shape == (2000, 9)
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi", clock="nanoseconds")[1:]
     assert np.array_equal(rows, ours), dict(zip(NAMES, np.abs(rows - ours).max(axis=0)))
     assert_initial_state_matters(rows, without_initial_state, first=1)
@@ -198,30 +208,38 @@ def test_ecos_without_the_parameter_set_name_keeps_the_fmus_start_values(exporte
     assert values[None][0] == 0.0 and values[None] != values[scenario.name]
 
 
-def test_the_ecos_executable_runs_the_exported_ssp_writing_where_it_is_started(built, exported, tmp_path):
-    """`ecos simulate --parameterSet NAME` in a folder of the user's choice (the CSV goes to
-    the working directory); its CSV has 6 decimals, so the commands are compared to 5e-7 N."""
+def run_ecos_executable(ssp, parameter_set, folder, names):
+    """`ecos simulate --parameterSet NAME` started in ``folder`` (it writes its CSV into the
+    working directory); the values of ``names`` at t_0 ... t_n from that CSV (6 decimals)."""
     import os
 
     import ecospy
-    scenario, ssp, _, _ = exported
+    start, stop, step = experiment(ssp)
     binaries = Path(ecospy.__file__).parent / "binaries"
-    exe = tmp_path / "ecos"  # the wheel installs it without the executable bit
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    exe = folder / "ecos"  # the wheel installs it without the executable bit
     shutil.copy(binaries / "ecos", exe)
     exe.chmod(exe.stat().st_mode | stat.S_IXUSR)
-    out = tmp_path / "ecos_out"
-    out.mkdir()
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
     env["LD_LIBRARY_PATH"] = str(binaries)
-    proc = subprocess.run([str(exe), "simulate", "--path", str(ssp), "--stepSize", "1e-4", "--stopTime", "0.2",
-                           "--parameterSet", scenario.name, "--noParallel", "--logLevel", "warn"], cwd=out,
-                          env=env, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([str(exe), "simulate", "--path", str(ssp), "--startTime", repr(start), "--stepSize",
+                           repr(step), "--stopTime", repr(stop), "--parameterSet", parameter_set, "--noParallel",
+                           "--logLevel", "warn"], cwd=folder, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    (csv,) = out.glob("*.csv")
+    (csv,) = folder.glob("*.csv")
     with open(csv) as f:
         header = [h.strip().split("[")[0].replace("::", ".") for h in f.readline().split(",")]
     data = np.loadtxt(csv, delimiter=",", skiprows=1)
-    got = data[:, [header.index(n) for n in COMMANDS]]
+    return data[:, [header.index(n) for n in names]]
+
+
+def test_the_ecos_executable_runs_the_exported_ssp_writing_where_it_is_started(built, exported, tmp_path):
+    """`ecos simulate --parameterSet NAME` in a folder of the user's choice; its CSV has 6
+    decimals, so the commands (hundreds of N) are compared to 5e-7 N."""
+    scenario, ssp, _, _ = exported
+    got = run_ecos_executable(ssp, scenario.name, tmp_path / "ecos_out", COMMANDS)
+    assert [p.name for p in (tmp_path / "ecos_out").glob("*.csv")] == [f"{ssp.stem}.csv"]  # named after the SSP
     ours = orchestrator_rows(built["ssp"], scenario, COMMANDS, "jacobi", clock="accumulated")
     assert got.shape == ours.shape == (2001, 3)
     assert np.abs(got - ours).max() <= 5.1e-7, np.abs(got - ours).max()  # N (the CSV's rounding)
@@ -242,13 +260,19 @@ def bound_parameter_set(ssp):
         for c in ssd.system.elements for b in c.parameterBindings for s in b.parameterValues for p in s.parameters])
 
 
-def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, exported, without_initial_state):
+def run_fmpy_ssp_exported(ssp, names):
+    """simulate_ssp over the SSP's DefaultExperiment with its bound parameters; the values of
+    ``names`` after each of its steps (2,001 for 0.2 s: the accumulated time stays below 0.2)."""
     from fmpy.ssp.simulation import simulate_ssp
-    scenario, ssp, _, _ = exported
     start, stop, step = experiment(ssp)
     result = simulate_ssp(str(ssp), start_time=start, stop_time=stop, step_size=step,
                           parameter_set=bound_parameter_set(ssp))
-    rows = np.array([result[n] for n in NAMES]).T
+    return np.array([result[n] for n in names]).T
+
+
+def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, exported, without_initial_state):
+    scenario, ssp, _, _ = exported
+    rows = run_fmpy_ssp_exported(ssp, NAMES)
     sc = scenario.with_changes(stop_time=scenario.stop_time + scenario.step)  # it runs 2,001 steps
     ours = orchestrator_rows(built["ssp"], sc, NAMES, "jacobi", clock="accumulated", connection_start="zero")
     assert rows.shape == (2001, 9)
@@ -268,20 +292,25 @@ def test_fmpy_simulate_ssp_ignores_the_bindings_by_itself(exported):
 
 # ---------------------------------------------------------------- the container FMU
 
+def run_container(container, ssp, values, names, out):
+    """`fmpy simulate` on the container FMU with the exported start values, stop time and step;
+    the values of ``names`` at t_0 ... t_n (fmpy writes shortest round-trip floats)."""
+    _, stop, step = experiment(ssp)
+    fmpy = Path(sys.executable).with_name("fmpy")
+    proc = subprocess.run([str(fmpy), "simulate", str(container), "--stop-time", repr(stop),
+                           "--output-interval", repr(step), "--start-values", *Path(values).read_text().split(),
+                           "--output-variables", *names, "--output-file", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    header = [n.strip('"') for n in Path(out).read_text().splitlines()[0].split(",")]
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    return data[:, [header.index(n) for n in names]]
+
+
 def test_fmpy_simulate_on_the_container_with_the_exported_start_values_is_bit_identical(
         built, exported, tmp_path, without_initial_state):
     scenario, ssp, values, _ = exported
-    _, stop, step = experiment(ssp)
-    out = tmp_path / "closed_loop.csv"
-    fmpy = Path(sys.executable).with_name("fmpy")
-    proc = subprocess.run([str(fmpy), "simulate", str(built[CONTAINER]), "--stop-time", repr(stop),
-                           "--output-interval", repr(step), "--start-values", *values.read_text().split(),
-                           "--output-variables", *NAMES, "--output-file", str(out)],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    header = [n.strip('"') for n in out.read_text().splitlines()[0].split(",")]
-    data = np.loadtxt(out, delimiter=",", skiprows=1)  # fmpy writes shortest round-trip floats
-    rows = data[:, [header.index(n) for n in NAMES]]
+    rows = run_container(built[CONTAINER], ssp, values, NAMES, tmp_path / "closed_loop.csv")
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi")
     assert rows.shape == ours.shape == (2001, 9)
     assert np.array_equal(rows, ours), dict(zip(NAMES, np.abs(rows - ours).max(axis=0)))
