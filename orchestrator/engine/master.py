@@ -1,4 +1,5 @@
-"""The master algorithm: co-simulates the FMUs of an SSP system on fmpy's FMU2Slave.
+"""The master algorithm: co-simulates the FMUs of any SSP system of co-simulation FMUs
+(FMI 2.0 and 3.0, any element names, any number of elements) on fmpy.
 
 Life cycle: extract, instantiate, apply parameters, setupExperiment, enter
 initialization, propagate outputs through the connections in dependency order
@@ -7,15 +8,24 @@ then step at a fixed communication step h where the time of step k is t0 + k h
 (never accumulated; see ``clock`` below), then terminate and free every instance and
 remove every extracted folder, also when a step fails.
 
-Orderings of one macro step from t to t + h:
-* ``gauss-seidel`` (default): controller, plant, trajectory. Each FMU's inputs are
-  set from the latest outputs of its sources just before it steps, so the plant
-  integrates with the command the controller computed from the measurement at t:
-  a sampled loop whose only delay is the zero-order hold of the servo cycle.
+Orderings of one macro step from t to t + h (the orders themselves come from the connection
+graph and the FMUs' declared direct feedthrough: ``orchestrator.engine.schedule``; docs/master.md):
+* ``gauss-seidel`` (default): one element after the other, each taking the latest outputs
+  of its sources just before it steps. Default order from the graph; for the TAPMP system
+  controller, plant, trajectory: the plant integrates with the command the controller
+  computed from the measurement at t, a sampled loop whose only delay is the zero-order
+  hold of the servo cycle. ``order`` gives the order explicitly.
 * ``jacobi``: every FMU's inputs are set from the outputs at t, then all step.
   The plant runs with the command of the previous sample: one extra step of delay
   (0.1 ms) in the feedback path. This is what libcosim's and Ecos's fixed-step
   masters and FMPy's ``simulate_ssp`` do.
+An algebraic loop (a cycle of connections through direct feedthrough only) is refused.
+
+Parameters address elements by SSP name; ``plant``, ``controller`` and ``trajectory`` (the
+scenario's tables) also address the one element whose FMU is TAPMP_Plant, TAPMP_Controller,
+TAPMP_Trajectory (:data:`ROLES`), whatever the SSP calls it. Recorded columns are
+``element.output``, with such an element written by its role, so the TAPMP system records
+the same columns under any element names.
 
 Conventions of other masters, to reproduce them bit for bit (tests/test_libcosim.py,
 test_ecos.py, test_fmpy_ssp.py):
@@ -46,12 +56,15 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.ssp.ssd import read_ssd
 
-from .clocks import Clock
+from tapmp.interface import ELEMENT
 
-ORDERINGS = {"gauss-seidel": ("controller", "plant", "trajectory"),
-             "jacobi": ("trajectory", "controller", "plant")}
-# Initialization propagates in the order of the signal flow.
-INIT_ORDER = ("trajectory", "controller", "plant")
+from .clocks import Clock
+from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
+                       initialization_order)
+
+ORDERINGS = ("gauss-seidel", "jacobi")
+# Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address.
+ROLES = {role: model for model, role in ELEMENT.items()}
 CONNECTION_STARTS = ("propagated", "zero")
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
@@ -79,7 +92,8 @@ class DivergenceError(CoSimulationError):
 
 HINT = ("hint: gains unstable at this step size? `tapmp check` tells before a run; "
         "use stable gains or a smaller step")
-# Envelope signals per limit name (see orchestrator.experiments.scenario.LIMITS): (element, output, unit).
+# Envelope signals per limit name (see orchestrator.experiments.scenario.LIMITS): (column prefix, output,
+# unit); a signal the system does not record is not checked.
 ENVELOPE = {"motor_travel": [("plant", f"q{i}_true", "m") for i in (1, 2, 3)],
             "platform_angle": [("plant", "B", "rad")]}
 
@@ -165,6 +179,14 @@ class _Unit:
         self.slave = slave_type(guid=self.md.guid, unzipDirectory=str(unzip_dir),
                                 modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
         self.outputs = [v.name for v in self.md.modelVariables if v.causality == "output"]
+        inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
+        # {output: inputs it depends on directly}; an output without declared dependencies
+        # depends on every input (FMI 2.0 and 3.0 ModelStructure rules).
+        self.feedthrough = {o: frozenset(inputs) for o in self.outputs}
+        for u in self.md.outputs:
+            if u.dependencies is not None:
+                self.feedthrough[u.variable.name] = frozenset(d.name for d in u.dependencies
+                                                              if d.causality == "input")
         self.n_out = len(self.outputs)
         self.out_vrs = (c_uint * self.n_out)(*(self.vars[n].valueReference for n in self.outputs))
         self.out = (c_double * self.n_out)()   # outputs at the last communication point
@@ -239,7 +261,12 @@ class _Unit:
             allowed = sorted(v.name for v in self.vars.values() if v.causality == "parameter")
             raise CoSimulationError(f"{self.name}.{name} is not a parameter of {self.md.modelName}: "
                                     f"allowed are {', '.join(allowed)}", self.name)
-        if var.type in ("Integer", "Int32"):
+        if var.type == "Boolean":
+            if not isinstance(value, bool) and value not in (0, 1):
+                raise CoSimulationError(f"{self.name}.{name} = {value!r} is invalid: allowed is a boolean",
+                                        self.name)
+            self.slave.setBoolean([var.valueReference], [bool(value)])  # FMI 2.0 and 3.0 alike in fmpy
+        elif var.type in ("Integer", "Int32"):
             if int(value) != value:
                 raise CoSimulationError(f"{self.name}.{name} = {value!r} is invalid: allowed is an integer",
                                         self.name)
@@ -264,16 +291,23 @@ class CoSimulation:
     ``start_time`` and ``step_size`` are in s; ``clock`` and ``connection_start`` select
     the conventions described in the module docstring. Every FMU input must be driven by
     a connection unless ``open_inputs`` names it ("element.variable"): such an input keeps
-    its start value.
+    its start value. ``parameters`` keys are element names or the role names of :data:`ROLES`.
+    ``order`` (Gauss-Seidel only) lists every element once in the order they step; without
+    it the order comes from the graph (``orchestrator.engine.schedule``). After entering,
+    :attr:`step_order` and :attr:`init_order` hold the element names in the orders used.
     """
 
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
                  limits: dict | None = None, clock: str = "exact",
-                 connection_start: str = "propagated", open_inputs=()):
+                 connection_start: str = "propagated", open_inputs=(), order=None):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
+        if order is not None and ordering != "gauss-seidel":
+            raise CoSimulationError(f"order = {order!r} is invalid with ordering = {ordering!r}: allowed is an "
+                                    "order only with ordering = 'gauss-seidel' (Jacobi steps all at once)")
+        self.order = order
         if not step_size > 0.0:
             raise CoSimulationError(f"step_size = {step_size!r} is invalid: allowed is a number > 0")
         if connection_start not in CONNECTION_STARTS:
@@ -344,47 +378,110 @@ class CoSimulation:
                                         f"element {name} (truncated or not an FMU): {err}", name) from err
             self.units[name] = unit
             self.guids[name] = unit.md.guid
-        missing = set(INIT_ORDER) - set(self.units)
-        if missing:
-            raise CoSimulationError(f"SSP system lacks the element(s) {', '.join(sorted(missing))}")
         self._connect(ssd.system.connections)
         for unit in self.units.values():
             unit.finish_connections()
-        unknown = set(self.parameters) - set(self.units)
-        if unknown:
-            raise CoSimulationError(f"parameters given for unknown element(s) {', '.join(sorted(unknown))}: "
-                                    f"allowed are {', '.join(self.units)}")
-        for name in INIT_ORDER:
+        self._plan(ssd.system.connections)
+        parameters = self._resolve_parameters()
+        for name in self.init_order:
             unit = self.units[name]
             self._call(unit, lambda u=unit: u.instantiate(self.callbacks, self._logger), "instantiate")
             unit.instantiated = True
-            for pname, value in self.parameters.get(name, {}).items():
+            for pname, value in parameters.get(name, {}).items():
                 self._call(unit, lambda u=unit, p=pname, v=value: u.set_parameter(p, v),
                            f"set parameter {pname}")
             self._call(unit, lambda u=unit: u.enter_initialization(self.t0), "enterInitializationMode")
         propagate = self.connection_start == "propagated"
         if propagate:
-            for name in INIT_ORDER:
+            for name in self.init_order:
                 unit = self.units[name]
                 self._call(unit, unit.read_outputs, "getReal")
-        for name in INIT_ORDER:  # dependency order: sources leave initialization first
+        for name in self.init_order:  # dependency order: sources leave initialization first
             unit = self.units[name]
             if propagate:
                 self._call(unit, unit.apply_inputs, "setReal")
             self._call(unit, unit.slave.exitInitializationMode, "exitInitializationMode")
             if propagate:  # else the outputs (and so the connections) stay 0 until the first step
                 self._call(unit, unit.read_outputs, "getReal")
-        self.columns = ["time"] + [f"{n}.{o}" for n in INIT_ORDER for o in self.units[n].outputs]
-        self._row_units = [self.units[n] for n in INIT_ORDER]
-        self._step_units = [self.units[n] for n in ORDERINGS[self.ordering]]
-        self._envelope = []  # (outputs array, index, signal, limit, unit, limit name)
+        prefix = self._column_prefixes()
+        self.columns = ["time"] + [f"{prefix[n]}.{o}" for n, u in self.units.items() for o in u.outputs]
+        self._row_units = list(self.units.values())
+        self._step_units = [self.units[n] for n in self.step_order]
+        by_prefix = {prefix[n]: u for n, u in self.units.items()}
+        self._envelope = []  # (outputs array, index, signal, limit, unit, limit name, element)
         for key, limit in self.limits.items():
             for element, output, unit_name in ENVELOPE[key]:
-                unit = self.units.get(element)
+                unit = by_prefix.get(element)
                 if limit > 0.0 and unit is not None and output in unit.outputs:
                     self._envelope.append((unit.out, unit.outputs.index(output),
-                                           f"{element}.{output}", float(limit), unit_name, key))
+                                           f"{element}.{output}", float(limit), unit_name, key, unit.name))
         self._check_outputs(self.t0)
+
+    def _plan(self, connections) -> None:
+        """:attr:`init_order` and :attr:`step_order` from the connection graph and the FMUs'
+        declared direct feedthrough (or the explicit ``order``); refuses an algebraic loop."""
+        names = list(self.units)
+        conns = [Connection(c.startElement, c.startConnector, c.endElement, c.endConnector) for c in connections]
+
+        def feedthrough(element, output):
+            return self.units[element].feedthrough[output]
+        try:
+            check_algebraic_loops(names, conns, feedthrough)
+            self.init_order = initialization_order(names, conns, feedthrough)
+            if self.ordering == "jacobi":
+                self.step_order = list(self.init_order)  # all step on the values at t: any order
+            elif self.order is not None:
+                self.step_order = check_order(self.order, names)
+            else:
+                self.step_order = gauss_seidel_order(names, conns, feedthrough)
+        except ScheduleError as err:
+            raise CoSimulationError(f"SSP file {self.ssp_path}: {err}") from None
+
+    def _role_element(self, role: str) -> str | None:
+        """The element whose FMU is the model of ``role`` (:data:`ROLES`) if exactly one is."""
+        hits = [n for n, u in self.units.items() if u.md.modelName == ROLES[role]]
+        return hits[0] if len(hits) == 1 else None
+
+    def _column_prefixes(self) -> dict:
+        """{element: prefix of its columns}: the role name for the one element with a role's FMU
+        (unless another element bears that name), else the element name."""
+        prefix = {n: n for n in self.units}
+        for role in ROLES:
+            element = self._role_element(role)
+            if element is not None and (role not in self.units or role == element):
+                prefix[element] = role
+        return prefix
+
+    def _resolve_parameters(self) -> dict:
+        """``parameters`` keyed by element: a key that names an element addresses it; a role name
+        (:data:`ROLES`) the one element whose FMU is that role's model. A parameter set twice
+        (by name and by role) is refused."""
+        out = {}
+        for key, table in self.parameters.items():
+            if not table:
+                continue  # an empty table sets nothing (e.g. [plant] of a system with its own plant FMU)
+            if key in self.units:
+                element = key
+            elif key in ROLES:
+                hits = [n for n, u in self.units.items() if u.md.modelName == ROLES[key]]
+                if len(hits) != 1:
+                    what = "none" if not hits else f"{len(hits)} ({', '.join(hits)})"
+                    raise CoSimulationError(
+                        f"parameters [{key}] address the element whose FMU is {ROLES[key]}, and SSP file "
+                        f"{self.ssp_path} has {what}: allowed is a table named after the element, one of "
+                        f"{', '.join(self.units)}", key)
+                element = hits[0]
+            else:
+                raise CoSimulationError(f"parameters given for unknown element(s) {key}: allowed are "
+                                        f"{', '.join(self.units)} (or {', '.join(ROLES)} for the element "
+                                        "whose FMU is TAPMP_Plant, ...)", key)
+            target = out.setdefault(element, {})
+            for name, value in table.items():
+                if name in target:
+                    raise CoSimulationError(f"{element}.{name} is set twice (by the tables of the element name "
+                                            f"and of its role): allowed is one value", element)
+                target[name] = value
+        return out
 
     def _read_ssp(self):
         """The SSD of the SSP file and its archive members {normalized name: member name};
@@ -588,12 +685,12 @@ class CoSimulation:
                         raise DivergenceError(f"{unit.name}.{name} = {value!r} at t = {t:.6g} s is not "
                                               f"finite: the co-simulation diverged; {HINT}",
                                               unit.name, t, f"{unit.name}.{name}", value, list(self.log))
-        for out, i, signal, limit, unit_name, key in self._envelope:
+        for out, i, signal, limit, unit_name, key, element in self._envelope:
             value = out[i]
             if not -limit <= value <= limit:
                 raise DivergenceError(f"{signal} = {value:.6g} {unit_name} at t = {t:.6g} s is outside the "
                                       f"envelope |{signal}| <= {limit:g} {unit_name} (limits.{key}): the "
-                                      f"closed loop is diverging; {HINT}", signal.split(".")[0], t, signal,
+                                      f"closed loop is diverging; {HINT}", element, t, signal,
                                       value, list(self.log))
 
     def _step_failed(self, unit: _Unit, t: float, n_log: int, status: int) -> None:

@@ -1,6 +1,6 @@
 """Scenarios: one TOML file each, validated before anything runs.
 
-Top-level keys: name, description, law ("sc-dc", "apd-dc" or "pid-dc"), gains (a preset of
+Top-level keys: name, description, law ("sc-dc" or "apd-dc"), gains (a preset of
 tapmp.params.GAIN_PRESETS), gains_file (a gain preset file, see load_gain_file; it
 replaces the preset named by gains), stop_time, start_time, step, ordering, output,
 start_on_trajectory, record_every (store every Nth step in results.csv; metrics
@@ -10,15 +10,11 @@ open_inputs (a list of "element.variable" FMU inputs that no connection of the S
 drives, deliberately: they keep their start values; the master refuses any other
 undriven input, and an entry that is no input of the system or that a connection drives),
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
-see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
-format (the result file: "csv" (default) or "mat", see orchestrator.experiments.results;
-`--format` overrides it). output is the scenario's result folder (default
-results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
+see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it).
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
-[limits] (the divergence envelope, see LIMITS), [mismatch] (the controller's model
-error, see MISMATCH_RANGE and docs/disturbances.md).
+[limits] (the divergence envelope, see LIMITS).
 """
 
 import copy
@@ -28,7 +24,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from tapmp.control import Gains, ModalGains
+from tapmp.control import Gains
 from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
@@ -42,19 +38,14 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-LAWS = {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}  # PID-DC: modal gains in [controller] kp_c .. ki_d
-# [mismatch]: relative model error of the controller's nominal parameters. For each listed
-# field of tapmp.params.ModelParams the controller gets (plant value) x factor; the plant
-# keeps its own. A factor within MISMATCH_RANGE; not together with [controller] NAME.
-MISMATCH_RANGE = (0.01, 100.0)
+LAWS = {"sc-dc": 0, "apd-dc": 1}
 ORDERINGS = ("gauss-seidel", "jacobi")
 CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-        "open_inputs": list, "fmus": str, "format": str}
-RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
-_TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
+        "open_inputs": list, "fmus": str}
+_TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
 # needs 20 mm of travel and 5 deg; a breach means the loop is running away.
@@ -138,7 +129,7 @@ class Scenario:
     stop_time: float = 2.5
     step: float = 1e-4
     ordering: str = "gauss-seidel"
-    output: str = ""  # "" = results/<name>
+    output: str = "results"
     start_on_trajectory: bool = True
     clock: str = "exact"
     connection_start: str = "propagated"
@@ -146,11 +137,11 @@ class Scenario:
     plant: dict = field(default_factory=dict)
     controller: dict = field(default_factory=dict)
     limits: dict = field(default_factory=dict)
-    mismatch: dict = field(default_factory=dict)  # ModelParams field -> controller/plant factor
     record_every: int = 1
     open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
+    order: list | None = None  # explicit Gauss-Seidel step order: every SSP element name once
+    elements: dict = field(default_factory=dict)  # [ELEMENT] tables: FMU parameters by SSP element name
     fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.engine.families)
-    format: str = "csv"   # result file: csv or mat (RESULT_FORMATS)
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -186,14 +177,13 @@ class Scenario:
             for name, value in zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), ref[:6]):
                 plant[name] = value
         ctrl = dict(self.controller)
-        ctrl.update(self.mismatched_params())
         ctrl["law"] = LAWS[self.law]
         for name, values in zip(GAIN_NAMES, self.gain_values()):
             for i, v in enumerate(values, start=1):
                 ctrl[f"{name}{i}"] = v
         if "L_1" in self.controller and "L_1" not in traj:
             traj["L_1"] = self.controller["L_1"]  # q_d is the controller's view of the reference
-        return {"trajectory": traj, "controller": ctrl, "plant": plant}
+        return {"trajectory": traj, "controller": ctrl, "plant": plant, **copy.deepcopy(self.elements)}
 
     def plain_models(self):
         """(PlantModel, ControllerModel, TrajectoryParams) with this scenario's parameters,
@@ -207,14 +197,8 @@ class Scenario:
                            tuple(pl[k] for k in ("X0", "Z0", "B0")),
                            tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
         ctrl = ControllerModel(model_tuple(ModelParams, ct), self.gain_values(), ct["law"],
-                               ct.get("velocity_source", 0), ct.get("force_limit", 0.0),
-                               model_tuple(ModalGains, ct))
+                               ct.get("velocity_source", 0), ct.get("force_limit", 0.0))
         return plant, ctrl, model_tuple(TrajectoryParams, tr)
-
-    def mismatched_params(self) -> dict:
-        """The controller's nominal model parameters set by [mismatch]: {name: plant value x factor}."""
-        plant = model_tuple(ModelParams, self.plant)
-        return {n: getattr(plant, n) * f for n, f in self.mismatch.items()}
 
     def to_dict(self) -> dict:
         """The resolved scenario as plain data (for run.json)."""
@@ -268,19 +252,31 @@ def _check_whole_steps(s: Scenario) -> None:
                         f"allowed are e.g. {' or '.join(f'{t:.12g}' for t in nearest)}")
 
 
-def _check_mismatch(s: Scenario) -> None:
-    """[mismatch] names ModelParams fields with a factor in MISMATCH_RANGE, none also set in [controller]."""
-    lo, hi = MISMATCH_RANGE
-    for k, v in s.mismatch.items():
-        if k not in ModelParams._fields:
-            raise ScenarioError(f"mismatch.{k} is unknown: allowed are {', '.join(ModelParams._fields)}")
-        v = s.mismatch[k] = _check_type(f"mismatch.{k}", v, float)
-        if not (math.isfinite(v) and lo <= v <= hi):
-            raise ScenarioError(f"mismatch.{k} = {v!r} is invalid: allowed is a factor in [{lo:g}, {hi:g}] "
-                                "(controller value = plant value x factor)")
-        if k in s.controller:
-            raise ScenarioError(f"mismatch.{k} = {v!r} conflicts with controller.{k} = {s.controller[k]!r}: "
-                                "allowed is one of them (the factor sets the controller's value)")
+def _check_addressing(s: Scenario) -> None:
+    """``order`` is a list of distinct element names, for Gauss-Seidel only (whether it names
+    every element of the SSP exactly once is checked by the master); every [ELEMENT] table is
+    named like an SSP element and holds numbers or booleans (whether each is a parameter of
+    that element's FMU is checked by the master against the SSP)."""
+    if s.order is not None:
+        if not (isinstance(s.order, list) and s.order and all(isinstance(e, str) for e in s.order)):
+            raise ScenarioError(f"order = {s.order!r} is invalid: allowed is a list of the SSP element names "
+                                "in the order they step, e.g. [\"controller\", \"plant\", \"trajectory\"]")
+        twice = sorted({e for e in s.order if s.order.count(e) > 1})
+        if twice:
+            raise ScenarioError(f"order = {s.order!r} names {', '.join(twice)} more than once: allowed is "
+                                "every element exactly once")
+        if s.ordering != "gauss-seidel":
+            raise ScenarioError(f"order = {s.order!r} is invalid with ordering = {s.ordering!r}: allowed is an "
+                                "order only with ordering = \"gauss-seidel\" (Jacobi steps all at once)")
+    for element, table in s.elements.items():
+        if not _OPEN_INPUT.fullmatch(f"{element}.x") or not isinstance(table, dict):
+            raise ScenarioError(f"[{element}] is invalid: allowed is a table of FMU parameters named after an "
+                                "SSP element ([A-Za-z_][A-Za-z0-9_]*)")
+        for k, v in table.items():
+            if isinstance(v, float) and not math.isfinite(v) or not isinstance(v, (int, float, bool)):
+                raise ScenarioError(f"{element}.{k} = {v!r} is invalid: allowed is a finite number, an integer "
+                                    "or a boolean (a parameter of the FMU of SSP element "
+                                    f"{element})")
 
 
 def validate(s: Scenario) -> Scenario:
@@ -318,11 +314,8 @@ def validate(s: Scenario) -> Scenario:
             if k not in allowed:
                 raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
-    _check_mismatch(s)
     checks = (("gain_overrides", lambda: s.gain_values().validated()),
-              ("controller", lambda: model_tuple(ModalGains, s.controller).validated()),
-              ("controller", lambda: model_tuple(ModelParams, {**s.controller,
-                                                              **s.mismatched_params()}).validated()),
+              ("controller", lambda: model_tuple(ModelParams, s.controller).validated()),
               ("plant", lambda: model_tuple(ModelParams, s.plant).validated()),
               ("plant", lambda: model_tuple(PlantConfig, s.plant).validated()),
               ("trajectory", lambda: model_tuple(TrajectoryParams, s.trajectory).validated()))
@@ -339,11 +332,10 @@ def validate(s: Scenario) -> Scenario:
             raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
                                 f"[{LIMITS[k][1]}] (0 = no limit)")
     _check_open_inputs(s.open_inputs)
+    _check_addressing(s)
     from ..engine.families import FAMILIES
     if s.fmus not in FAMILIES:
         raise ScenarioError(f"fmus = {s.fmus!r} is invalid: allowed are {', '.join(FAMILIES)}")
-    if s.format not in RESULT_FORMATS:
-        raise ScenarioError(f"format = {s.format!r} is invalid: allowed are {', '.join(RESULT_FORMATS)}")
     if s.record_every < 1:
         raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)
@@ -365,8 +357,13 @@ def from_dict(data: dict, source: str = "") -> Scenario:
             if not isinstance(value, dict):
                 raise ScenarioError(f"{key} must be a table ([{key}])")
             kwargs[key] = dict(value)
+        elif key == "order":
+            kwargs[key] = value
+        elif isinstance(value, dict):  # a table named after an SSP element (checked by the master)
+            kwargs.setdefault("elements", {})[key] = dict(value)
         else:
-            raise ScenarioError(f"{key} is unknown: allowed are {', '.join([*_TOP, *sorted(_TABLES)])}")
+            raise ScenarioError(f"{key} is unknown: allowed are {', '.join([*_TOP, *sorted(_TABLES)])}, "
+                              "order, or a table named after an SSP element")
     if "name" not in kwargs:
         kwargs["name"] = Path(source).stem if source else "scenario"
     if kwargs.get("gains_file") and source and not Path(kwargs["gains_file"]).is_absolute():
