@@ -1,22 +1,35 @@
 """Run a scenario through the master algorithm and write its result folder.
 
-A result folder holds results.csv (streamed while the run goes), run.json (the
-resolved scenario, FMU GUIDs, versions, step, ordering, wall time, status, exit code
-and the reason of a failure) and metrics.json. JSON files are written atomically
-(a uniquely named temporary file in the same folder, then os.replace). Memory stays
-bounded: rows go to disk and into the streaming metrics in blocks of BLOCK steps,
-whatever the simulated time.
+A run folder holds run.json (kind "run": the resolved scenario, FMU GUIDs, columns,
+versions, step, ordering, format, wall time, status, exit code and the reason of a
+failure), metrics.json and the rows in one of two formats (scenario key ``format``,
+``--format``): results.csv (text, every value as Python's shortest round-trip repr)
+or results.mat (MATLAB 5 MAT-file: one N x 1 double variable per column, names with
+"." as "_", plus ``columns``, the original names in order). A comparison folder holds
+comparison.json (kind "comparison") and one run folder per compared law.
+
+JSON files are written atomically (a uniquely named temporary file in the same folder,
+then os.replace). Memory stays bounded: rows go to disk and into the streaming metrics
+in blocks of BLOCK steps, whatever the simulated time; a block is formatted in one
+operation (one %-format of the whole block for CSV, raw float64 bytes for MAT).
 
 One writer per output folder: a run holds an exclusive lock (fcntl.flock on
 OUT/.tapmp.lock, which records the holder's pid) from before it looks at the folder
 until its last file is written; a second writer is refused (OutputInUseError), also
 with overwrite. The lock is re-entrant within one thread (a command may lock a folder
-and then run into it) and released by the kernel if the process dies.
+and then run into it) and released by the kernel if the process dies. A folder whose
+run completed is never reused without overwrite; one whose run failed, was interrupted
+or never finished is (its old files are removed first); a folder of the other kind
+(run / comparison) is refused even with overwrite.
 
 Abnormal ends leave no half state: SIGINT, SIGTERM and SIGHUP end a run at the next
 step boundary (run.json: status "interrupted", the signal's name, exit code 128 +
 its number); a failed write (e.g. a full disk) ends it with ResultsWriteError, and
 results.csv, written in whole blocks of rows, is cut back to its last whole block.
+A MAT run streams its blocks into results.part.npy (a valid .npy file whose header is
+updated after every whole block) and writes results.mat from it atomically when the
+run ends for any reason Python sees; only a killed process (SIGKILL, power loss)
+leaves results.part.npy, which read_results reads as well.
 """
 
 import csv
@@ -25,6 +38,7 @@ import io
 import json
 import os
 import platform
+import re
 import signal
 import tempfile
 import threading
@@ -43,6 +57,12 @@ BLOCK = 1000  # steps between writes of results.csv and metric updates
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # end a run at a step boundary
 
 
+FORMATS = {"csv": "results.csv", "mat": "results.mat"}  # scenario key format / --format -> file
+PART_FILE = "results.part.npy"  # a MAT run's rows while it runs (see _MatBlocks)
+RUN_FILES = (*FORMATS.values(), PART_FILE, "run.json", "metrics.json")
+COMPARISON_JSON = "comparison.json"  # marks a comparison folder (kind "comparison")
+KINDS = ("run", "comparison")
+
 LOCK_FILE = ".tapmp.lock"  # in every output folder while a tapmp writer holds it
 _HELD = set()  # (real path, thread id) of the folders this process has locked: re-entrant per thread
 
@@ -53,6 +73,10 @@ class OutputExistsError(RuntimeError):
 
 class OutputInUseError(RuntimeError):
     """Another tapmp process (or thread) is writing into the output folder."""
+
+
+class ResultFolderError(ValueError):
+    """A folder given to read or plot is missing or holds no readable results."""
 
 
 def write_json(path: Path, data) -> None:
@@ -136,18 +160,78 @@ def versions() -> dict:
     return out
 
 
-def prepare_output(out: Path, overwrite: bool) -> Path:
-    """Create the output folder; refuse one that holds results unless overwrite.
-    Call it holding the folder's output_lock."""
+def _read_json(path: Path):
+    """The JSON content of ``path``, or None if it is missing or unreadable."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def folder_kind(folder) -> str | None:
+    """What a result folder holds: "comparison" (comparison.json, or legacy: no run files
+    of its own and run folders below), "run" (any of RUN_FILES) or None (nothing of tapmp's)."""
+    folder = Path(folder)
+    if (folder / COMPARISON_JSON).is_file():
+        return "comparison"
+    if any((folder / f).exists() for f in RUN_FILES):
+        return "run"
+    if folder.is_dir() and any((p / "run.json").is_file() for p in folder.iterdir() if p.is_dir()):
+        return "comparison"
+    return None
+
+
+def folder_completed(folder) -> bool:
+    """Whether a result folder holds a completed run or comparison: status "completed"
+    in run.json / comparison.json; a run's metrics.json (written only on completion) or an
+    unreadable run.json count as completed too (never reuse what might be good results);
+    a legacy comparison without comparison.json is completed if one of its runs is."""
+    folder = Path(folder)
+    kind = folder_kind(folder)
+    if kind == "run":
+        info = _read_json(folder / "run.json")
+        if (folder / "metrics.json").exists() or ((folder / "run.json").exists() and info is None):
+            return True
+        return isinstance(info, dict) and info.get("status") == "completed"
+    if kind == "comparison":
+        info = _read_json(folder / COMPARISON_JSON)
+        if info is not None:
+            return info.get("status") == "completed"
+        return any(folder_completed(p) for p in folder.iterdir() if p.is_dir())
+    return False
+
+
+def prepare_output(out: Path, overwrite: bool, kind: str = "run") -> Path:
+    """Create the output folder for a result of ``kind`` ("run" or "comparison"). Refused
+    (OutputExistsError, one line naming --out, and --overwrite where it would help): a
+    folder holding the other kind, and one holding a completed result unless overwrite.
+    A folder of the same kind whose result failed, was interrupted or never finished is
+    reused: its run files (and figures of a run) are removed. Call it holding the
+    folder's output_lock."""
     out = Path(out)
-    if out.exists() and any((out / f).exists() for f in ("results.csv", "run.json", "metrics.json")):
-        if not overwrite:
-            raise OutputExistsError(f"output folder {out} already holds results: "
-                                    "choose another with --out or pass --overwrite")
-        for f in ("results.csv", "run.json", "metrics.json"):
+    existing = folder_kind(out) if out.exists() else None
+    if existing is not None and existing != kind:
+        marker = COMPARISON_JSON if existing == "comparison" else "run.json"
+        what = {"run": "a single run", "comparison": "a comparison"}
+        raise OutputExistsError(f"output folder {out} holds {what[existing]} ({marker}), not {what[kind]}: "
+                                f"choose another folder with --out")
+    if existing is not None and folder_completed(out) and not overwrite:
+        raise OutputExistsError(f"output folder {out} already holds results of a completed {kind}: "
+                                "choose another with --out or pass --overwrite")
+    if kind == "run":
+        for f in RUN_FILES:
             (out / f).unlink(missing_ok=True)
+        for fig in out.glob("run_fig*.png") if out.exists() else ():
+            fig.unlink()
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+def write_comparison_status(out: Path, scenario_name: str, runs: dict, status: str, **extra) -> None:
+    """comparison.json of a comparison folder: kind, scenario, the compared runs
+    {folder name: law}, status ("running", "completed", "failed", "interrupted")."""
+    _write_result(Path(out) / COMPARISON_JSON, {"kind": "comparison", "scenario": scenario_name,
+                                               "runs": dict(runs), "status": status, **extra})
 
 
 class Interrupted(KeyboardInterrupt):
@@ -236,19 +320,21 @@ def _stops(stop: _StopRequest, token: str | None):
 
 def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = False,
                  progress=None, stop_token: str | None = None) -> dict:
-    """Run one scenario; write results.csv, run.json, metrics.json into ``out``.
+    """Run one scenario; write run.json, metrics.json and results.csv or results.mat
+    (``scenario.format``) into ``out`` (prepare_output: a completed run there is kept
+    unless ``overwrite``, a failed or interrupted one is replaced).
 
     ``progress(n_done, n_total)`` is called every BLOCK steps. Returns the metrics,
-    computed from every step (results.csv keeps every ``scenario.record_every``-th
+    computed from every step (the result file keeps every ``scenario.record_every``-th
     step and the last). The output folder is locked for the whole run (OutputInUseError
     if another writer has it).
 
     SIGINT, SIGTERM and SIGHUP (and request_stop(stop_token)) end the run at the next
     step boundary with Interrupted. On any failure the whole rows so far stay in
-    results.csv, run.json records the status, exit code and reason (if it can be
+    the result file, run.json records the status, exit code and reason (if it can be
     written) and the error is raised again: CoSimulationError, Interrupted, or
-    ResultsWriteError if a result file cannot be written (results.csv is then cut back
-    to its last whole block of rows).
+    ResultsWriteError if a result file cannot be written (it is then cut back to its
+    last whole block of rows).
     """
     with output_lock(out):
         out = prepare_output(out, overwrite)
@@ -265,7 +351,9 @@ def _write_result(path: Path, data) -> None:
 
 def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) -> dict:
     """run_scenario's body, in the locked and prepared output folder ``out``."""
-    info = {"scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
+    fmt = getattr(scenario, "format", "csv")
+    info = {"kind": "run", "format": fmt, "results_file": FORMATS[fmt],
+            "scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
             "ordering": scenario.ordering, "record_every": scenario.record_every,
             "clock": scenario.clock, "connection_start": scenario.connection_start,
             "versions": versions(), "status": "running"}
@@ -281,7 +369,10 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) 
                               connection_start=scenario.connection_start,
                               open_inputs=scenario.open_inputs, order=scenario.order) as sim:
                 info["guids"] = sim.guids
-                stats = _simulate(sim, scenario, out / "results.csv", stop, progress)
+                info["columns"] = list(sim.columns)
+                if fmt == "mat":  # results.part.npy needs its column names on record (a killed run)
+                    _write_result(out / "run.json", info)
+                stats = _simulate(sim, scenario, out, fmt, stop, progress)
             result = stats.result()
             _write_result(out / "metrics.json", result)
             wall = time.perf_counter() - start
@@ -294,75 +385,79 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) 
     return result
 
 
-def _simulate(sim: CoSimulation, scenario: Scenario, path: Path, stop: _StopRequest, progress):
-    """The step loop: results.csv in whole blocks, metrics over every step; returns the
-    metrics.ErrorStatistics. Stops at a step boundary when ``stop`` is set."""
+def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
+    """The rows of ``block`` (steps first, first + 1, ...) that a run keeps: every
+    ``every``-th step and the last step ``n``."""
+    if every == 1:
+        return block
+    steps = np.arange(first, first + block.shape[0])
+    return block[(steps % every == 0) | (steps == n)]
+
+
+def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: _StopRequest, progress):
+    """The step loop: rows to the result file in whole blocks, metrics over every step;
+    returns the metrics.ErrorStatistics. Stops at a step boundary when ``stop`` is set."""
     n, every = scenario.n_steps, scenario.record_every
-    csv_file = _CsvBlocks(path)
+    writer = (_CsvBlocks if fmt == "csv" else _MatBlocks)(out, sim.columns)
     try:
-        row = sim.row()
-        csv_file.add(sim.columns, None)
-        csv_file.add(row, row[0])
-        stats = metrics.ErrorStatistics(sim.columns)
-        block = [row]
+        stats = metrics.ErrorStatistics(sim.columns, metrics.saturation_limit(sim.parameters))
+        rows, first = [sim.row()], 0  # rows of steps first, first + 1, ... not yet written
         for k in range(1, n + 1):
             if stop.signal is not None:
                 stop.check(sim.time)
             sim.step()
-            row = sim.row()
-            block.append(row)
-            if k % every == 0 or k == n:
-                csv_file.add(row, row[0])
-            if len(block) == BLOCK:
+            rows.append(sim.row())
+            if len(rows) == BLOCK:
+                block = np.array(rows)
+                writer.write(_recorded(block, first, every, n))
                 stats.add(block)
-                block = []
-                csv_file.flush()
+                first, rows = first + BLOCK, []
                 if progress:
                     progress(k, n)
         stop.check(sim.time)
-        csv_file.flush()
-        stats.add(block)
+        if rows:
+            block = np.array(rows)
+            writer.write(_recorded(block, first, every, n))
+            stats.add(block)
+            rows = []
+        writer.finish()
         if progress:
             progress(n, n)
         return stats
     except ResultsWriteError:
+        writer.finish(quiet=True)
         raise
     except BaseException:
-        csv_file.flush(quiet=True)  # the whole rows so far stay
+        if rows:  # the whole rows so far stay
+            writer.write(_recorded(np.array(rows), first, every, n), quiet=True)
+        writer.finish(quiet=True)
         raise
     finally:
-        csv_file.close()
+        writer.close()
 
 
-class _CsvBlocks:
-    """results.csv written in whole blocks of rows (one write per block); after a failed
-    write (e.g. a full disk) the file is cut back to the end of its last whole block."""
+def _write_error(path: Path, err: OSError, detail: str = "") -> ResultsWriteError:
+    return ResultsWriteError(f"cannot write {path}: {err.strerror or err} (errno {err.errno}){detail}")
 
-    def __init__(self, path: Path):
+
+class _Blocks:
+    """A result file written in whole blocks of rows (one os.write per block); after a
+    failed write (e.g. a full disk) the file is cut back to the end of its last whole block."""
+
+    def __init__(self, path: Path, columns):
         self.path = Path(path)
+        self.columns = list(columns)
         try:
             self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
         except OSError as err:
-            raise ResultsWriteError(f"cannot write {self.path}: {err.strerror or err} (errno {err.errno})") from err
-        self.buffer = io.StringIO(newline="")
-        self.writer = csv.writer(self.buffer)
+            raise _write_error(self.path, err) from err
         self.size = 0            # bytes of whole blocks on disk
+        self.rows = 0            # rows on disk
         self.last_time = None    # time [s] of the last row on disk
-        self.pending_time = None  # time [s] of the last row in the buffer
 
-    def add(self, row, t: float | None) -> None:
-        """Buffer one row (the header with t = None)."""
-        self.writer.writerow(row)
-        if t is not None:
-            self.pending_time = t
-
-    def flush(self, quiet: bool = False) -> None:
-        """Write the buffered rows as one block; ResultsWriteError (unless ``quiet``) if it fails."""
-        data = self.buffer.getvalue().encode()
-        self.buffer.seek(0)
-        self.buffer.truncate()
-        if not data:
-            return
+    def _append(self, data: bytes, rows: int, last_time, quiet: bool) -> bool:
+        """Append one block of bytes; on failure cut back to whole blocks and raise
+        ResultsWriteError (or return False if ``quiet``)."""
         try:
             view = memoryview(data)
             while view:
@@ -373,16 +468,121 @@ class _CsvBlocks:
             except OSError:
                 pass
             if quiet:
-                return
+                return False
             kept = (f"the rows up to t = {self.last_time:.6g} s" if self.last_time is not None
                     else "no rows")
-            raise ResultsWriteError(f"cannot write {self.path}: {err.strerror or err} (errno {err.errno}): "
-                                    f"it keeps {kept}, whole rows only") from err
+            raise _write_error(self.path, err, f": it keeps {kept}, whole rows only") from err
         self.size += len(data)
-        self.last_time = self.pending_time
+        self.rows += rows
+        if last_time is not None:
+            self.last_time = last_time
+        return True
 
     def close(self) -> None:
         os.close(self.fd)
+
+
+class _CsvBlocks(_Blocks):
+    """results.csv: a header of column names, then one line per row, every value as
+    Python's repr (the shortest text that reads back to the same double). A block of
+    rows is formatted with one %-operation over the whole block."""
+
+    def __init__(self, out: Path, columns):
+        super().__init__(Path(out) / FORMATS["csv"], columns)
+        self.header = (",".join(self.columns) + "\n").encode()
+        self.line = ",".join(["%r"] * len(self.columns)) + "\n"
+
+    def write(self, block: np.ndarray, quiet: bool = False) -> None:
+        """Append the rows of ``block`` (n x columns); the header goes with the first block."""
+        if not block.shape[0]:
+            return
+        text = (self.line * block.shape[0]) % tuple(block.ravel().tolist())
+        data = (self.header if self.size == 0 else b"") + text.encode()
+        self._append(data, block.shape[0], float(block[-1, 0]), quiet)
+
+    def finish(self, quiet: bool = False) -> None:
+        """Nothing left to do: every block is on disk as it is written."""
+
+
+def mat_names(columns) -> list[str]:
+    """MATLAB variable names of result columns: "." and anything else not allowed as "_",
+    a leading "v_" if the name does not start with a letter, at most 63 characters,
+    and "_2", "_3", ... for a name that would repeat an earlier one."""
+    names, seen = [], set()
+    for col in columns:
+        base = re.sub(r"\W", "_", col, flags=re.ASCII)
+        base = base if base[:1].isalpha() and base.isascii() else "v_" + base
+        name, k = base[:63], 2
+        while name in seen:
+            name, k = f"{base[:60]}_{k}", k + 1
+        seen.add(name)
+        names.append(name)
+    return names
+
+
+class _MatBlocks(_Blocks):
+    """results.mat via results.part.npy: each block is appended to the .npy file as raw
+    little-endian float64 rows and its fixed-size header is rewritten with the new row
+    count, so the part file is a valid .npy of the whole blocks at every moment. finish()
+    writes results.mat from it (scipy.io.savemat, under a temporary name, then os.replace)
+    and removes it."""
+
+    HEADER = 128  # bytes of the .npy header (magic, version 1.0, length, padded dict)
+
+    def __init__(self, out: Path, columns):
+        super().__init__(Path(out) / PART_FILE, columns)
+        self.mat = Path(out) / FORMATS["mat"]
+        self._append(self._header(0), 0, None, quiet=False)
+
+    def _header(self, rows: int) -> bytes:
+        text = repr({"descr": "<f8", "fortran_order": False, "shape": (rows, len(self.columns))})
+        body = text.ljust(self.HEADER - 10 - 1) + "\n"
+        return b"\x93NUMPY\x01\x00" + len(body).to_bytes(2, "little") + body.encode("latin1")
+
+    def write(self, block: np.ndarray, quiet: bool = False) -> None:
+        """Append the rows of ``block`` (n x columns) and record them in the header."""
+        if not block.shape[0]:
+            return
+        data = np.ascontiguousarray(block, dtype="<f8").tobytes()
+        if self._append(data, block.shape[0], float(block[-1, 0]), quiet):
+            try:
+                os.pwrite(self.fd, self._header(self.rows), 0)
+            except OSError as err:  # the header is rewritten in place: it never needs new space
+                if not quiet:
+                    raise _write_error(self.path, err) from err
+
+    def finish(self, quiet: bool = False) -> None:
+        """Write results.mat from the whole blocks on disk and remove the part file; if that
+        fails, results.part.npy stays (ResultsWriteError unless ``quiet``)."""
+        try:
+            write_mat(self.mat, self.columns, np.load(self.path, mmap_mode="r"))
+        except (OSError, ValueError) as err:
+            if quiet:
+                return
+            if isinstance(err, OSError):
+                raise _write_error(self.mat, err, f": the rows stay in {self.path}") from err
+            raise
+        self.path.unlink(missing_ok=True)
+
+
+def write_mat(path: Path, columns, data: np.ndarray) -> None:
+    """Write rows ``data`` (n x columns) as a MAT-file (version 5, uncompressed, readable
+    by MATLAB's load, scipy.io.loadmat): one n x 1 double variable per column (mat_names)
+    and ``columns``, the original names as a char matrix (MATLAB: cellstr(columns)).
+    Written under a temporary name in the same folder, then os.replace."""
+    from scipy.io import savemat
+    path = Path(path)
+    variables = {name: data[:, j:j + 1] for j, name in enumerate(mat_names(columns))}
+    variables["columns"] = np.array(list(columns))
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), 0o644)
+            savemat(f, variables, do_compression=False, oned_as="column")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def _record_failure(path: Path, info: dict, err: BaseException, sim, start: float) -> None:
@@ -404,8 +604,24 @@ def _record_failure(path: Path, info: dict, err: BaseException, sim, start: floa
 
 
 def read_results(folder: Path) -> tuple[list[str], np.ndarray]:
-    """Columns and data of a results.csv."""
-    path = Path(folder) / "results.csv"
-    with open(path) as f:
-        columns = next(csv.reader(f))
-    return columns, np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    """Columns and rows (n x columns, SI units, time [s] first) of a run folder, from
+    results.mat, results.csv or (a killed MAT run) results.part.npy with the columns
+    recorded in run.json. ResultFolderError names the folder if it holds none."""
+    folder = Path(folder)
+    mat, csv_path, part = folder / FORMATS["mat"], folder / FORMATS["csv"], folder / PART_FILE
+    if mat.is_file():
+        from scipy.io import loadmat
+        content = loadmat(mat)
+        columns = [str(c).rstrip() for c in content["columns"]]
+        return columns, np.hstack([content[n] for n in mat_names(columns)]).astype(float)
+    if csv_path.is_file():
+        with open(csv_path) as f:
+            columns = next(csv.reader(f))
+        return columns, np.loadtxt(csv_path, delimiter=",", skiprows=1, ndmin=2)
+    if part.is_file():
+        info = _read_json(folder / "run.json") or {}
+        if "columns" not in info:
+            raise ResultFolderError(f"{part} has no column names: run.json records none")
+        return list(info["columns"]), np.array(np.load(part, mmap_mode="r"))
+    raise ResultFolderError(f"{folder} holds no results ({', '.join(FORMATS.values())}): "
+                            "allowed is a run folder written by tapmp run")

@@ -1,6 +1,6 @@
 """Scenarios: one TOML file each, validated before anything runs.
 
-Top-level keys: name, description, law ("sc-dc" or "apd-dc"), gains (a preset of
+Top-level keys: name, description, law ("sc-dc", "apd-dc" or "pid-dc"), gains (a preset of
 tapmp.params.GAIN_PRESETS), gains_file (a gain preset file, see load_gain_file; it
 replaces the preset named by gains), stop_time, start_time, step, ordering, output,
 start_on_trajectory, record_every (store every Nth step in results.csv; metrics
@@ -10,11 +10,15 @@ open_inputs (a list of "element.variable" FMU inputs that no connection of the S
 drives, deliberately: they keep their start values; the master refuses any other
 undriven input, and an entry that is no input of the system or that a connection drives),
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
-see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it).
+see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
+format (the result file: "csv" (default) or "mat", see orchestrator.experiments.results;
+`--format` overrides it). output is the scenario's result folder (default
+results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
-[limits] (the divergence envelope, see LIMITS).
+[limits] (the divergence envelope, see LIMITS), [mismatch] (the controller's model
+error, see MISMATCH_RANGE and docs/disturbances.md).
 """
 
 import copy
@@ -24,7 +28,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from tapmp.control import Gains
+from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
@@ -38,14 +42,19 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-LAWS = {"sc-dc": 0, "apd-dc": 1}
+LAWS = {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}  # PID-DC: modal gains in [controller] kp_c .. ki_d
+# [mismatch]: relative model error of the controller's nominal parameters. For each listed
+# field of tapmp.params.ModelParams the controller gets (plant value) x factor; the plant
+# keeps its own. A factor within MISMATCH_RANGE; not together with [controller] NAME.
+MISMATCH_RANGE = (0.01, 100.0)
 ORDERINGS = ("gauss-seidel", "jacobi")
 CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-        "open_inputs": list, "fmus": str}
-_TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits"}
+        "open_inputs": list, "fmus": str, "format": str}
+RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
+_TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
 # needs 20 mm of travel and 5 deg; a breach means the loop is running away.
@@ -129,7 +138,7 @@ class Scenario:
     stop_time: float = 2.5
     step: float = 1e-4
     ordering: str = "gauss-seidel"
-    output: str = "results"
+    output: str = ""  # "" = results/<name>
     start_on_trajectory: bool = True
     clock: str = "exact"
     connection_start: str = "propagated"
@@ -137,11 +146,13 @@ class Scenario:
     plant: dict = field(default_factory=dict)
     controller: dict = field(default_factory=dict)
     limits: dict = field(default_factory=dict)
+    mismatch: dict = field(default_factory=dict)  # ModelParams field -> controller/plant factor
     record_every: int = 1
     open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
     order: list | None = None  # explicit Gauss-Seidel step order: every SSP element name once
     elements: dict = field(default_factory=dict)  # [ELEMENT] tables: FMU parameters by SSP element name
     fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.engine.families)
+    format: str = "csv"   # result file: csv or mat (RESULT_FORMATS)
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -177,6 +188,7 @@ class Scenario:
             for name, value in zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), ref[:6]):
                 plant[name] = value
         ctrl = dict(self.controller)
+        ctrl.update(self.mismatched_params())
         ctrl["law"] = LAWS[self.law]
         for name, values in zip(GAIN_NAMES, self.gain_values()):
             for i, v in enumerate(values, start=1):
@@ -197,8 +209,14 @@ class Scenario:
                            tuple(pl[k] for k in ("X0", "Z0", "B0")),
                            tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
         ctrl = ControllerModel(model_tuple(ModelParams, ct), self.gain_values(), ct["law"],
-                               ct.get("velocity_source", 0), ct.get("force_limit", 0.0))
+                               ct.get("velocity_source", 0), ct.get("force_limit", 0.0),
+                               model_tuple(ModalGains, ct))
         return plant, ctrl, model_tuple(TrajectoryParams, tr)
+
+    def mismatched_params(self) -> dict:
+        """The controller's nominal model parameters set by [mismatch]: {name: plant value x factor}."""
+        plant = model_tuple(ModelParams, self.plant)
+        return {n: getattr(plant, n) * f for n, f in self.mismatch.items()}
 
     def to_dict(self) -> dict:
         """The resolved scenario as plain data (for run.json)."""
@@ -250,6 +268,21 @@ def _check_whole_steps(s: Scenario) -> None:
     raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: stop_time - start_time = "
                         f"{s.stop_time - s.start_time!r} s is not a whole number of steps of {s.step!r} s: "
                         f"allowed are e.g. {' or '.join(f'{t:.12g}' for t in nearest)}")
+
+
+def _check_mismatch(s: Scenario) -> None:
+    """[mismatch] names ModelParams fields with a factor in MISMATCH_RANGE, none also set in [controller]."""
+    lo, hi = MISMATCH_RANGE
+    for k, v in s.mismatch.items():
+        if k not in ModelParams._fields:
+            raise ScenarioError(f"mismatch.{k} is unknown: allowed are {', '.join(ModelParams._fields)}")
+        v = s.mismatch[k] = _check_type(f"mismatch.{k}", v, float)
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise ScenarioError(f"mismatch.{k} = {v!r} is invalid: allowed is a factor in [{lo:g}, {hi:g}] "
+                                "(controller value = plant value x factor)")
+        if k in s.controller:
+            raise ScenarioError(f"mismatch.{k} = {v!r} conflicts with controller.{k} = {s.controller[k]!r}: "
+                                "allowed is one of them (the factor sets the controller's value)")
 
 
 def _check_addressing(s: Scenario) -> None:
@@ -314,8 +347,11 @@ def validate(s: Scenario) -> Scenario:
             if k not in allowed:
                 raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
+    _check_mismatch(s)
     checks = (("gain_overrides", lambda: s.gain_values().validated()),
-              ("controller", lambda: model_tuple(ModelParams, s.controller).validated()),
+              ("controller", lambda: model_tuple(ModalGains, s.controller).validated()),
+              ("controller", lambda: model_tuple(ModelParams, {**s.controller,
+                                                              **s.mismatched_params()}).validated()),
               ("plant", lambda: model_tuple(ModelParams, s.plant).validated()),
               ("plant", lambda: model_tuple(PlantConfig, s.plant).validated()),
               ("trajectory", lambda: model_tuple(TrajectoryParams, s.trajectory).validated()))
@@ -336,6 +372,8 @@ def validate(s: Scenario) -> Scenario:
     from ..engine.families import FAMILIES
     if s.fmus not in FAMILIES:
         raise ScenarioError(f"fmus = {s.fmus!r} is invalid: allowed are {', '.join(FAMILIES)}")
+    if s.format not in RESULT_FORMATS:
+        raise ScenarioError(f"format = {s.format!r} is invalid: allowed are {', '.join(RESULT_FORMATS)}")
     if s.record_every < 1:
         raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)
