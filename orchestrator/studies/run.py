@@ -4,6 +4,7 @@ Kept apart from study.py so the layers stay one-way: study (specification, cases
 the runner) <- study_plots <- tuning <- run.
 """
 
+import sys
 import time
 from pathlib import Path
 
@@ -40,6 +41,9 @@ def _run_cases(study: Study, ssp: Path, client, out: Path, resume: bool, overwri
                                   "fingerprint": fp, "command": command, "cases": case_list})
     params = list(case_list[0]["params"])
     table = StudyTable(out / STUDY_CSV, params)
+    if table.dropped:
+        print(f"note: the last row of {out / STUDY_CSV} was cut ({len(table.dropped)} characters without a line "
+              "end, e.g. the study was killed while writing it): dropped, its case runs again", file=sys.stderr)
     done_before = len(table.rows)
     start = time.perf_counter()
     try:

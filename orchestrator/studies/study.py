@@ -29,8 +29,10 @@ import os
 import shutil
 import signal
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
+from multiprocessing import resource_tracker
 from pathlib import Path
 
 import numpy as np
@@ -44,8 +46,9 @@ STUDY_JSON = "study.json"
 STATUSES = ("completed", "failed", "rejected")
 METRIC_COLUMNS = ("objective", "tracking_mae_um_mean", "sync_mae_um_mean",
                   "tracking_mae_um_1", "tracking_mae_um_2", "tracking_mae_um_3",
-                  "sync_mae_um_1", "sync_mae_um_2", "sync_mae_um_3")
-TAIL_COLUMNS = ("spectral_radius", "wall_time_s", "worker", "error")
+                  "sync_mae_um_1", "sync_mae_um_2", "sync_mae_um_3", "saturation_fraction_max")
+TAIL_COLUMNS = ("spectral_radius", "flag", "wall_time_s", "worker", "error")
+SATURATION_FLAG = 0.01  # a case whose force commands sit at the limit in > 1 % of samples is "saturated"
 DISTRIBUTIONS = ("uniform", "loguniform", "normal")
 _SECTIONS = ("plant", "controller", "trajectory")
 
@@ -386,8 +389,22 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
         row.update(status="interrupted", error=" ".join(str(err).split()))
     except Exception as err:  # a case's failure is its row, never the end of the study
         row["error"] = " ".join(f"{type(err).__name__}: {err}".split())
+    row["flag"] = case_flag(row.get("spectral_radius"), row.get("saturation_fraction_max"))
     row["wall_time_s"] = time.perf_counter() - start
     return row
+
+
+def case_flag(spectral_radius: float | None, saturation_fraction_max: float | None) -> str:
+    """The study.csv flag of a case: "unstable" (or "marginal") by the stability verdict of its
+    spectral radius, "saturated" if a motor's force command is at the limit in more than
+    SATURATION_FLAG of the samples; joined with "+", "" for neither (or unknown)."""
+    from ..experiments.stability import verdict_for
+    flags = []
+    if spectral_radius is not None and verdict_for(spectral_radius) != "stable":
+        flags.append(verdict_for(spectral_radius))
+    if saturation_fraction_max is not None and saturation_fraction_max > SATURATION_FLAG:
+        flags.append("saturated")
+    return "+".join(flags)
 
 
 def _metric_columns(m: dict) -> dict:
@@ -396,6 +413,7 @@ def _metric_columns(m: dict) -> dict:
     for i in range(3):
         out[f"tracking_mae_um_{i + 1}"] = m["tracking_mae_um"][i]
         out[f"sync_mae_um_{i + 1}"] = m["sync_mae_um"][i]
+    out["saturation_fraction_max"] = max(m["saturation_fraction"])
     return out
 
 
@@ -407,24 +425,53 @@ def scenario_data(scenario: Scenario) -> dict:
 def open_client(scheduler: str | None = None, workers: int | None = None):
     """A Dask client: on the cluster at ``scheduler`` (address), or on a new LocalCluster of
     ``workers`` single-threaded worker processes (default: one per core). Close it when done."""
+    import dask
     from dask.distributed import Client, LocalCluster
     if scheduler:
         return Client(scheduler)
     n = workers or os.cpu_count() or 1
     _require(n >= 1, f"--workers = {n} is invalid: allowed is an integer >= 1")
-    cluster = LocalCluster(n_workers=n, processes=True, threads_per_worker=1, dashboard_address=":0",
-                           silence_logs=40)
+    scratch = tempfile.mkdtemp(prefix="tapmp_dask_")  # Dask's scratch space, removed by close_client
+    # The worker processes inherit the signal mask of the threads that start them (the cluster's
+    # threads are started here): with SIGINT and SIGHUP blocked, a Ctrl-C or hangup sent to the
+    # whole process group reaches only this client, which stops the running cases itself
+    # (CaseRunner._stop) instead of workers dying with tracebacks. Signals that arrive meanwhile
+    # stay pending and are delivered when the mask is restored.
+    # multiprocessing's resource tracker (a process) ignores SIGINT and SIGTERM but not SIGHUP,
+    # and when it starts it unblocks SIGINT in the thread that starts it: started here, with
+    # SIGHUP blocked, it survives a hangup, and it is not started from the cluster's threads.
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, WORKER_BLOCKED_SIGNALS)
+    try:
+        resource_tracker.ensure_running()
+        signal.pthread_sigmask(signal.SIG_BLOCK, WORKER_BLOCKED_SIGNALS)
+        with dask.config.set({"temporary-directory": scratch}):  # the scheduler's scratch space too
+            cluster = LocalCluster(n_workers=n, processes=True, threads_per_worker=1, dashboard_address=":0",
+                                   silence_logs=40, local_directory=scratch)
+    except BaseException:
+        shutil.rmtree(scratch, ignore_errors=True)
+        raise
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     client = Client(cluster)
     client._tapmp_cluster = cluster  # closed with the client by close_client
+    client._tapmp_scratch = scratch
     return client
 
 
+WORKER_BLOCKED_SIGNALS = {signal.SIGINT, signal.SIGHUP}  # SIGTERM stays: the nanny ends workers with it
+
+
 def close_client(client) -> None:
-    """Close a client from open_client (and its LocalCluster, if it made one)."""
+    """Close a client from open_client (and its LocalCluster and scratch folder, if it made them)."""
     cluster = getattr(client, "_tapmp_cluster", None)
-    client.close()
-    if cluster is not None:
-        cluster.close()
+    try:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        scratch = getattr(client, "_tapmp_scratch", None)
+        if scratch:
+            shutil.rmtree(scratch, ignore_errors=True)
 
 
 class StudyTable:
@@ -434,6 +481,7 @@ class StudyTable:
         self.path = Path(path)
         self.columns = ["case", *param_columns, "status", *METRIC_COLUMNS, *TAIL_COLUMNS]
         self.rows = {}
+        self.dropped = self._drop_cut_row()
         if self.path.exists():
             with open(self.path, newline="") as f:
                 reader = csv.DictReader(f)
@@ -441,6 +489,9 @@ class StudyTable:
                          f"{self.path} has columns {reader.fieldnames}, not those of this study "
                          f"({self.columns}): it was written by another study; use --overwrite")
                 for row in reader:
+                    _require(None not in row and None not in row.values(),
+                             f"{self.path}: line {reader.line_num} does not have the {len(self.columns)} fields of "
+                             "the header: the file is damaged; use --overwrite to start again")
                     self.rows[row["case"]] = row
         new = not self.path.exists()
         self.file = open(self.path, "a", newline="")
@@ -448,6 +499,22 @@ class StudyTable:
         if new:
             self.writer.writeheader()
             self.file.flush()
+
+    def _drop_cut_row(self) -> str:
+        """Cut off a last row that was not written whole (no line end: the writer was killed or
+        the disk was full), keeping the whole rows before it byte for byte; returns the cut text
+        ("" if none). A line end is written only after a whole row (no field holds one)."""
+        if not self.path.exists():
+            return ""
+        with open(self.path, "rb+") as f:
+            data = f.read()
+            keep = data.rfind(b"\n") + 1
+            if keep == len(data):
+                return ""
+            f.truncate(keep)
+        if keep == 0:  # not even the header was whole
+            self.path.unlink()
+        return data[keep:].decode(errors="replace")
 
     def add(self, case: dict, row: dict) -> None:
         full = {"case": case["case"], **case["params"], **row}
@@ -570,7 +637,7 @@ def read_study_csv(path) -> list[dict]:
         rows = list(csv.DictReader(f))
     for row in rows:
         for k, v in row.items():
-            if k in ("case", "status", "error", "worker", "law", "ordering", "gains", "gains_file"):
+            if k in ("case", "status", "flag", "error", "worker", "law", "ordering", "gains", "gains_file"):
                 continue
             try:
                 row[k] = float(v) if v != "" else None

@@ -9,6 +9,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .study import PENALTY_UM, STUDY_CSV, case_value, read_study_csv  # noqa: E402
@@ -24,7 +25,7 @@ def _numeric(values) -> bool:
 def plot_study(out: Path, study, params: list) -> list:
     """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
     rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
-    done = [r for r in rows if r["status"] == "completed"]
+    done = [r for r in rows if r["status"] == "completed" and all(isinstance(r.get(k), float) for k, _ in _MAE)]
     if not done:
         return []
     paths = []
@@ -38,7 +39,11 @@ def plot_study(out: Path, study, params: list) -> list:
     elif len(numeric_grid) == 1:
         paths.append(_lines(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[0]))
     elif len(numeric_grid) >= 2:
-        paths.append(_heatmaps(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[:2]))
+        flagged = {}
+        for r in rows:
+            if r.get("flag"):
+                flagged.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
+        paths.append(_heatmaps(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[:2], flagged))
     return paths
 
 
@@ -84,7 +89,9 @@ def _lines(path, study, groups, group_keys, x_key):
     return path
 
 
-def _heatmaps(path, study, groups, group_keys, keys):
+def _heatmaps(path, study, groups, group_keys, keys, flagged):
+    """Heat maps of the MAE over two swept keys; cells of flagged cases (study.csv ``flag``:
+    unstable, marginal, saturated) are cross-hatched and labelled with the flag."""
     kx, ky = keys
     xs, ys = sorted(set(study.grid[kx])), sorted(set(study.grid[ky]))
     fig, axes = plt.subplots(len(groups), 2, figsize=(11, 4 * len(groups)), squeeze=False)
@@ -94,16 +101,23 @@ def _heatmaps(path, study, groups, group_keys, keys):
             for r in rs:
                 z[ys.index(r[ky]), xs.index(r[kx])] = r[key]
             im = ax.imshow(np.log10(z), origin="lower", aspect="auto", cmap="viridis")
+            flags = {}
+            for r in flagged.get(g, []):
+                flags[(ys.index(r[ky]), xs.index(r[kx]))] = r["flag"]
             for (i, j), v in np.ndenumerate(z):
-                ax.text(j, i, "failed" if np.isnan(v) else f"{v:.3g}", ha="center", va="center",
-                        fontsize=7, color="w")
+                text = "failed" if np.isnan(v) else f"{v:.3g}"
+                if (i, j) in flags:
+                    ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="r", lw=0))
+                    text += f"\n{flags[(i, j)]}"
+                ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w")
             ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
             ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys])
             ax.set_xlabel(kx)
             ax.set_ylabel(ky)
             ax.set_title(f"{title}\n{_label(group_keys, g)}", fontsize=9)
             fig.colorbar(im, ax=ax, label="log10 [um]")
-    fig.suptitle(f"{study.name} (blank/failed: the case did not complete)", fontsize=10)
+    fig.suptitle(f"{study.name} (blank/failed: the case did not complete; cross-hatched: flagged unstable "
+                 "(spectral radius > 1) or saturated (force at the limit in > 1 % of samples))", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
