@@ -74,16 +74,21 @@ def loop_states(scenario, perturb):
 
 
 @pytest.mark.parametrize("ordering", ["gauss-seidel", "jacobi"])
-@pytest.mark.parametrize("law, window", [("sc-dc", (500, 1000)), ("apd-dc", (100, 300))])
-def test_default_gains_are_stable_and_a_perturbation_decays_at_the_spectral_radius(law, window, ordering):
-    scenario = load(PAPER, [f'law="{law}"', f'ordering="{ordering}"', "stop_time=0.1"])
+@pytest.mark.parametrize("law, window, tolerance", [
+    # SC-DC: from step 1000 on the slowest mode alone is left; 1e-6 on rho (2.6e-4 of 1 - rho) would
+    # catch the 43 % error in 1 - rho an earlier window (500-1000, Jacobi: 0.99451) gives.
+    ("sc-dc", (1000, 1500), 1e-6),
+    # APD-DC: 1 - rho = 0.054, the perturbation reaches round-off by step 400; 3e-3 is 6 % of 1 - rho.
+    ("apd-dc", (100, 300), 3e-3)])
+def test_default_gains_are_stable_and_a_perturbation_decays_at_the_spectral_radius(law, window, tolerance, ordering):
+    scenario = load(PAPER, [f'law="{law}"', f'ordering="{ordering}"', f"stop_time={0.16 if law == 'sc-dc' else 0.1}"])
     report = check(scenario)
     assert report.verdict == "stable" and report.spectral_radius < 1.0 - MARGIN
     scale = np.array([1e-8] * 3 + [1e-6] * 3 + [1e-10] * 3)  # m or rad, m/s or rad/s, m s
     dev = np.linalg.norm((loop_states(scenario, 1e-6) - loop_states(scenario, 0.0)) / scale, axis=1)
     a, b = window  # once the slowest mode dominates (and before round-off does)
     assert dev[b] < 0.05 * dev[1]
-    assert (dev[b] / dev[a]) ** (1 / (b - a)) == pytest.approx(report.spectral_radius, abs=3e-3)
+    assert (dev[b] / dev[a]) ** (1 / (b - a)) == pytest.approx(report.spectral_radius, abs=tolerance)
     errors, failed_at = tracking_errors(scenario, scenario.n_steps)  # the full nonlinear run stays put
     assert failed_at is None and np.abs(errors).max() < 1e-6
 
