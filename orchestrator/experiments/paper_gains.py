@@ -216,8 +216,8 @@ def paper_gains_table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    """python -m orchestrator.experiments.paper_gains [--stop-time S] [--steps H ...] [--workers N]
-    [--json FILE]: run_paper_gains and print paper_gains_table (rows also to FILE as JSON)."""
+    """python -m orchestrator.experiments.paper_gains [--stop-time S] [--steps H ...] [--cases ...]
+    [--laws ...] [--readings ...] [--plants ...] [--workers N] [--json FILE]: run_paper_gains and print paper_gains_table (rows also to FILE as JSON)."""
     import argparse
     import json
 
@@ -225,6 +225,8 @@ def main(argv=None) -> int:
                                  description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop.")
     ap.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s]")
     ap.add_argument("--steps", type=float, nargs="+", default=[1e-6, 1e-5, 1e-4], help="steps [s]")
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--laws", nargs="+", default=list(LAWS), choices=list(LAWS))
     ap.add_argument("--readings", nargs="+", default=list(READINGS), choices=list(READINGS))
     ap.add_argument("--plants", nargs="+", default=list(PLANTS), choices=list(PLANTS))
     ap.add_argument("--workers", type=int, default=1, help="processes")
@@ -232,7 +234,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     try:
         rows = run_paper_gains(steps=tuple(a.steps), stop_time=a.stop_time, readings=tuple(a.readings),
-                               plants=tuple(a.plants), workers=a.workers)
+                               cases=tuple(a.cases), laws=tuple(a.laws), plants=tuple(a.plants),
+                               workers=a.workers)
     except ValueError as err:
         ap.exit(2, f"error: {err}\n")
     print(paper_gains_table(rows))
