@@ -82,7 +82,7 @@ def test_retuned_gain_takes_effect_at_the_next_sample(built, load_fmu):
     ("K_T2", 0.0, "enterInitializationMode", "K_T2 = 0.0 is invalid: allowed is a finite number > 0"),
     ("Lambda_v1", -1.0, "enterInitializationMode",
      "Lambda_v1 = -1.0 is invalid: allowed is a finite number >= 0"),
-    ("law", 3, "enterInitializationMode", "law = 3 is invalid: allowed is 0 (SC-DC) or 1 (APD-DC)"),
+    ("law", 3, "enterInitializationMode", "law = 3 is invalid: allowed is 0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)"),
     ("velocity_source", -1, "enterInitializationMode", "velocity_source = -1 is invalid"),
     ("q2", 0.06, "exitInitializationMode", "allowed is |value| < 1"),
     ("dq3", float("inf"), "set", "dq3 = inf at t = 0 s is invalid: allowed is a finite number")])
@@ -157,3 +157,40 @@ def test_controller_reports_its_command_in_initialization_mode_once_inputs_are_s
     fmu.set(Lambda_p1=gain_preset("default")["Lambda_p"][0])
     fmu.slave.exitInitializationMode()
     assert fmu.get("F1", "F2", "F3") == in_init
+
+
+PID_GAINS = dict(kp_c=500.0, kv_c=0.5, ki_c=3000.0, kp_d=2000.0, kv_d=0.8, ki_d=90000.0)
+
+
+@pytest.mark.parametrize("family", ["python", "native"])
+def test_controller_fmu_law_2_is_pid_dc_in_both_families(built, native_built, load_fmu, family):
+    """law = 2 with the six modal gains set: the FMU's commands and errors follow the plain
+    PID-DC controller (tapmp.control.pid_command, integral of e) over 200 samples."""
+    from tapmp.control import PIDDC, ModalGains
+    path = built[CONTROLLER] if family == "python" else native_built["fmi2"][CONTROLLER]
+    fmu = load_fmu(path)
+    ref, q, dq = inputs(0)
+    fmu.set(law=2, **PID_GAINS, **dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=dq[0], dq2=dq[1], dq3=dq[2])
+    fmu.init()
+    model = ControllerModel(PAPER_MODEL, Gains.from_preset(gain_preset("default")), PIDDC, modal=ModalGains(**PID_GAINS))
+    worst = 0.0
+    for k in range(200):
+        ref, q, dq = inputs(k)
+        fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=dq[0], dq2=dq[1], dq3=dq[2])
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+        F, u, e, es = model.sample(k * 1e-4, 1e-4, ref, q, dq)
+        worst = max(worst, max(abs(a - b) / max(1.0, abs(b)) for a, b in zip(fmu.get(*OUTS), (*F, *u, *e, *es))))
+    assert worst == 0.0  # both families run the same doubles as the plain model
+    assert model.integral != [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("family", ["python", "native"])
+@pytest.mark.parametrize("name,value,allowed", [
+    ("ki_d", -1.0, "a finite number >= 0"), ("law", 3, "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)")])
+def test_controller_fmu_refuses_bad_pid_dc_settings_naming_them(built, native_built, load_fmu, family, name,
+                                                                value, allowed):
+    path = built[CONTROLLER] if family == "python" else native_built["fmi2"][CONTROLLER]
+    fmu = load_fmu(path)
+    status = fmu.statuses(**{name: value})
+    assert 3 in status.values()
+    assert any(f"{name} = {value!r}" in m and allowed in m for m in fmu.errors()), fmu.errors()

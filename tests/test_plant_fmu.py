@@ -98,3 +98,42 @@ def test_leaving_the_kinematic_domain_fails_the_step_and_keeps_finite_outputs(bu
     text = "\n".join(fmu.errors())
     assert "|B| < pi/2" in text and "t = 0.001 s" in text, text
     assert all(math.isfinite(v) for v in fmu.get(*OUTS))
+
+
+DISTURBED = dict(k_pull=-400.0, attraction_force=8.0, attraction_gap=0.004, cogging_amplitude=3.0,
+                 cogging_pitch=0.012, cogging_phase1=0.5, cogging_phase2=-1.0, cogging_phase3=2.5)
+
+
+@pytest.mark.parametrize("family", ["python", "native"])
+def test_fmu_disturbances_follow_the_plain_model_in_both_families(built, native_built, load_fmu, family):
+    """Negative k_pull, attraction and cogging set through the FMU's parameters: the FMU steps the
+    plain PlantModel's doubles (and the disturbances do move it: off, the path differs)."""
+    path = built[PLANT] if family == "python" else native_built["fmi2"][PLANT]
+    fmu = load_fmu(path)
+    fmu.init(X0=1e-3, Z0=-2e-3, B0=0.02, dX0=0.01, dB0=0.1, **DISTURBED)
+    model = PlantModel(PAPER_MODEL, PlantConfig(**DISTURBED), (1e-3, -2e-3, 0.02), (0.01, 0.0, 0.1))
+    undisturbed = PlantModel(PAPER_MODEL, PlantConfig(), (1e-3, -2e-3, 0.02), (0.01, 0.0, 0.1))
+    worst = 0.0
+    for k in range(300):
+        F = forces(k)
+        fmu.set(F1=F[0], F2=F[1], F3=F[2])
+        fmu.slave.doStep(k * 1e-4, 1e-4)
+        model.step(k * 1e-4, 1e-4, *F)
+        undisturbed.step(k * 1e-4, 1e-4, *F)
+        expected = (*model.measured_positions(), *model.joint_positions(), *model.joint_velocities(), *model.state)
+        worst = max(worst, max(abs(a - b) for a, b in zip(fmu.get(*OUTS), expected)))
+    assert worst == 0.0
+    assert max(abs(a - b) for a, b in zip(model.joint_positions(), undisturbed.joint_positions())) > 1e-7
+
+
+@pytest.mark.parametrize("family", ["python", "native"])
+@pytest.mark.parametrize("name,value,allowed", [
+    ("attraction_gap", 0.0, "a finite number > 0"), ("cogging_amplitude", -1.0, "a finite number >= 0"),
+    ("k_pull", -2e12, "a number in [-1e+12, 1e+12]")])
+def test_fmu_refuses_bad_disturbance_settings_naming_them(built, native_built, load_fmu, family, name, value,
+                                                         allowed):
+    path = built[PLANT] if family == "python" else native_built["fmi2"][PLANT]
+    fmu = load_fmu(path)
+    status = fmu.statuses(**{name: value})
+    assert 3 in status.values()
+    assert any(f"{name} = {value!r}" in m and allowed in m for m in fmu.errors()), fmu.errors()
