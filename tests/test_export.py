@@ -122,6 +122,22 @@ def test_the_native_fmi3_ssp_exports_with_fmi3_types(native_built, tmp_path, cap
     assert experiment(out) == (0.0, 2.5, 1e-4)
 
 
+def test_role_tables_are_bound_to_renamed_elements_and_libcosim_runs_them(built, tmp_path, capsys):
+    """On an SSP whose elements are named otherwise (ref, ctl, axis) the scenario's [trajectory],
+    [controller] and [plant] tables go to the elements whose FMUs are those models, as in the
+    master; libcosim then gives the original system's results bit for bit."""
+    from test_general_master import RENAME, rewrite_ssp
+    renamed = rewrite_ssp(built["ssp"], tmp_path / "renamed.ssp", rename=RENAME)
+    out = tmp_path / "renamed_export.ssp"
+    assert main(["export", str(PAPER), "--out", str(out), "--ssp", str(renamed), "--set", "stop_time=0.05"]) == 0
+    with zipfile.ZipFile(out) as z:
+        assert {n for n in z.namelist() if n.endswith(".ssv")} == {f"resources/{e}.ssv" for e in RENAME.values()}
+    names = tuple(f"{RENAME[n.split('.')[0]]}.{n.split('.')[1]}" for n in NAMES)
+    rows = run_libcosim_exported(out, names)
+    ours = orchestrator_rows(built["ssp"], paper_scenario(0.05), NAMES, "jacobi", clock="nanoseconds")[1:]
+    assert rows.shape == (500, 9) and np.array_equal(rows, ours)
+
+
 # ---------------------------------------------------------------- libcosim
 
 def run_libcosim_exported(ssp, names):

@@ -55,11 +55,14 @@ def _q(ns: str, tag: str) -> str:
     return f"{{{ns}}}{tag}"
 
 
-def _fmu_parameters(fmu_bytes: bytes) -> tuple[dict, dict]:
-    """({parameter name: (SSV type, unit)}, {unit name: base-unit exponents}) of an FMU
-    (FMI 2.0 ScalarVariable or FMI 3.0 typed variable elements) from its modelDescription."""
+def _model_description(fmu_bytes: bytes) -> ET.Element:
     with zipfile.ZipFile(io.BytesIO(fmu_bytes)) as z:
-        root = ET.fromstring(z.read("modelDescription.xml"))
+        return ET.fromstring(z.read("modelDescription.xml"))
+
+
+def _fmu_parameters(root: ET.Element) -> tuple[dict, dict]:
+    """({parameter name: (SSV type, unit)}, {unit name: base-unit exponents}) of an FMU's
+    modelDescription (FMI 2.0 ScalarVariable or FMI 3.0 typed variable elements)."""
     params = {}
     for mv in root.find("ModelVariables"):
         if mv.tag == "ScalarVariable":  # FMI 2.0: the type is a child element
@@ -141,6 +144,37 @@ def _bind(component: ET.Element, source: str) -> None:
     component.insert(before[-1] + 1 if before else 0, bindings)
 
 
+def resolve_parameters(parameters: dict, models: dict, ssp: Path) -> dict:
+    """``parameters`` keyed by the SSP's element names, as the master resolves them: a key that
+    names an element addresses it; a role name (``trajectory``, ``controller``, ``plant``) the one
+    element whose FMU is that role's model (``models``: {element: modelName}); empty tables set
+    nothing; a value set twice (by element name and by role) is refused."""
+    from ..engine.master import ROLES
+    out = {}
+    for key, table in parameters.items():
+        if not table:
+            continue
+        if key in models:
+            element = key
+        elif key in ROLES:
+            hits = [e for e, m in models.items() if m == ROLES[key]]
+            if len(hits) != 1:
+                raise ExportError(f"parameters [{key}] address the element whose FMU is {ROLES[key]}, and SSP file "
+                                  f"{ssp} has {len(hits) or 'none'}: allowed is a table named after the element, "
+                                  f"one of {', '.join(models)}")
+            element = hits[0]
+        else:
+            raise ExportError(f"parameters given for unknown element {key!r}: allowed are {', '.join(models)} "
+                              f"(or {', '.join(ROLES)} for the element whose FMU is that role's model)")
+        target = out.setdefault(element, {})
+        for name, value in table.items():
+            if name in target:
+                raise ExportError(f"{element}.{name} is set twice (by the tables of the element name and of "
+                                  "its role): allowed is one value")
+            target[name] = value
+    return out
+
+
 def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
     """The members of the exported SSP archive {name: bytes}: the source SSP's members, its
     SystemStructure.ssd with the bindings and default experiment, and one .ssv per element."""
@@ -155,18 +189,16 @@ def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
         raise ExportError(f"SSP file {source_ssp} has no {SSD_MEMBER}: allowed is an SSP built by `bash build_fmus.sh`")
     root = ET.fromstring(members[SSD_MEMBER])
     components = {c.get("name"): c for c in root.iter(_q(SSD, "Component"))}
-    values = scenario.parameters()
-    for element, table in values.items():
-        if element not in components:
-            raise ExportError(f"scenario {scenario.name} sets parameters of element {element!r}, which "
-                              f"{source_ssp} does not have: allowed are {', '.join(components)}")
-        if not table:
-            continue
-        component = components[element]
+    descriptions = {}
+    for element, component in components.items():
         fmu = component.get("source", "")
         if fmu not in members:
             raise ExportError(f"SSP file {source_ssp}: element {element} names {fmu!r}, which the archive lacks")
-        declared, units = _fmu_parameters(members[fmu])
+        descriptions[element] = _model_description(members[fmu])
+    models = {element: md.get("modelName") for element, md in descriptions.items()}
+    for element, table in resolve_parameters(scenario.parameters(), models, source_ssp).items():
+        component = components[element]
+        declared, units = _fmu_parameters(descriptions[element])
         ssv = f"resources/{element}.ssv"
         members[ssv] = parameter_set(scenario.name, table, declared, units, element)
         _bind(component, ssv)
