@@ -39,7 +39,7 @@ import numpy as np
 
 from tapmp.params import GAIN_NAMES
 
-from ..experiments.scenario import _SECTION_PARAMS, LAWS, Scenario, ScenarioError, load, read_toml, validate
+from ..experiments.scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, read_toml, validate
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -310,9 +310,9 @@ def validate_tune(table, path) -> dict:
     _require(isinstance(table, dict), f"{where} must be a table")
     for key in table:
         _require(key in _KEYS, f"{where}.{key} is unknown: allowed are {', '.join(_KEYS)}")
-    laws = table.get("laws", list(LAWS))
-    _require(isinstance(laws, list) and laws and all(law in LAWS for law in laws),
-             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(LAWS)}")
+    laws = table.get("laws", list(_TUNABLE))  # the laws tuned on Gains (not PID-DC's modal gains)
+    _require(isinstance(laws, list) and laws and all(law in _TUNABLE for law in laws),
+             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}")
     bounds = table.get("bounds", {})
     out_bounds = {}
     for law in laws:
