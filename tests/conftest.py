@@ -1,5 +1,6 @@
 """Shared fixtures: the FMUs are built once per test session, for real, with pythonfmu."""
 
+import tempfile
 from ctypes import byref
 from pathlib import Path
 
@@ -13,6 +14,28 @@ from fmpy.logging import addLoggerProxy
 from orchestrator.engine.build import build_all
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session", autouse=True)
+def session_temp_folder(tmp_path_factory):
+    """The same for session and module fixtures (set up before any test's own folder)."""
+    folder = tmp_path_factory.mktemp("session_tmp")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TMPDIR", str(folder))
+        mp.setattr(tempfile, "tempdir", str(folder))
+        yield folder
+
+
+@pytest.fixture(autouse=True)
+def own_temp_folder(tmp_path, monkeypatch):
+    """Every test's temporary files in its own folder, tmp_path/tmp: Python's tempfile (fmpy's
+    extractions, Dask's scratch space), and TMPDIR for C libraries (Ecos's ecos_ssp_*) and child
+    processes; nothing is left in the system's /tmp."""
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    monkeypatch.setenv("TMPDIR", str(folder))
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    return folder
 
 
 @pytest.fixture(scope="session")
