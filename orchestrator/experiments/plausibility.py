@@ -27,7 +27,7 @@ USUAL = {
     **{("plant", f"F_c{i}"): (0.01, 200.0, "N") for i in (1, 2, 3)},
     ("plant", "v_s"): (1e-6, 0.1, "m/s"),
     ("plant", "force_limit"): (10.0, 1e4, "N"),
-    ("plant", "k_pull"): (1.0, 1e5, "N/m"),
+    ("plant", "k_pull"): (-1e5, 1e5, "N/m"),  # negative: a net attraction (negative stiffness)
     ("controller", "force_limit"): (10.0, 1e4, "N"),
     ("trajectory", "radius"): (1e-5, 0.04, "m"),
     ("trajectory", "B_amplitude"): (0.0, 0.35, "rad"),

@@ -45,6 +45,7 @@ import threading
 import time
 from contextlib import contextmanager
 from importlib import metadata
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -385,6 +386,12 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) 
     return result
 
 
+def _as_block(rows: list) -> np.ndarray:
+    """Rows (lists of equal length) as one float64 array; np.fromiter over the chained rows
+    is about a third faster than np.array on a list of lists."""
+    return np.fromiter(chain.from_iterable(rows), float, count=len(rows) * len(rows[0])).reshape(len(rows), -1)
+
+
 def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
     """The rows of ``block`` (steps first, first + 1, ...) that a run keeps: every
     ``every``-th step and the last step ``n``."""
@@ -408,7 +415,7 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
             sim.step()
             rows.append(sim.row())
             if len(rows) == BLOCK:
-                block = np.array(rows)
+                block = _as_block(rows)
                 writer.write(_recorded(block, first, every, n))
                 stats.add(block)
                 first, rows = first + BLOCK, []
@@ -416,7 +423,7 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
                     progress(k, n)
         stop.check(sim.time)
         if rows:
-            block = np.array(rows)
+            block = _as_block(rows)
             writer.write(_recorded(block, first, every, n))
             stats.add(block)
             rows = []
@@ -429,7 +436,7 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
         raise
     except BaseException:
         if rows:  # the whole rows so far stay
-            writer.write(_recorded(np.array(rows), first, every, n), quiet=True)
+            writer.write(_recorded(_as_block(rows), first, every, n), quiet=True)
         writer.finish(quiet=True)
         raise
     finally:
