@@ -27,12 +27,11 @@ def session_temp_folder(tmp_path_factory):
 
 
 @pytest.fixture(autouse=True)
-def own_temp_folder(tmp_path, monkeypatch):
-    """Every test's temporary files in its own folder, tmp_path/tmp: Python's tempfile (fmpy's
-    extractions, Dask's scratch space), and TMPDIR for C libraries (Ecos's ecos_ssp_*) and child
-    processes; nothing is left in the system's /tmp."""
-    folder = tmp_path / "tmp"
-    folder.mkdir()
+def own_temp_folder(tmp_path_factory, monkeypatch):
+    """Every test's temporary files in its own folder (beside its tmp_path, under pytest's base
+    folder): Python's tempfile (fmpy's extractions, Dask's scratch space), and TMPDIR for C
+    libraries (Ecos's ecos_ssp_*) and child processes; nothing is left in the system's /tmp."""
+    folder = tmp_path_factory.mktemp("tmp")
     monkeypatch.setenv("TMPDIR", str(folder))
     monkeypatch.setattr(tempfile, "tempdir", str(folder))
     return folder
