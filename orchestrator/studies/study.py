@@ -384,7 +384,8 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
             m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token)
             row.update(_metric_columns(m), status="completed", metrics=m)
             if not keep_results:
-                (Path(case_dir) / "results.csv").unlink(missing_ok=True)
+                for name in ("results.csv", "results.mat"):  # either format (scenario key format)
+                    (Path(case_dir) / name).unlink(missing_ok=True)
     except KeyboardInterrupt as err:  # the study was stopped (Dask lets this through and dies)
         row.update(status="interrupted", error=" ".join(str(err).split()))
     except Exception as err:  # a case's failure is its row, never the end of the study
