@@ -49,7 +49,8 @@ def test_compare_writes_three_runs_comparison_and_figures(built, tmp_path, capsy
     assert "paper: Table 1" in text and "| paper: SC-DC (proposed) | 3.160 |" in text
     matched = json.loads((out / "apd-dc-matched" / "run.json").read_text())["scenario"]["gain_values"]
     assert matched["Lambda_p"] == pytest.approx([0.36 * 900] * 3)
-    for fig in ("fig4_trajectory", "fig5_tracking_errors", "fig6_sync_errors", "fig7_axis_errors"):
+    for fig in ("fig4_trajectory", "fig5_tracking_errors", "fig6_sync_errors", "fig7_axis_errors",
+                "fig8_force_commands"):
         assert (out / f"{fig}.png").stat().st_size > 10000
     assert "ours: SC-DC (proposed)" in capsys.readouterr().out
 
