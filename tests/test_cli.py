@@ -61,10 +61,22 @@ def test_bad_scenario_gives_one_line_and_exit_code_2(tmp_path, capsys):
     assert err.startswith("error: step = -1.0 is invalid") and "Traceback" not in err
 
 
-@pytest.mark.parametrize("cmd", [[], ["build"], ["run"], ["compare"], ["plot"]])
+def _subcommands():
+    from orchestrator.cli import parser
+    return sorted(parser()._subparsers._group_actions[0].choices)
+
+
+@pytest.mark.parametrize("cmd", [[]] + [[c] for c in _subcommands()])
 def test_every_command_has_help(cmd):
     res = subprocess.run([sys.executable, "-m", "orchestrator", *cmd, "--help"], capture_output=True, text=True)
-    assert res.returncode == 0 and "usage: tapmp" in res.stdout
+    assert res.returncode == 0 and f"usage: tapmp {' '.join(cmd)}".rstrip() in res.stdout
+
+
+def test_the_help_lists_every_subcommand():
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "--help"], capture_output=True, text=True)
+    assert set(_subcommands()) == {"build", "run", "check", "compare", "reproduce", "study", "export", "plot"}
+    for c in _subcommands():
+        assert c in res.stdout
 
 
 BAD_FILES = {
