@@ -29,3 +29,16 @@ def test_blockwise_statistics_equal_whole_table_statistics():
     assert got["samples"] == 5003
     whole = compute(COLUMNS, data)  # one block
     assert whole["tracking_std_um"] == pytest.approx(got["tracking_std_um"], rel=1e-9)
+
+
+def test_a_system_without_the_tapmp_plant_gets_metrics_that_name_the_missing_columns():
+    from orchestrator.experiments.metrics import ErrorStatistics
+    columns = ["time", "trajectory.q1_d", "trajectory.q2_d", "trajectory.q3_d", "myplant.x"]
+    stats = ErrorStatistics(columns)
+    stats.add(np.zeros((7, len(columns))))
+    stats.add(np.zeros((3, len(columns))))
+    result = stats.result()
+    assert result["samples"] == 10
+    assert "plant.q1_true" in result["not_computed"] and "trajectory.B_d" in result["not_computed"]
+    assert "trajectory.q1_d" not in result["not_computed"]
+    assert "tracking_mae_um" not in result

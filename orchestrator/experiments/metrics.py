@@ -28,6 +28,10 @@ def saturation_limit(parameters: dict) -> float:
     return limits[0] if limits[0] > 0.0 else limits[1]
 
 
+REQUIRED = ("time", *(f"trajectory.q{i}_d" for i in (1, 2, 3)), *(f"plant.q{i}_true" for i in (1, 2, 3)),
+            "trajectory.X_d", "trajectory.Z_d", "trajectory.B_d", "plant.X", "plant.Z", "plant.B")
+
+
 def error_signals(columns: list[str], data: np.ndarray) -> dict[str, np.ndarray]:
     """Tracking, synchronization and axis errors [m, m, (m, m, rad)] from a results table."""
     col = {name: i for i, name in enumerate(columns)}
@@ -56,6 +60,9 @@ class ErrorStatistics:
         self.force_limit = float(force_limit)  # [N]; 0: no saturation is counted
         self.saturated = np.zeros(3, dtype=np.int64)  # samples with |F_i| at the limit
         self._forces = [self.columns.index(c) for c in _FORCES] if set(_FORCES) <= set(self.columns) else None
+        # A system without the TAPMP plant and trajectory (e.g. the user's own plant FMU) runs,
+        # but its errors cannot be computed: metrics.json says which columns are missing.
+        self.missing = [c for c in REQUIRED if c not in self.columns]
         self.n = 0
         self.abs_sum = {g: np.zeros(3) for g in _GROUPS}
         self.mean = {g: np.zeros(3) for g in _GROUPS}
@@ -67,6 +74,9 @@ class ErrorStatistics:
         if data.size == 0:
             return
         data = data.reshape(-1, len(self.columns))
+        if self.missing:
+            self.n += data.shape[0]
+            return
         signals = error_signals(self.columns, data)
         if self.force_limit > 0.0 and self._forces is not None:
             at_limit = np.abs(data[:, self._forces]) >= self.force_limit * (1.0 - AT_LIMIT)
@@ -85,6 +95,10 @@ class ErrorStatistics:
     def result(self) -> dict:
         """metrics.json content: lists for (q1, q2, q3) and (X um, Z um, B urad); saturation_fraction
     per motor (0 to 1) against force_limit_n [N]."""
+        if self.missing:
+            return {"samples": int(self.n), "not_computed": (
+                "the system has no column " + ", ".join(self.missing) + ": tracking, synchronization and axis "
+                "errors need the TAPMP plant and trajectory elements (recorded as plant.* and trajectory.*)")}
         um = 1e6
         mae = {g: (self.abs_sum[g] / self.n * um).tolist() for g in _GROUPS}
         std = {g: (np.sqrt(self.m2[g] / self.n) * um).tolist() for g in _GROUPS}

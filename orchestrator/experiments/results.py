@@ -40,6 +40,7 @@ import os
 import platform
 import re
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -375,6 +376,8 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) 
                     _write_result(out / "run.json", info)
                 stats = _simulate(sim, scenario, out, fmt, stop, progress)
             result = stats.result()
+            if "not_computed" in result:
+                print(f"note: metrics not computed: {result['not_computed']}", file=sys.stderr)
             _write_result(out / "metrics.json", result)
             wall = time.perf_counter() - start
             info.update(status="completed", exit_code=0, wall_time_s=wall,
