@@ -34,7 +34,6 @@ leaves results.part.npy, which read_results reads as well.
 
 import csv
 import fcntl
-import io
 import json
 import os
 import platform
