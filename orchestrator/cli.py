@@ -129,50 +129,62 @@ def cmd_run(args) -> int:
 
 
 def compare_runs(scenario):
-    """The three runs of `tapmp compare`: SC-DC, APD-DC (Eq. 41) and APD-DC with matched stiffness."""
-    g = scenario.gain_values()
-    matched = dict(scenario.gain_overrides, Lambda_p=[v * d for v, d in zip(g.Lambda_v, g.D)])
-    return {"sc-dc": scenario.with_changes(law="sc-dc"),
-            "apd-dc": scenario.with_changes(law="apd-dc"),
-            "apd-dc-matched": scenario.with_changes(law="apd-dc", gain_overrides=matched)}
+    """The runs of `tapmp compare` ({folder name: Scenario}): SC-DC, APD-DC (Eq. 41) and the fair
+    baselines and ablations of orchestrator.experiments.baselines."""
+    from .experiments.baselines import compare_runs as runs
+    return runs(scenario)
 
 
-def cmd_compare(args) -> int:
+def check_runs(runs: dict) -> dict:
+    """The stability pre-check of every run ({name: StabilityReport}); one warning line on stderr
+    for each run that is not stable (it runs anyway)."""
+    from .experiments.stability import check
+    checks = {}
+    for name, sc in runs.items():
+        r = checks[name] = check(sc)
+        if not r.stable:
+            print(f"warning: {sc.name} {name}: the sampled closed loop is {r.verdict} (spectral radius "
+                  f"{r.spectral_radius:.4g}, stable needs < 1 - 1e-6); it runs anyway", file=sys.stderr, flush=True)
+    return checks
+
+
+def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str):
+    """Run every compare run of ``scenario`` into out/<run>, write out/comparison.md and the
+    figures; returns (runs, results, checks, comparison.md text)."""
     from .experiments.plots import plot
     from .experiments.report import write_comparison
 
+    runs = compare_runs(scenario)
+    checks = check_runs(runs)
+    with comparison_folder(out, overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
+        results = {name: _run_one(sc, ssp, out / name, True, progress, f"{scenario.name} {name}")
+                   for name, sc in runs.items()}
+        text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
+        plot(out)
+    return runs, results, checks, text
+
+
+def cmd_compare(args) -> int:
     scenario = _load(args)
     warn_if_implausible(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / "compare"
-    results = {}
-    runs = compare_runs(scenario)
-    with comparison_folder(out, args.overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
-        for name, sc in runs.items():
-            results[name] = _run_one(sc, _ssp(args, scenario), out / name, True,
-                                     not args.no_progress, f"{scenario.name} {name}")
-        command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-        text = write_comparison(out / "comparison.md", scenario, results, command)
-        plot(out)
+    command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    _, _, _, text = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, command)
     print(text)
     print(f"results, figures and comparison.md in {out}")
     return 0
 
 
 def cmd_reproduce(args) -> int:
-    from .experiments.plots import plot
-    from .experiments.report import write_reproduction
+    from .experiments.reproduction import reproduce
+    command = "tapmp reproduce " + " ".join(shlex.quote(a) for a in sys.argv[2:])
 
-    tables = {}
-    for name in ("paper_simulation", "paper_experiment"):
-        scenario = load(Path(args.scenarios) / f"{name}.toml")
-        out = Path(args.results) / name / "compare"  # as `tapmp compare --out`
-        runs = compare_runs(scenario)
-        with comparison_folder(out, True, scenario, runs):
-            results = {run: _run_one(sc, _ssp(args, scenario), out / run, True, not args.no_progress, f"{name} {run}")
-                       for run, sc in runs.items()}
-            plot(out)
-        tables[name] = (scenario, results)
-    write_reproduction(Path(args.out), tables, "tapmp reproduce " + " ".join(sys.argv[2:]))
+    def compare(scenario, out):
+        return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress,
+                              f"tapmp compare {out.parent.name}")
+
+    reproduce(Path(args.scenarios), Path(args.results), Path(args.out), compare, command,
+              paper_gains_stop=args.paper_gains_stop_time, workers=args.workers)
     print(f"wrote {args.out}")
     return 0
 
@@ -295,8 +307,10 @@ def parser() -> argparse.ArgumentParser:
     scenario_args(c)
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write docs/paper-reproduction.md",
-                        description="Run `compare` on both paper scenarios and write the paper-reproduction "
-                        "page: our Tables 1-6 beside the paper's and what differs.")
+                        description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "
+                        "and their calibrated versions if present, run the paper's gains at fine steps, and write the "
+                        "paper-reproduction page: the paper's Tables 1-6 as printed beside ours, the modal table, "
+                        "the baselines, the paper-gain runs and which of the paper's claims hold.")
     rp.add_argument("--out", default="docs/paper-reproduction.md", help="page to write")
     rp.add_argument("--scenarios", default="scenarios", help="folder with paper_simulation.toml, paper_experiment.toml")
     rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
@@ -305,6 +319,9 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
                     "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
                     "scenario's fmus; paths relative to the repository root")
+    rp.add_argument("--paper-gains-stop-time", type=float, default=0.2, metavar="S",
+                    help="horizon [s] of each run of the paper's gains at 1 us, 10 us and 0.1 ms (default 0.2)")
+    rp.add_argument("--workers", type=int, default=2, help="processes for the paper-gain runs (default 2)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
     rp.set_defaults(func=cmd_reproduce)
     st = sub.add_parser("study", help="run a parameter study on Dask",

@@ -46,7 +46,7 @@ def test_compare_writes_three_runs_comparison_and_figures(built, tmp_path, capsy
     for run in ("sc-dc", "apd-dc", "apd-dc-matched"):
         assert (out / run / "metrics.json").is_file()
     text = (out / "comparison.md").read_text()
-    assert "paper: Table 1" in text and "| paper: SC-DC (proposed) | 3.160 |" in text
+    assert "paper: Table 1" in text and "| paper: SC-DC (proposed) | 3.16 | 3.28 | 3.29 |" in text
     matched = json.loads((out / "apd-dc-matched" / "run.json").read_text())["scenario"]["gain_values"]
     assert matched["Lambda_p"] == pytest.approx([0.36 * 900] * 3)
     for fig in ("fig4_trajectory", "fig5_tracking_errors", "fig6_sync_errors", "fig7_axis_errors",

@@ -76,23 +76,24 @@ def test_study_writes_one_row_per_case_with_the_numbers_of_its_metrics(built, tm
 
 
 def test_reproduce_writes_the_page_with_the_numbers_of_its_runs(built, tmp_path):
+    from orchestrator.experiments.baselines import BASELINES
     scenarios = tmp_path / "scenarios"
     scenarios.mkdir()
     for name in ("paper_simulation", "paper_experiment"):
         text = (ROOT / "scenarios" / f"{name}.toml").read_text()
-        text, n = re.subn(r"(?m)^stop_time = 2\.5", "stop_time = 0.02", text)
+        text, n = re.subn(r"(?m)^stop_time = [0-9.]+", "stop_time = 0.02", text)
         assert n == 1
         (scenarios / f"{name}.toml").write_text(text)
     page, results = tmp_path / "repro.md", tmp_path / "results"
     res = tapmp("reproduce", "--scenarios", scenarios, "--results", results, "--out", page, "--ssp", built["ssp"],
-                "--no-progress", tmp_path=tmp_path)
+                "--paper-gains-stop-time", "0.001", "--no-progress", tmp_path=tmp_path)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().splitlines()[-1] == f"wrote {page}"
     text = page.read_text()
     for name in ("paper_simulation", "paper_experiment"):
-        assert f"## Scenario `{name}`" in text and "0.02 s at a 0.0001 s step" in text
+        assert f"`scenarios/{name}.toml`" in text and "0.02 s at a 0.0001 s step" in text
         runs = sorted(p.parent for p in results.glob(f"{name}/**/metrics.json"))
-        assert {p.name for p in runs} == {"sc-dc", "apd-dc", "apd-dc-matched"}
+        assert {p.name for p in runs} == {b.name for b in BASELINES}
         for run in runs:
             m = json.loads((run / "metrics.json").read_text())
             cells = " | ".join(f"{v:.3f}" for v in (*m["tracking_std_um"], *m["tracking_mae_um"]))

@@ -20,7 +20,11 @@ from .metrics import error_signals  # noqa: E402
 from .results import COMPARISON_JSON, ResultFolderError, _read_json, folder_kind, read_results  # noqa: E402
 
 LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
-              "pid-dc": "PID-DC"}
+              "pid-dc": "PID-DC",
+              # the other runs of `tapmp compare` (orchestrator.experiments.baselines): one label each
+              "apd-dc-diff-stiffness": "APD-DC diff. stiffness", "apd-dc-mode-matched": "APD-DC mode-matched",
+              "pid-dc-mode-matched": "PID-DC mode-matched", "sc-dc-b0": "SC-DC b = 0",
+              "sc-dc-lp0": "SC-DC Lambda_p = 0"}
 ERRORS = (  # key of error_signals, file stem, title, y labels, scale from SI
     ("tracking", "fig5_tracking_errors", "Tracking error of each motor (cf. Fig. 5)",
      ("e1 [µm]", "e2 [µm]", "e3 [µm]"), 1e6),
