@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from .baselines import BASELINES, BY_NAME, run_gains_text
+from .baselines import BASELINES, BY_NAME, run_gains_text, scdc_modal
 
 # The paper's Tables 1-6 as printed (Zhou et al. 2024, Section 5.2 and 6.2): per table the rows
 # APD-DC, proposed (SC-DC) and "Reduction (%)", each STD q1..q3 (or X, Z, B) then MAE. The
@@ -106,6 +106,11 @@ def _mean(values) -> float:
     return sum(values) / len(values)
 
 
+def modal_note(scenario) -> str:
+    """One sentence: how the PID-DC rows' modal gains were obtained from the scenario's gains."""
+    return f"Modal gains of the PID-DC rows: {scdc_modal(scenario.gain_values())[1]}."
+
+
 def runs_table(runs: dict, results: dict, checks: dict) -> str:
     """Markdown table of the compare runs: what each isolates, its gains, the stability
     pre-check (spectral radius, verdict) and the share of samples at the force limit [%].
@@ -159,7 +164,7 @@ def write_comparison(path: Path, scenario, results: dict, command: str, runs: di
         "Errors use the plant's true motor positions. The paper's values are from its own plant and "
         "gains, copied as printed (see docs/paper-reproduction.md for what differs).", ""]
     if runs is not None:
-        parts += ["## Runs", "", runs_table(runs, results, checks or {}), ""]
+        parts += ["## Runs", "", runs_table(runs, results, checks or {}), "", modal_note(scenario), ""]
     parts += ["## SC-DC against each run (mean over the three motors)", "", summary_table(results), "",
               comparison_tables(scenario.name, results)]
     text = "\n".join(parts)

@@ -14,7 +14,7 @@ from pathlib import Path
 from tapmp.modal import modal_table
 
 from .paper_gains import paper_gains_table, run_paper_gains
-from .report import PAPER, comparison_tables, printed, reduction, runs_table, summary_table
+from .report import PAPER, comparison_tables, modal_note, printed, reduction, runs_table, summary_table
 from .scenario import load
 
 SCENARIOS = ("paper_simulation", "paper_experiment")
@@ -182,7 +182,7 @@ def _section(title: str, name: str, sc, runs, results, checks, command: str, fol
             f"`scenarios/{name}.toml`, {sc.description}; {sc.stop_time - sc.start_time:g} s at a {sc.step:g} s "
             f"step, {sc.ordering}; gains `{sc.gains}` (Lambda_v = {list(g.Lambda_v)}, D = {list(g.D)}, "
             f"Lambda_p = {list(g.Lambda_p)}, b = {list(g.b)}, K_T = {list(g.K_T)}).", "",
-            "### Runs and stability pre-check", "", runs_table(runs, results, checks), "",
+            "### Runs and stability pre-check", "", runs_table(runs, results, checks), "", modal_note(sc), "",
             "### SC-DC against each run (mean over the motors)", "", summary_table(results), "",
             comparison_tables(name.removesuffix("_calibrated"), results)]
 
