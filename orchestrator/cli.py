@@ -299,9 +299,11 @@ def parser() -> argparse.ArgumentParser:
                     "the FMI-free model, which every FMU family reproduces bit for bit (tests), so the verdict "
                     "is the same for all")
     ck.set_defaults(func=cmd_check)
-    c = sub.add_parser("compare", help="run a scenario with SC-DC and with APD-DC",
-                       description="Run the scenario with SC-DC, APD-DC (Eq. 41) and APD-DC with matched "
-                       "stiffness; write comparison.md and figures and print the tables. Output folder by default "
+    c = sub.add_parser("compare", help="run a scenario with SC-DC, APD-DC and fair baselines",
+                       description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "
+                       "and differential-mode stiffness, the mode-matched PD and PID (PID-DC) and the SC-DC "
+                       "ablations b = 0 and Lambda_p = 0 (orchestrator/experiments/baselines.py); write "
+                       "comparison.md and figures and print the tables. Output folder by default "
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
     scenario_args(c)
