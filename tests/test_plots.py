@@ -52,6 +52,9 @@ def test_comparison_figures_name_the_laws_in_titles_and_legends_and_use_micromet
         all_text = texts(fig)
         assert not [t for t in all_text if "um]" in t or "urad" in t], name  # µm, µrad only
         assert all(law in fig._suptitle.get_text() for law in LAWS), name
+        fig.canvas.draw()  # the title, broken between names, stays inside the figure
+        box = fig._suptitle.get_window_extent()
+        assert box.x0 >= 0 and box.x1 <= fig.bbox.x1, name
         if name != "fig4_trajectory":
             assert [t.get_text() for t in fig.legends[0].get_texts()] == LAWS
     assert [ax.get_ylabel() for ax in figs["fig5_tracking_errors"].axes] == ["e1 [µm]", "e2 [µm]", "e3 [µm]"]

@@ -71,14 +71,24 @@ def load_folder(folder: Path) -> tuple[str, dict[str, dict]]:
     return kind, runs
 
 
-def _title(text: str, runs: dict) -> str:
-    return f"{text}: {' vs '.join(runs)}"
+def _title(text: str, runs: dict, width: int = 80, sep: str = " vs ") -> str:
+    """``text: run vs run vs ...``, broken between runs (never inside a name) to fit the figure."""
+    lines, line = [], f"{text}:"
+    for i, name in enumerate(runs):
+        piece = (" " if i == 0 else sep) + name
+        if len(line) + len(piece) > width and line:
+            lines.append(line)
+            piece = piece.lstrip()
+            line = ""
+        line += piece
+    return "\n".join(lines + [line])
 
 
 def _legend_below(fig, axes) -> None:
     """One legend for the figure, below the axes (never over a trace)."""
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncols=max(1, len(labels)), frameon=False)
+    # at most three entries a row, so eight runs still fit the figure's width
+    fig.legend(handles, labels, loc="outside lower center", ncols=max(1, min(3, len(labels))), frameon=False)
 
 
 def trajectory_figure(runs: dict):
@@ -91,7 +101,7 @@ def trajectory_figure(runs: dict):
     ax[0].set(xlabel="X [mm]", ylabel="Z [mm]", title="(a) X- and Z-axis", aspect="equal")
     ax[1].plot(data[:, 0], data[:, c["trajectory.B_d"]] * 180 / math.pi, label="desired")
     ax[1].set(xlabel="time [s]", ylabel="B [deg]", title="(b) B-axis")
-    fig.suptitle(f"Desired trajectory in task space (cf. paper Fig. 4), the reference of: {' and '.join(runs)}")
+    fig.suptitle(_title("Desired trajectory in task space (cf. paper Fig. 4), the reference of", runs, sep=", "))
     return fig
 
 
