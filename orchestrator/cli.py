@@ -265,19 +265,24 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default=str(build_mod.DEFAULT_BUILD_DIR), help="output folder (default: build/)")
     b.set_defaults(func=cmd_build)
 
-    def scenario_args(sp):
+    def source_args(sp):
+        """The scenario, its --set overrides and the SSP it runs on (run, compare, export)."""
         sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+        sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
+        sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
+        sp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, "
+                        "build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, build/native/fmi3/TAPMP.ssp) or "
+                        "python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the scenario's fmus; paths "
+                        "relative to the repository root")
+
+    def scenario_args(sp):
+        source_args(sp)
         sp.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, "
                         f"then /<law> for run, /compare for compare); {RELATIVE}")
         sp.add_argument("--format", choices=RESULT_FORMATS, help="result file: csv (results.csv, text) or mat "
                         "(results.mat, MATLAB 5 MAT-file, about half the size and faster to write); overrides the "
                         "scenario's format (default csv)")
-        sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
-        sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
-        sp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
-                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
-                    "scenario's fmus; paths relative to the repository root")
         sp.add_argument("--overwrite", action="store_true", help="replace a completed result in the output folder "
                         "(a failed or interrupted one is replaced without it)")
         sp.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -350,14 +355,8 @@ def parser() -> argparse.ArgumentParser:
                         "--start-values for `fmpy simulate` on TAPMP_ClosedLoop.fmu (also printed). Relative "
                         "paths are relative to the current directory; the default SSP of --fmus is found in the "
                         "repository's build/.")
-    ex.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    source_args(ex)
     ex.add_argument("--out", required=True, help="SSP file to write, ending in .ssp, e.g. export/paper.ssp")
-    ex.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="override a scenario value, e.g. --set stop_time=0.2")
-    ex.add_argument("--ssp", help="SSP system file to start from (default: the built SSP of --fmus)")
-    ex.add_argument("--fmus", choices=list(FAMILIES), help="FMU family whose SSP is exported: native (default, "
-                    "build/native/fmi2/TAPMP.ssp), fmi3 (build/native/fmi3/TAPMP.ssp) or python (build/TAPMP.ssp); "
-                    "overrides the scenario's fmus")
     ex.add_argument("--overwrite", action="store_true", help="replace an existing FILE.ssp and its start values")
     ex.set_defaults(func=cmd_export)
     pl = sub.add_parser("plot", help="plot a run or a comparison",

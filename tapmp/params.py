@@ -84,7 +84,12 @@ def scdc_modal_image(preset: dict) -> dict[str, float]:
             raise ValueError(f"{name} = {values!r} is not uniform: allowed are equal gains on all motors "
                              "(only then is SC-DC a modal PID)")
         v[name] = values[0]
-    lp, lv, b, D = v["Lambda_p"], v["Lambda_v"], v["b"], v["D"]
+    return scdc_mode_gains(v["Lambda_p"], v["Lambda_v"], v["b"], v["D"])
+
+
+def scdc_mode_gains(lp: float, lv: float, b: float, D: float) -> dict[str, float]:
+    """Per-mode PID gains of SC-DC for one motor's Lambda_p [u/m], Lambda_v [u s/m], b and
+    D [1/s] (formulas in scdc_modal_image; units as MODAL_GAIN_NAMES)."""
     return {"kp_c": lv * D, "kv_c": lv, "ki_c": 0.0,
             "kp_d": lv * D + 3.0 * (lv * b + lp), "kv_d": lv, "ki_d": 3.0 * lv * D * b}
 

@@ -56,15 +56,13 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.ssp.ssd import read_ssd
 
-from tapmp.interface import ELEMENT
 
 from .clocks import Clock
+from .ssp import ROLES, ParameterAddressError, resolve_parameters
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
                        initialization_order)
 
 ORDERINGS = ("gauss-seidel", "jacobi")
-# Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address.
-ROLES = {role: model for model, role in ELEMENT.items()}
 CONNECTION_STARTS = ("propagated", "zero")
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
@@ -453,35 +451,12 @@ class CoSimulation:
         return prefix
 
     def _resolve_parameters(self) -> dict:
-        """``parameters`` keyed by element: a key that names an element addresses it; a role name
-        (:data:`ROLES`) the one element whose FMU is that role's model. A parameter set twice
-        (by name and by role) is refused."""
-        out = {}
-        for key, table in self.parameters.items():
-            if not table:
-                continue  # an empty table sets nothing (e.g. [plant] of a system with its own plant FMU)
-            if key in self.units:
-                element = key
-            elif key in ROLES:
-                hits = [n for n, u in self.units.items() if u.md.modelName == ROLES[key]]
-                if len(hits) != 1:
-                    what = "none" if not hits else f"{len(hits)} ({', '.join(hits)})"
-                    raise CoSimulationError(
-                        f"parameters [{key}] address the element whose FMU is {ROLES[key]}, and SSP file "
-                        f"{self.ssp_path} has {what}: allowed is a table named after the element, one of "
-                        f"{', '.join(self.units)}", key)
-                element = hits[0]
-            else:
-                raise CoSimulationError(f"parameters given for unknown element(s) {key}: allowed are "
-                                        f"{', '.join(self.units)} (or {', '.join(ROLES)} for the element "
-                                        "whose FMU is TAPMP_Plant, ...)", key)
-            target = out.setdefault(element, {})
-            for name, value in table.items():
-                if name in target:
-                    raise CoSimulationError(f"{element}.{name} is set twice (by the tables of the element name "
-                                            f"and of its role): allowed is one value", element)
-                target[name] = value
-        return out
+        """``parameters`` keyed by element (ssp.resolve_parameters: by name, or by role)."""
+        models = {n: u.md.modelName for n, u in self.units.items()}
+        try:
+            return resolve_parameters(self.parameters, models, self.ssp_path)
+        except ParameterAddressError as err:
+            raise CoSimulationError(str(err), err.element) from None
 
     def _read_ssp(self):
         """The SSD of the SSP file and its archive members {normalized name: member name};

@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 from tapmp.control import Gains, ModalGains
 from tapmp.modal import modal_gains, scdc_matrices
+from tapmp.params import scdc_mode_gains
 
 from .scenario import model_tuple
 
@@ -87,7 +88,7 @@ def scdc_modal(g: Gains) -> tuple[ModalGains, str]:
 def differential_stiffness(g: Gains) -> list[float]:
     """SC-DC's differential-mode proportional gain per motor, Lambda_v D + 3 (Lambda_v b + Lambda_p)
     [u/m, like Lambda_p], from each motor's own gains (tapmp.modal, eigenvalue 3 of L)."""
-    return [lv * d + 3.0 * (lv * b + lp) for lv, d, b, lp in zip(g.Lambda_v, g.D, g.b, g.Lambda_p)]
+    return [scdc_mode_gains(*motor)["kp_d"] for motor in zip(g.Lambda_p, g.Lambda_v, g.b, g.D)]
 
 
 def compare_runs(scenario) -> dict:

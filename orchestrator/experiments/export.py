@@ -29,7 +29,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..engine.ssp import SSC, SSD
+from ..engine.ssp import SSC, SSD, ParameterAddressError, resolve_parameters
 from .scenario import Scenario
 
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
@@ -144,37 +144,6 @@ def _bind(component: ET.Element, source: str) -> None:
     component.insert(before[-1] + 1 if before else 0, bindings)
 
 
-def resolve_parameters(parameters: dict, models: dict, ssp: Path) -> dict:
-    """``parameters`` keyed by the SSP's element names, as the master resolves them: a key that
-    names an element addresses it; a role name (``trajectory``, ``controller``, ``plant``) the one
-    element whose FMU is that role's model (``models``: {element: modelName}); empty tables set
-    nothing; a value set twice (by element name and by role) is refused."""
-    from ..engine.master import ROLES
-    out = {}
-    for key, table in parameters.items():
-        if not table:
-            continue
-        if key in models:
-            element = key
-        elif key in ROLES:
-            hits = [e for e, m in models.items() if m == ROLES[key]]
-            if len(hits) != 1:
-                raise ExportError(f"parameters [{key}] address the element whose FMU is {ROLES[key]}, and SSP file "
-                                  f"{ssp} has {len(hits) or 'none'}: allowed is a table named after the element, "
-                                  f"one of {', '.join(models)}")
-            element = hits[0]
-        else:
-            raise ExportError(f"parameters given for unknown element {key!r}: allowed are {', '.join(models)} "
-                              f"(or {', '.join(ROLES)} for the element whose FMU is that role's model)")
-        target = out.setdefault(element, {})
-        for name, value in table.items():
-            if name in target:
-                raise ExportError(f"{element}.{name} is set twice (by the tables of the element name and of "
-                                  "its role): allowed is one value")
-            target[name] = value
-    return out
-
-
 def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
     """The members of the exported SSP archive {name: bytes}: the source SSP's members, its
     SystemStructure.ssd with the bindings and default experiment, and one .ssv per element."""
@@ -196,7 +165,11 @@ def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
             raise ExportError(f"SSP file {source_ssp}: element {element} names {fmu!r}, which the archive lacks")
         descriptions[element] = _model_description(members[fmu])
     models = {element: md.get("modelName") for element, md in descriptions.items()}
-    for element, table in resolve_parameters(scenario.parameters(), models, source_ssp).items():
+    try:
+        resolved = resolve_parameters(scenario.parameters(), models, source_ssp)
+    except ParameterAddressError as err:
+        raise ExportError(str(err)) from None
+    for element, table in resolved.items():
         component = components[element]
         declared, units = _fmu_parameters(descriptions[element])
         ssv = f"resources/{element}.ssv"

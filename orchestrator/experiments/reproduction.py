@@ -76,7 +76,7 @@ def _scenario_claims(name: str, results: dict, exact: bool) -> list[str]:
     PID-DC rows are SC-DC's exact modal image (uniform gains)."""
     base = name.removesuffix("_calibrated")
     tables = PAPER[base]["tables"] if base in PAPER else None
-    sc, apd = results["sc-dc"], results["apd-dc"]
+    sc = results["sc-dc"]
     t = {k: _mean(m["tracking_mae_um"]) for k, m in results.items()}
     y = {k: _mean(m["sync_mae_um"]) for k, m in results.items()}
     out = []
