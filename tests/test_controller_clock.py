@@ -225,3 +225,53 @@ def test_python_model_bad_input():
     for h in (-1e-4, math.nan, math.inf, 0.0):
         with pytest.raises(ModelInputError, match=r"^communicationStepSize = .* is invalid: allowed is a finite"):
             ctl.communication_point(0.0, h, (0.0,) * 9, (0.0,) * 3, (0.0,) * 3)
+
+
+def test_scenario_step_is_the_sample_period(native_built):
+    """tapmp sets the controller's T_s to the scenario's step, so a run at another step samples
+    once per step: the native closed loop at 50 us equals the Python model's FMI-free loop
+    (tapmp.closed_loop.simulate, same parameters) within 1e-12 N, and T_s in [controller] is
+    refused."""
+    from conftest import COMMANDS, orchestrator_rows
+    from orchestrator.experiments.scenario import ScenarioError
+    from tapmp.closed_loop import simulate
+
+    sc = paper_scenario(0.02, "step=5e-5")
+    assert sc.parameters()["controller"]["T_s"] == 5e-5
+    rows = orchestrator_rows(native_built["fmi2"]["ssp"], sc, COMMANDS, ordering="gauss-seidel")
+    plant, ctrl, traj = sc.plain_models()
+    assert ctrl.T_s == 5e-5
+    forces = []
+    simulate(plant, ctrl, traj, sc.start_time, sc.n_steps, sc.step, record=lambda t, ref, F, q, qt: forces.append(F))
+    assert len(rows) == len(forces) == 401
+    np.testing.assert_allclose(rows, np.array(forces), rtol=0, atol=1e-12)
+    assert all((rows[k] != rows[k + 1]).all() for k in range(1, 400))  # a new command every 50 us
+    with pytest.raises(ScenarioError, match=r"^controller.T_s is set by the scenario's step = 0.0001: allowed is "
+                                            r"to set step$"):
+        paper_scenario(0.2, "controller.T_s=1e-3")
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_fmu_state_holds_the_sample_clock(fmus, host, family):
+    """A state saved between sample instants (serialized and read back) replays bit for bit:
+    the next instant samples with the same interval, the skipped-instant warning is not
+    repeated."""
+    ctrl = host(fmus[family][CONTROLLER])
+    ctrl.init(_parameters()[CONTROLLER])
+    steps = [(0.0, 2 * T_S), (2 * T_S, T_S / 2), (2.5 * T_S, T_S / 2), (3 * T_S, 2 * T_S), (5 * T_S, T_S)]
+
+    def run(part):
+        out = []
+        for i, (t, h) in enumerate(part):
+            ctrl.set({"q1": 1e-5 * (i + 1), "q2": -2e-5 * i, "X_d": 1e-4 * i})
+            ctrl.do_step(t, h)
+            out.append(ctrl.get(CONTROLLER_OUTPUTS))
+        return out
+    run(steps[:3])
+    state = ctrl.get_state()
+    blob = ctrl.fmu.serializeFMUState(state) if ctrl.fmi3 else ctrl.fmu.serializeFMUstate(state)
+    first = run(steps[3:])
+    restored = ctrl.fmu.deserializeFMUState(blob) if ctrl.fmi3 else ctrl.fmu.deSerializeFMUstate(blob)
+    ctrl.set_state(restored)
+    assert run(steps[3:]) == first
+    assert len(ctrl.warnings()) == 1  # at t = 2 T_s only, not again after the rollback (3 T_s later)
