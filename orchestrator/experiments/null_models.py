@@ -100,9 +100,11 @@ class Score(NamedTuple):
 
 
 def score(predicted: list[float], cells: list[Cell], select=lambda c: True) -> Score:
-    """Score ``predicted`` [%] (one per cell of ``cells``) on the cells ``select`` keeps."""
-    dev = np.array([abs(p - c.paper) for p, c in zip(predicted, cells) if select(c)])
-    return Score(len(dev), tuple(int((dev <= t).sum()) for t in TOLERANCES), float(dev.mean()))
+    """Score ``predicted`` [%] (one per cell of ``cells``, NaN where a predictor says nothing) on
+    the cells ``select`` keeps; mean |dev| is NaN when no cell is left."""
+    dev = np.array([abs(p - c.paper) for p, c in zip(predicted, cells) if select(c) and not np.isnan(p)])
+    mad = float(dev.mean()) if dev.size else float("nan")
+    return Score(len(dev), tuple(int((dev <= t).sum()) for t in TOLERANCES), mad)
 
 
 def predictors(cells: list[Cell], simulated: dict[str, list[float]] | None = None) -> dict[str, list[float]]:
@@ -136,7 +138,7 @@ def null_model_table(simulated: dict[str, list[float]] | None = None) -> str:
         parts = []
         for _, select in _SUBSETS:
             s = score(values, cells, select)
-            parts.append(f"{s.hits[0]}/{s.cells} / {s.hits[1]}/{s.cells}, {s.mad:.1f} pp")
+            parts.append(f"{s.hits[0]}/{s.cells} / {s.hits[1]}/{s.cells}, {s.mad:.1f} pp" if s.cells else "not run")
         lines.append(f"| {label} | " + " | ".join(parts) + " |")
     return "\n".join(lines)
 
