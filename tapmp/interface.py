@@ -40,7 +40,7 @@ UNITS = {
     "N": {"kg": 1, "m": 1, "s": -2}, "kg": {"kg": 1}, "kg.m2": {"kg": 1, "m": 2},
     "N.s/m": {"kg": 1, "s": -1}, "N/m": {"kg": 1, "s": -2}, "N/(m.s)": {"kg": 1, "s": -3},
     "1/s": {"s": -1},
-    "Hz": {"s": -1}, "1": {},
+    "Hz": {"s": -1}, "1": {}, "s": {"s": 1},
 }
 
 _AXES = (("X", "m", "platform displacement along X"), ("Z", "m", "platform displacement along Z"),
@@ -93,6 +93,11 @@ _PLANT_CFG_DOC = {
     "cogging_phase1": ("rad", "force ripple (cogging) phase of motor 1"),
     "cogging_phase2": ("rad", "force ripple (cogging) phase of motor 2"),
     "cogging_phase3": ("rad", "force ripple (cogging) phase of motor 3"),
+    **{f"disturbance_force{i}": ("N", f"external force step on mover {i} from disturbance_time on (not limited "
+                                      "by force_limit); 0 = off") for i in (1, 2, 3)},
+    "disturbance_time": ("s", "time at which the external force step starts"),
+    "noise_rms": ("m", "measurement noise: rms of the white Gaussian noise added to each measured position "
+                       "before quantization; 0 = off"),
 }
 
 PLANT_VARS: tuple[Var, ...] = tuple(
@@ -106,7 +111,9 @@ PLANT_VARS: tuple[Var, ...] = tuple(
     + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d}", variability="fixed") for a, u, d in _AXES]
     + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _PLANT_CFG_DOC.items()]
     + [Var("substeps", "parameter", "", "RK4 integration steps per communication step (>= 1)",
-           _CFG.substeps, type="Integer", variability="fixed")]
+           _CFG.substeps, type="Integer", variability="fixed"),
+       Var("noise_seed", "parameter", "", "seed of the measurement noise (the same seed gives the same noise "
+           "in every FMU family)", _CFG.noise_seed, type="Integer", variability="fixed")]
 )
 
 _GAIN_DOC = {
@@ -180,6 +187,8 @@ RANGES: dict[str, tuple[float, float]] = {
     "attraction_force": (0.0, 1e6), "attraction_gap": (1e-6, 1.0),
     "cogging_amplitude": (0.0, 1e6), "cogging_pitch": (1e-6, 1.0),
     "cogging_phase1": (-1e6, 1e6), "cogging_phase2": (-1e6, 1e6), "cogging_phase3": (-1e6, 1e6),
+    "disturbance_force1": (-1e6, 1e6), "disturbance_force2": (-1e6, 1e6), "disturbance_force3": (-1e6, 1e6),
+    "disturbance_time": (0.0, 1e9), "noise_rms": (0.0, 1e-3), "noise_seed": (0, 2147483647),
     # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
     # stays below a millisecond of CPU per step or so
     "substeps": (1, 10000),
