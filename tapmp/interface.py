@@ -97,6 +97,11 @@ _PLANT_CFG_DOC = {
     "cogging_phase1": ("rad", "force ripple (cogging) phase of motor 1"),
     "cogging_phase2": ("rad", "force ripple (cogging) phase of motor 2"),
     "cogging_phase3": ("rad", "force ripple (cogging) phase of motor 3"),
+    **{f"disturbance_force{i}": ("N", f"external force step on mover {i} from disturbance_time on (not limited "
+                                      "by force_limit); 0 = off") for i in (1, 2, 3)},
+    "disturbance_time": ("s", "time at which the external force step starts"),
+    "noise_rms": ("m", "measurement noise: rms of the white Gaussian noise added to each measured position "
+                       "before quantization; 0 = off"),
 }
 
 PLANT_VARS: tuple[Var, ...] = tuple(
@@ -110,7 +115,9 @@ PLANT_VARS: tuple[Var, ...] = tuple(
     + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d}", variability="fixed") for a, u, d in _AXES]
     + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _PLANT_CFG_DOC.items()]
     + [Var("substeps", "parameter", "", "RK4 integration steps per communication step (>= 1)",
-           _CFG.substeps, type="Integer", variability="fixed")]
+           _CFG.substeps, type="Integer", variability="fixed"),
+       Var("noise_seed", "parameter", "", "seed of the measurement noise (the same seed gives the same noise "
+           "in every FMU family)", _CFG.noise_seed, type="Integer", variability="fixed")]
 )
 
 # Gains act on the command u (command units, K_T F = u); "{i}" is the motor number.
@@ -195,6 +202,8 @@ RANGES: dict[str, tuple[float, float]] = {
     "attraction_force": (0.0, 1e6), "attraction_gap": (1e-6, 1.0),
     "cogging_amplitude": (0.0, 1e6), "cogging_pitch": (1e-6, 1.0),
     "cogging_phase1": (-1e6, 1e6), "cogging_phase2": (-1e6, 1e6), "cogging_phase3": (-1e6, 1e6),
+    "disturbance_force1": (-1e6, 1e6), "disturbance_force2": (-1e6, 1e6), "disturbance_force3": (-1e6, 1e6),
+    "disturbance_time": (0.0, 1e9), "noise_rms": (0.0, 1e-3), "noise_seed": (0, 2147483647),
     # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
     # stays below a millisecond of CPU per step or so
     "substeps": (1, 10000),
@@ -289,10 +298,10 @@ def _plant_dependencies(name: str) -> Dependencies:
         initial = {f"{name}0"}
     elif name.startswith("dq"):
         initial = _pose_inputs(int(i), "d", "0") | ({"L_1"} if i != "2" else set())
-    else:  # q (measured: quantized to encoder_resolution) and q_true
+    else:  # q (measured: plus the noise of sample 0, quantized to encoder_resolution) and q_true
         initial = _pose_inputs(int(i), "", "0") | ({"L_1"} if i != "2" else set())
         if not name.endswith("_true"):
-            initial.add("encoder_resolution")
+            initial |= {"encoder_resolution", "noise_rms", "noise_seed"}
     return Dependencies((), _ordered(PLANT_VARS, initial))
 
 

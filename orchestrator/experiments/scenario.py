@@ -288,6 +288,16 @@ def _check_mismatch(s: Scenario) -> None:
                                 "allowed is one of them (the factor sets the controller's value)")
 
 
+def _check_disturbance(s: Scenario) -> None:
+    """A force step (any plant.disturbance_force_i != 0) starts within the run."""
+    if any(s.plant.get(f"disturbance_force{i}", 0.0) for i in (1, 2, 3)):
+        t = s.plant.get("disturbance_time", 0.0)
+        if not (s.start_time <= t < s.stop_time):
+            raise ScenarioError(f"plant.disturbance_time = {t!r} is invalid: allowed is a time in [start_time, "
+                                f"stop_time) = [{s.start_time:g}, {s.stop_time:g}) s (the force step must start "
+                                "within the run)")
+
+
 def _check_addressing(s: Scenario) -> None:
     """``order`` is a list of distinct element names, for Gauss-Seidel only (whether it names
     every element of the SSP exactly once is checked by the master); every [ELEMENT] table is
@@ -354,6 +364,7 @@ def validate(s: Scenario) -> Scenario:
                 raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
     _check_mismatch(s)
+    _check_disturbance(s)
     checks = (("gain_overrides", lambda: s.gain_values().validated()),
               ("controller", lambda: model_tuple(ModalGains, s.controller).validated()),
               ("controller", lambda: model_tuple(ModelParams, {**s.controller,
