@@ -147,7 +147,8 @@ REF = {"X_d": 1e-3, "Z_d": 2e-3, "B_d": 0.01, "dX_d": 0.02, "dZ_d": -0.01, "dB_d
 _Q = inverse(REF["X_d"], REF["Z_d"], REF["B_d"], 0.3)
 CONTROLLER_POINT = {**REF, "q1": _Q[0] + 1e-5, "q2": _Q[1] - 2e-5, "q3": _Q[2] + 3e-5,
                     "dq1": 0.01, "dq2": 0.02, "dq3": -0.01}
-PLANT_POINT = {"X0": 1e-3, "Z0": 2e-3, "B0": 0.01, "dX0": 0.01, "dZ0": 0.02, "dB0": 0.1,
+PLANT_POINT = {"X0": 1e-3, "Z0": 2e-3, "B0": 0.01, "dX0": 0.01, "dZ0": 0.02, "dB0": 0.1, "noise_rms": 1e-6,
+               "encoder_resolution": 0.0,  # so that a small change of noise_rms shows
                "F1": 1.0, "F2": -2.0, "F3": 3.0}
 
 
