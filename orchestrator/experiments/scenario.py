@@ -66,8 +66,10 @@ _SECTION_PARAMS = {
     "trajectory": {v.name: v for v in VARIABLES[TRAJECTORY] if v.causality == "parameter"},
     "plant": {v.name: v for v in VARIABLES[PLANT] if v.causality == "parameter"},
     "controller": {v.name: v for v in VARIABLES[CONTROLLER] if v.causality == "parameter"
-                   and not v.name[:-1] in GAIN_NAMES and v.name != "law"},
+                   and not v.name[:-1] in GAIN_NAMES and v.name not in ("law", "T_s")},
 }
+# Set from the scenario's own keys, never in [controller]: the controller samples once per step.
+_FROM_SCENARIO = {"law": "law", "T_s": "step"}
 
 
 def model_tuple(kind, table: dict):
@@ -190,6 +192,7 @@ class Scenario:
         ctrl = dict(self.controller)
         ctrl.update(self.mismatched_params())
         ctrl["law"] = LAWS[self.law]
+        ctrl["T_s"] = self.step  # the controller's sample period: one sample per macro step
         for name, values in zip(GAIN_NAMES, self.gain_values()):
             for i, v in enumerate(values, start=1):
                 ctrl[f"{name}{i}"] = v
@@ -210,7 +213,7 @@ class Scenario:
                            tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
         ctrl = ControllerModel(model_tuple(ModelParams, ct), self.gain_values(), ct["law"],
                                ct.get("velocity_source", 0), ct.get("force_limit", 0.0),
-                               model_tuple(ModalGains, ct))
+                               model_tuple(ModalGains, ct), ct["T_s"], self.start_time)
         return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
     def mismatched_params(self) -> dict:
@@ -344,6 +347,9 @@ def validate(s: Scenario) -> Scenario:
         table = getattr(s, section)
         allowed = _SECTION_PARAMS[section]
         for k, v in table.items():
+            if section == "controller" and k in _FROM_SCENARIO:
+                raise ScenarioError(f"controller.{k} is set by the scenario's {_FROM_SCENARIO[k]} = "
+                                    f"{getattr(s, _FROM_SCENARIO[k])!r}: allowed is to set {_FROM_SCENARIO[k]}")
             if k not in allowed:
                 raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)

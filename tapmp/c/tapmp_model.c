@@ -391,6 +391,13 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
     return 1;
 }
 
+/* control.sample_index */
+int tapmp_sample_index(double t, double t0, double T_s, double *k)
+{
+    *k = floor((t - t0) / T_s + 0.5);
+    return fabs(t - (t0 + *k * T_s)) <= TAPMP_SAMPLE_TOLERANCE * T_s;
+}
+
 /* trajectory.reference */
 void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
 {

@@ -123,6 +123,14 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
                             const double q[3], const double dq_in[3], int advance,
                             double out[12], tapmp_controller_state *next, double *arg);
 
+/* tapmp.control.SAMPLE_TOLERANCE: a communication point within this x T_s of a sample
+ * instant t0 + k T_s is that instant. */
+#define TAPMP_SAMPLE_TOLERANCE 1e-4
+
+/* tapmp.control.sample_index: 1 and *k if the communication point t [s] falls on the sample
+ * instant t0 + k T_s (within TAPMP_SAMPLE_TOLERANCE T_s), else 0 (between instants). */
+int tapmp_sample_index(double t, double t0, double T_s, double *k);
+
 /* --- trajectory (tapmp/trajectory.py) --- */
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
 void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
