@@ -111,7 +111,7 @@ def at_communication_points(result: dict, names, prefix: str) -> tuple[np.ndarra
     return times[:-1], rows[:-1], rows[-1]
 
 
-def assert_the_clock_of_omsimulator(times, final_step):
+def assert_the_clock_of_omsimulator(times):
     """2,000 accumulated steps of 1e-4 s, then one of ~5.7e-15 s to reach 0.2 s."""
     assert len(times) == 2001
     assert np.array_equal(times, np.cumsum([0.0] + [STEP] * 2000))
