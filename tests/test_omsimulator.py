@@ -53,14 +53,17 @@ def omsimulator(tmp_path_factory) -> Path:
     symbolic link into a file holding the link's target warns "could not load the ssd schema file"
     and validates nothing. Then the program is run from a scratch tree where the link is restored,
     so the schema check runs (the libraries stay where they are)."""
-    program = shared(OMS)
+    return runnable(shared(OMS), tmp_path_factory.mktemp("omsimulator"))
+
+
+def runnable(program: Path, tree: Path) -> Path:
+    """``program``, or a copy of it in ``tree`` that finds its schemas (see :func:`omsimulator`)."""
     root = program.parent.parent
     schema = root / "share" / "OMSimulator" / "schema"
     if schema.is_dir():
         return program
     target = (schema.parent / schema.read_text().strip()).resolve()
     assert (target / "ssp" / "SystemStructureDescription.xsd").is_file(), target
-    tree = tmp_path_factory.mktemp("omsimulator")
     (tree / "bin").mkdir()
     (tree / "share" / "OMSimulator").mkdir(parents=True)
     shutil.copy2(program, tree / "bin" / "OMSimulator")  # it finds share/ from its own location
