@@ -39,3 +39,15 @@ def test_the_guid_the_binary_checks_is_the_one_of_the_model_description(model, b
     with zipfile.ZipFile(built[model]) as z:
         copy = z.read("resources/guid.txt").decode()
     assert copy == read_model_description(str(built[model])).guid != ""
+
+
+@pytest.mark.parametrize("model", FMU_NAMES)
+def test_the_fmpy_simulate_command_runs_the_pythonfmu_fmu(model, built, tmp_path):
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "fmpy.cli", "simulate", str(built[model]), "--stop-time", "0.01",
+                           "--output-interval", "1e-4", "--output-file", "out.csv"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    data = np.loadtxt(tmp_path / "out.csv", delimiter=",", skiprows=1)
+    assert data.shape[0] == 101 and np.all(np.isfinite(data))
