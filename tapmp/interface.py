@@ -262,17 +262,21 @@ def _controller_dependencies(name: str) -> Dependencies:
     in doStep (sampled at t, held after). In Initialization Mode the outputs are computed from
     the inputs (advance = False: the dq inputs, no integral) and the parameters."""
     table = CONTROLLER_VARS
-    if name[0] in "Fu":  # u_d (Eq. 26) reads every input; the laws couple the three motors
+    i = int(name[-1])
+    if name[0] in "Fu":
+        # u_d (Eq. 26) reads the whole pose and every measured rate; the laws couple the motors
+        # through the errors (c, Eq. 21; the modal means of PID-DC) but each motor has its own
+        # gains and only its own block mass in its feedforward. The integral is zero initially,
+        # so the integral gains ki_c, ki_d do not enter.
         initial = {v.name for v in table if v.causality == "input"}
-        initial |= {v.name for v in table if v.causality == "parameter"} - {"T_s", "velocity_source"}
-        if name[0] == "u":
-            initial.discard("force_limit")
-    else:  # e_i = q_d,i - q_i (Eq. 15); es_i = e_i - e_(i+1) (Eq. 18)
-        i = int(name[-1])
-        motors = (i,) if name[0] == "e" and name[1] != "s" else (i, i % 3 + 1)
-        initial = set()
-        for m in motors:
-            initial |= _pose_inputs(m) | {f"q{m}"} | ({"L_1"} if m != 2 else set())
+        initial |= {"m_p", f"m_{i}", "I_y", "L_1", "g", "law", "kp_c", "kv_c", "kp_d", "kv_d"}
+        initial |= {f"{n}{i}" for n in ("Lambda_p", "Lambda_v", "b", "D", "K_T")}
+        if name[0] == "F":
+            initial.add("force_limit")
+    elif name[1] == "s":  # es_i = e_i - e_(i+1) (Eq. 18), as computed: X_d cancels only to round-off
+        initial = {"X_d", "Z_d", "B_d", f"q{i}", f"q{i % 3 + 1}", "L_1"}
+    else:  # e_i = q_d,i - q_i (Eq. 15, q_d by Eq. 2)
+        initial = _pose_inputs(i) | {f"q{i}"} | ({"L_1"} if i != 2 else set())
     return Dependencies((), _ordered(table, initial))
 
 

@@ -115,6 +115,7 @@ PROTOTYPES = {  # name: (restype, argtypes), as declared in tapmp_model.h
                                         POINTER(CControllerState), c_double, _dp, _dp, _dp, c_int, _dp,
                                         POINTER(CControllerState), _dp]),
     "tapmp_reference": (None, [c_double, POINTER(CTrajectory), _dp]),
+    "tapmp_sample_index": (c_int, [c_double, c_double, c_double, _dp]),
 }
 
 

@@ -137,7 +137,7 @@ def loop_models(scenario: Scenario, linear: bool = False):
                        tuple(pl.get(k, 0.0) for k in ("dX0", "dZ0", "dB0")))
     ctrl = ControllerModel(model_tuple(ModelParams, ct), scenario.gain_values(), ct["law"],
                            ct.get("velocity_source", VELOCITY_DIFFERENCE), force_limit,
-                           model_tuple(ModalGains, ct))
+                           model_tuple(ModalGains, ct), ct["T_s"], scenario.start_time)
     return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
 
