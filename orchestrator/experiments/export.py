@@ -31,7 +31,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..engine.ssp import (OSP, SSC, SSD, ParameterAddressError, default_experiment,
+from ..engine.ssp import (OSP, SSC, SSD, ParameterAddressError, default_experiment,  # noqa: F401 (OSP for readers)
                           resolve_parameters, set_system_step)
 from .scenario import Scenario
 
