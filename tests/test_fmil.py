@@ -2,12 +2,11 @@
 family without a warning, through ``fmil_check`` (../shared/tools/fmil, a small C program on
 FMIL): ``parse`` reports every FMIL log message of level warning or worse and exits non-zero on
 any; ``alone`` instantiates an FMU and steps it, recording its outputs at every communication point.
-``tests/fmil_deps.c``, built here against FMIL, prints the ModelStructure dependencies FMIL reads.
+What FMIL reads back of the dependencies: tests/test_dependencies.py.
 """
 
 import re
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from conftest import shared
 from fmpy import simulate_fmu
 
 from orchestrator.engine.container import CONTAINER
-from tapmp.interface import FMU_NAMES, TIME, dependencies
+from tapmp.interface import FMU_NAMES
 
 FMIL_CHECK = "tools/fmil/fmil_check"
 pytestmark = pytest.mark.needs_shared(FMIL_CHECK)
@@ -64,54 +63,3 @@ def test_fmil_steps_each_native_fmu_alone_as_fmpy_does(native_built, version, mo
     for name in result.dtype.names:
         assert np.array_equal(result[name], ours[name]), name
     assert max(abs(result[n][-1]) for n in result.dtype.names if n != "time") > 1e-3
-
-
-# -- the dependencies FMIL reads back ----------------------------------------------------------------
-
-@pytest.fixture(scope="session")
-def fmil_deps(tmp_path_factory):
-    """tests/fmil_deps.c compiled against ../shared/tools/fmil (FMIL's headers and library)."""
-    fmil = shared("tools/fmil")
-    exe = tmp_path_factory.mktemp("fmil_deps") / "fmil_deps"
-    proc = subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-o", str(exe),
-                           str(Path(__file__).parent / "fmil_deps.c"), "-isystem", str(fmil / "include"),
-                           f"-L{fmil / 'lib'}", "-lfmilib_shared", f"-Wl,-rpath,{fmil / 'lib'}"],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return exe
-
-
-def read_dependencies(exe, fmu, scratch) -> dict:
-    """{("output" | "initial", unknown): set of knowns, or None for "depends on all"} as FMIL reads them."""
-    scratch.mkdir()
-    proc = subprocess.run([str(exe), str(fmu), str(scratch)], capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
-    out = {}
-    for line in proc.stdout.splitlines():
-        head, _, knowns = line.partition(":")
-        what, name = head.split(" ")
-        out[(what, name)] = None if knowns.strip() == "(all)" else set(knowns.split())
-    return out
-
-
-@pytest.mark.parametrize("model", FMU_NAMES)
-@pytest.mark.parametrize("family", ["python", "fmi2", "fmi3"])
-def test_the_dependencies_fmil_reads_back_are_the_interfaces(fmil_deps, built, native_built, family, model,
-                                                             tmp_path):
-    fmu = built[model] if family == "python" else native_built[family][model]
-    read = read_dependencies(fmil_deps, fmu, tmp_path / "scratch")
-    expected = dependencies(model)
-    assert {name for _, name in read} == set(expected)
-    for name, deps in expected.items():
-        initial, step = set(deps.initial), set(deps.step)
-        if family != "fmi3":  # FMI 2.0 declares no time variable: time is no known there
-            initial.discard(TIME)
-            step.discard(TIME)
-        assert read[("initial", name)] == initial, (name, read[("initial", name)])
-        if family == "fmi3":
-            assert read[("output", name)] == step, (name, read[("output", name)])
-        else:
-            # In FMI 2.0 no output of ours depends on a known at a communication point, so every
-            # <Unknown> in <Outputs> says dependencies="" - and FMIL represents a section whose
-            # lists are all empty as it represents one with no information: "depends on all".
-            assert step == set() and read[("output", name)] is None, (name, read[("output", name)])
