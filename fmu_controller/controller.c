@@ -127,14 +127,30 @@ static void warn_skipped(tapmp_instance *inst, double t, double steps)
     if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
 }
 
+/* tapmp.control.missed_sample_text */
+static void warn_missed(tapmp_instance *inst, double t, double due)
+{
+    char text[TAPMP_MESSAGE_MAX];
+    snprintf(text, sizeof text, "the host's communication points skip sample instants of T_s = %g s: none fell "
+             "on the sample instant t = %.9g s; at t = %.9g s the controller holds its command until a "
+             "communication point falls on its grid t0 + k T_s", inst->m.T_s, due, t);
+    if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
+}
+
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
 {
     ModelData *m = &inst->m;
     double k;
     (void)h;  /* the host's step never enters the law: the time between samples does */
     build(inst);  /* new tunable values take effect at this sample; the loop state carries over */
-    if (!tapmp_sample_index(t, m->t0, m->T_s, &k) || (m->has_sample && k <= m->k_last)) {
+    int on_grid = tapmp_sample_index(t, m->t0, m->T_s, &k);
+    if (!on_grid || (m->has_sample && k <= m->k_last)) {
         memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
+        if (!on_grid && m->has_sample && !m->warned &&
+            t > m->t0 + (m->k_last + 1.0 + TAPMP_SAMPLE_TOLERANCE) * m->T_s) {
+            m->warned = 1;  /* a due sample instant passed without a communication point on it */
+            warn_missed(inst, t, m->t0 + (m->k_last + 1.0) * m->T_s);
+        }
         return 1;
     }
     /* the first sample integrates over one period, as every later one on an unbroken grid */

@@ -204,15 +204,21 @@ class ControllerModel:
 
         Returns (outputs, warning): the new (F, u, e, e_s) of :meth:`sample`, or None when
         the outputs are held (t is no new sample instant); and, the first time the host's
-        communication points skip a sample instant, the warning text naming the sample
-        interval used (else None). A step h that is not a finite number > 0 raises
+        communication points skip a sample instant, the warning text (else None): naming the
+        sample interval used when the next sample comes, or the instant missed when a
+        communication point off the grid lies past it (one warning per instance). A step h that is not a finite number > 0 raises
         ModelInputError naming communicationStepSize.
         """
         if not (math.isfinite(h) and h > 0.0):
             raise ModelInputError("communicationStepSize", h, "a finite number > 0", t)
         k = sample_index(t, self.t0, self.T_s)
         if k is None or (self.k_last is not None and k <= self.k_last):
-            return None, None
+            warning = None
+            if (k is None and self.k_last is not None and not self.warned
+                    and t > self.t0 + (self.k_last + 1 + SAMPLE_TOLERANCE) * self.T_s):
+                self.warned = True  # a due sample instant passed without a communication point on it
+                warning = missed_sample_text(t, self.t0 + (self.k_last + 1) * self.T_s, self.T_s)
+            return None, warning
         # the first sample integrates over one period, as every later one on an unbroken grid
         steps = 1 if self.k_last is None else k - self.k_last
         out = self.sample(t, steps * self.T_s, ref, q, dq_in)
@@ -272,6 +278,13 @@ class ControllerModel:
         if lim > 0.0:
             F = [min(max(f, -lim), lim) for f in F]
         return tuple(F), tuple(u), e, e_s
+
+
+def missed_sample_text(t: float, due: float, T_s: float) -> str:
+    """The warning of a host whose communication points pass a sample instant off the grid."""
+    return (f"the host's communication points skip sample instants of T_s = {T_s:g} s: none fell on the "
+            f"sample instant t = {due:.9g} s; at t = {t:.9g} s the controller holds its command until a "
+            f"communication point falls on its grid t0 + k T_s")
 
 
 def skipped_samples_text(t: float, steps: int, T_s: float) -> str:

@@ -169,6 +169,27 @@ def test_skipped_sample_instants_warn_once(fmus, host, family):
     assert ctrl.errors() == []
 
 
+@pytest.mark.parametrize("family", FAMILIES)
+def test_steps_off_the_grid_warn_once_and_hold(fmus, host, family):
+    """A host stepping 1.5 T_s lands on the grid every other step: at t = 1.5 T_s, past the due
+    instant T_s, one warning names the instant missed; the outputs hold until t = 3 T_s, which
+    samples (no second warning)."""
+    ctrl = host(fmus[family][CONTROLLER])
+    ctrl.init(_parameters()[CONTROLLER])
+    outs = []
+    for k in range(6):
+        ctrl.set({"X_d": 1e-3, "q1": 1e-5 * (1 + k), "q2": -2e-5, "q3": 3e-5 * k})
+        ctrl.do_step(1.5 * k * T_S, 1.5 * T_S)
+        outs.append(ctrl.get(CONTROLLER_OUTPUTS))
+    assert outs[1] == outs[0] and outs[2] != outs[1] and outs[3] == outs[2] and outs[4] != outs[3]
+    warnings = ctrl.warnings()
+    assert len(warnings) == 1, ctrl.messages
+    assert warnings[0] == ("the host's communication points skip sample instants of T_s = 0.0001 s: none fell on "
+                           "the sample instant t = 0.0001 s; at t = 0.00015 s the controller holds its command "
+                           "until a communication point falls on its grid t0 + k T_s")
+    assert ctrl.errors() == []
+
+
 def test_python_model_warns_with_the_same_text():
     """tapmp.control.ControllerModel: the same rule and the same warning as the FMUs."""
     ctl = ControllerModel(PAPER_MODEL, Gains.from_preset(gain_preset("default")), T_s=T_S)
