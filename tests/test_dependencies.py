@@ -88,11 +88,10 @@ def test_container_declares_the_closed_loop(built):
     assert "plant.X0" in got_initial["controller.F1"] and "trajectory.radius" in got_initial["controller.F1"]
 
 
-@pytest.mark.skipif(not FMIL.is_file(), reason=f"FMIL's fmil_check not found at {FMIL} (../shared/tools)")
+@pytest.mark.needs_shared("tools/fmil/fmil_check")
 def test_fmil_parses_every_model_structure(fmus, built):
     """FMIL (the importer behind OpenModelica and PyFMI) reads every modelDescription with its
-    dependencies without a warning. (fmil_check prints no dependency lists, so what FMIL reads
-    back is checked through fmpy above.)"""
+    dependencies without a warning. (What FMIL reads back: the test below.)"""
     paths = [str(fmus[f][m]) for f in FAMILIES for m in FMU_NAMES] + [str(built[CONTAINER])]
     proc = subprocess.run([str(FMIL), "parse", *paths], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -102,7 +101,7 @@ def test_fmil_parses_every_model_structure(fmus, built):
 FMIL_READER = Path(__file__).resolve().parent / "c_host" / "fmil_dependencies.c"
 
 
-@pytest.mark.skipif(not FMIL.is_file(), reason=f"FMIL not found at {FMIL.parent} (../shared/tools)")
+@pytest.mark.needs_shared("tools/fmil/fmil_check")
 def test_fmil_reads_the_declared_dependencies(fmus, built, tmp_path):
     """What FMIL 3.0.4 reads back (tests/c_host/fmil_dependencies.c on its API) equals the
     interface, with one limitation of FMIL's FMI 2.0 parser: a section (<Outputs> or

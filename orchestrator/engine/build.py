@@ -181,9 +181,11 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
         fmu = Path(fmu)
         front, binding = binaries
         where = f"binaries/{PLATFORM}/"
+        with zipfile.ZipFile(fmu) as z:  # the binding checks the host's fmuGUID against resources/guid.txt
+            guid = ET.fromstring(z.read("modelDescription.xml")).get("guid", "")
         _rewrite_fmu(fmu, {"modelDescription.xml": lambda b: complete_model_description(b, model)},
                      {f"{where}{script.stem}.so": front.read_bytes(), f"{where}{BINDING}": binding.read_bytes(),
-                      f"{where}{PYTHON_ENV}": python_env().encode()})
+                      f"{where}{PYTHON_ENV}": python_env().encode(), "resources/guid.txt": guid.encode()})
     return fmu
 
 
