@@ -9,8 +9,15 @@
 
 #include "fmi2Functions.h"
 
+/* The callbacks used, copied member by member: the standard's fmi2CallbackFunctions has
+ * const members, so the struct itself cannot be assigned. */
 typedef struct {
-    fmi2CallbackFunctions cb;
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2_callbacks;
+
+typedef struct {
+    fmi2_callbacks cb;
 } fmi2_env;
 
 static void logger(void *instance, int status, const char *category, const char *message)
@@ -34,7 +41,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)fmuResourceLocation, (void)visible;
     fmi2_env *env = calloc(1, sizeof *env);
     if (!env) return NULL;
-    if (functions) env->cb = *functions;
+    if (functions) {
+        env->cb.logger = functions->logger;
+        env->cb.componentEnvironment = functions->componentEnvironment;
+    }
     if (fmuType != fmi2CoSimulation) {
         if (env->cb.logger)
             env->cb.logger(env->cb.componentEnvironment, instanceName, fmi2Error, "logStatusError",
