@@ -3,13 +3,16 @@
 #
 # 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
 #    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), gcc-mingw-w64-x86-64 and
-#    wine64 (build the native FMUs' Windows binaries and run them). As root directly, else
+#    wine64 (build the native FMUs' Windows binaries and run them), clang and libclang-rt-14-dev
+#    (libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer for the native FMUs' fuzz
+#    targets and sanitizer builds; TAPMP_FUZZ_SECONDS sets the seconds per fuzz target,
+#    default 60). As root directly, else
 #    through sudo; `apt-get update` only if installing fails (empty or stale package lists).
 # 2. Creates .venv with the package and its test extras and runs every test with pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
-PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64)
+PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64 clang libclang-rt-14-dev)
 
 missing=()
 for package in "${PACKAGES[@]}"; do
