@@ -563,27 +563,37 @@ static void release(tapmp_instance *inst, tapmp_state *s)
     free(s);
 }
 
-/* The error for a state argument this instance does not hold. */
-static int foreign_state(tapmp_instance *inst, const char *call)
+/* The FMU state calls, as each FMI version spells them. */
+enum { GET_STATE, SET_STATE, FREE_STATE, STATE_SIZE, SERIALIZE, DESERIALIZE };
+static const char *state_call(const tapmp_instance *inst, int call)
 {
-    return tapmp_fail(inst, "%s%s: FMUstate is invalid: allowed is a state from %sGetFMUstate or "
-                      "%sDeSerializeFMUstate of this instance that was not freed", inst->fmi, call, inst->fmi,
-                      inst->fmi);
+    static const char *const fmi2[] = {"fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
+                                       "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate"};
+    static const char *const fmi3[] = {"fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState",
+                                       "fmi3SerializedFMUStateSize", "fmi3SerializeFMUState", "fmi3DeserializeFMUState"};
+    return inst->fmi[3] == '3' ? fmi3[call] : fmi2[call];
+}
+
+/* The error for a state argument this instance does not hold. */
+static int foreign_state(tapmp_instance *inst, int call)
+{
+    return tapmp_fail(inst, "%s: FMUstate is invalid: allowed is a state from %s or %s of this instance that was "
+                      "not freed", state_call(inst, call), state_call(inst, GET_STATE), state_call(inst, DESERIALIZE));
 }
 
 int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
 {
-    if (!state) return tapmp_fail(inst, "%sGetFMUstate: FMUstate pointer is NULL", inst->fmi);
+    if (!state) return tapmp_fail(inst, "%s: FMUstate pointer is NULL", state_call(inst, GET_STATE));
     tapmp_state *s = *state;
     if (s && !held(inst, s))  /* FMI: NULL for a new state, or one of this instance's to overwrite */
-        return tapmp_fail(inst, "%sGetFMUstate: *FMUstate is invalid: allowed is NULL (a new state) or a state "
-                          "from %sGetFMUstate or %sDeSerializeFMUstate of this instance that was not freed",
-                          inst->fmi, inst->fmi, inst->fmi);
+        return tapmp_fail(inst, "%s: *FMUstate is invalid: allowed is NULL (a new state) or a state from %s or %s "
+                          "of this instance that was not freed", state_call(inst, GET_STATE),
+                          state_call(inst, GET_STATE), state_call(inst, DESERIALIZE));
     if (!s) {
         s = calloc(1, sizeof *s);
         if (!s || !hold(inst, s)) {
             if (s) free(s);
-            return tapmp_fail(inst, "%sGetFMUstate: out of memory", inst->fmi);
+            return tapmp_fail(inst, "%s: out of memory", state_call(inst, GET_STATE));
         }
         s->magic = STATE_MAGIC;
     }
@@ -638,9 +648,9 @@ static void apply_state(tapmp_instance *inst, const tapmp_instance *c)
 int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state)
 {
     char msg[TAPMP_MESSAGE_MAX];
-    if (!held(inst, state)) return foreign_state(inst, "SetFMUstate");
+    if (!held(inst, state)) return foreign_state(inst, SET_STATE);
     if (!validate_state(&state->copy, msg, sizeof msg))
-        return tapmp_fail(inst, "%sSetFMUstate: %s; nothing was changed", inst->fmi, msg);
+        return tapmp_fail(inst, "%s: %s; nothing was changed", state_call(inst, SET_STATE), msg);
     apply_state(inst, &state->copy);
     return ST_OK;
 }
@@ -648,7 +658,7 @@ int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state)
 int tapmp_free_state(tapmp_instance *inst, tapmp_state **state)
 {
     if (!state || !*state) return ST_OK;  /* FMI: a NULL state is ignored */
-    if (!held(inst, *state)) return foreign_state(inst, "FreeFMUstate");
+    if (!held(inst, *state)) return foreign_state(inst, FREE_STATE);
     release(inst, *state);
     *state = NULL;
     return ST_OK;
@@ -656,22 +666,22 @@ int tapmp_free_state(tapmp_instance *inst, tapmp_state **state)
 
 int tapmp_serialized_size(tapmp_instance *inst, const tapmp_state *state, size_t *size)
 {
-    if (!held(inst, state)) return foreign_state(inst, "SerializedFMUstateSize");
-    int status = tapmp_require_pointer(inst, size, "SerializedFMUstateSize", "size");
+    if (!held(inst, state)) return foreign_state(inst, STATE_SIZE);
+    int status = tapmp_require_pointer(inst, size, state_call(inst, STATE_SIZE) + 4, "size");
     if (status == ST_OK) *size = sizeof(serial_layout);
     return status;
 }
 
 int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes, size_t size)
 {
-    if (!held(inst, state)) return foreign_state(inst, "SerializeFMUstate");
+    if (!held(inst, state)) return foreign_state(inst, SERIALIZE);
     if (size < sizeof(serial_layout))
-        return tapmp_fail(inst, "%sSerializeFMUstate: size = %zu is invalid: allowed is >= %zu (from "
-                          "%sSerializedFMUstateSize)", inst->fmi, size, sizeof(serial_layout), inst->fmi);
-    if (!bytes) return tapmp_fail(inst, "%sSerializeFMUstate: serializedState = NULL is invalid: allowed is an "
-                                  "array of size bytes", inst->fmi);
+        return tapmp_fail(inst, "%s: size = %zu is invalid: allowed is >= %zu (from %s)", state_call(inst, SERIALIZE),
+                          size, sizeof(serial_layout), state_call(inst, STATE_SIZE));
+    if (!bytes) return tapmp_fail(inst, "%s: serializedState = NULL is invalid: allowed is an array of size bytes",
+                                  state_call(inst, SERIALIZE));
     serial_layout *s = calloc(1, sizeof *s);
-    if (!s) return tapmp_fail(inst, "%sSerializeFMUstate: out of memory", inst->fmi);
+    if (!s) return tapmp_fail(inst, "%s: out of memory", state_call(inst, SERIALIZE));
     const tapmp_instance *c = &state->copy;
     memcpy(s->magic, SERIAL_MAGIC, sizeof s->magic);
     snprintf(s->model, sizeof s->model, "%s", MODEL_IDENTIFIER_STRING);
@@ -694,16 +704,17 @@ int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes,
 int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapmp_state **state)
 {
     char msg[TAPMP_MESSAGE_MAX];
-    if (!state) return tapmp_fail(inst, "%sDeSerializeFMUstate: FMUstate pointer is NULL", inst->fmi);
+    const char *call = state_call(inst, DESERIALIZE);
+    if (!state) return tapmp_fail(inst, "%s: FMUstate pointer is NULL", call);
     if (!bytes || size != sizeof(serial_layout))
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: size = %zu is invalid: allowed is %zu (a state "
-                          "serialized by this FMU)", inst->fmi, size, sizeof(serial_layout));
+        return tapmp_fail(inst, "%s: size = %zu is invalid: allowed is %zu (a state serialized by this FMU)", call,
+                          size, sizeof(serial_layout));
     serial_layout *s = malloc(sizeof *s);
     tapmp_state *st = calloc(1, sizeof *st);
     if (!s || !st) {
         free(s);
         free(st);
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: out of memory", inst->fmi);
+        return tapmp_fail(inst, "%s: out of memory", call);
     }
     memcpy(s, bytes, sizeof *s);
     int ok = 1;
@@ -742,14 +753,14 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
     free(s);
     if (!ok) {
         free(st);
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: %s; nothing was changed", inst->fmi, msg);
+        return tapmp_fail(inst, "%s: %s; nothing was changed", call, msg);
     }
     if (*state && !held(inst, *state)) {  /* FMI: NULL for a new state, or one of this instance's to replace */
         free(st);
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: *FMUstate is invalid: allowed is NULL (a new state) or a "
-                          "state of this instance that was not freed", inst->fmi);
+        return tapmp_fail(inst, "%s: *FMUstate is invalid: allowed is NULL (a new state) or a state of this instance "
+                          "that was not freed", call);
     }
-    if (!hold(inst, st)) return tapmp_fail(inst, "%sDeSerializeFMUstate: out of memory", inst->fmi);
+    if (!hold(inst, st)) return tapmp_fail(inst, "%s: out of memory", call);
     st->magic = STATE_MAGIC;
     if (*state) release(inst, *state);
     *state = st;
