@@ -1,6 +1,8 @@
 /* Reading a libFuzzer input as a sequence of FMI calls and their arguments: shared by
  * fuzz_fmi2.c and fuzz_fmi3.c. Every read past the end of the input yields zeros, so any
- * byte string is a valid (possibly short) call sequence. */
+ * byte string is a valid (possibly short) call sequence. The kept inputs in regressions/
+ * are call sequences in this encoding: a change to how the targets read their input makes
+ * them replay other sequences, so such a change needs the kept inputs found again. */
 #ifndef TAPMP_FUZZ_INPUT_H
 #define TAPMP_FUZZ_INPUT_H
 
@@ -59,7 +61,7 @@ static unsigned fuzz_vr(fuzz_input *in, unsigned n_vars)
     return fuzz_u32(in);
 }
 
-/* A count for an array argument: 0 .. 40, or a huge one only when the array is NULL. */
+/* A count for an array argument: 0 .. 40 (the arrays passed have exactly that length). */
 static size_t fuzz_count(fuzz_input *in) { return fuzz_byte(in) % 41; }
 
 /* A string argument: NULL, empty, short, or the fuzzer's own bytes (NUL-terminated copy). */
