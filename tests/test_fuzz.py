@@ -94,4 +94,4 @@ def test_fuzzing_finds_nothing(fuzz_targets, target, tmp_path):
         f"{target}: finding(s) {found} in {tmp_path}: keep them in tests/fuzz/regressions/{target}/\n"
         + proc.stderr[-4000:])
     runs = int(next(line.split()[-1] for line in proc.stderr.splitlines() if "stat::number_of_executed_units" in line))
-    assert runs > 100 * SECONDS  # measured: ~15,000 runs per second and target
+    assert runs > 100 * SECONDS  # measured: 9,000 to 30,000 runs per second and target
