@@ -3,10 +3,10 @@
 * Sanitizer builds (AddressSanitizer + UndefinedBehaviorSanitizer, detect_leaks=1), no
   finding: the C hosts of tests/c_host (fmi2_host.c, fmi3_host.c) built with the sanitizers
   load sanitizer builds of every FMU and step them 1,000 times, with FMPy's results on the
-  shipped binaries; tests/c_host/memory_host.c runs the call sequences that broke the FMUs
-  (nValues shorter than the value references, states held at FreeInstance, a state used
-  after it or its instance was freed, a state of another instance, a second free) on every
-  FMU of both versions; the three FMUs linked into one program run the closed loop.
+  shipped binaries; tests/c_host/memory_host.c runs the call sequences a memory defect would
+  show in (nValues shorter than the value references, states held at FreeInstance, a state
+  used after it or its instance was freed, a state of another instance, a second free) on
+  every FMU of both versions; the three FMUs linked into one program run the closed loop.
 * The defects, pinned through FMPy on the shipped binaries: fmi3SetFloat64 / fmi3GetFloat64
   with nValues smaller than the number of value references return fmi3Error with a message
   and touch no value past nValues; a state of another instance, or a freed one, is refused
@@ -43,7 +43,7 @@ def clean(proc: subprocess.CompletedProcess) -> bool:
 
 @pytest.mark.parametrize("model", FMU_NAMES)
 @pytest.mark.parametrize("family", FAMILIES)
-def test_the_calls_that_broke_the_fmus_run_clean_under_the_sanitizers(native_built, family, model, tmp_path):
+def test_the_risky_call_sequences_run_clean_under_the_sanitizers(native_built, family, model, tmp_path):
     src = extract_sources(native_built[family][model], tmp_path)
     exe = tmp_path / "memory_host"
     proc = compile_c(["-std=c99", "-Wall", "-Wextra", *SANITIZE, f"-I{src}", "-o", exe, C_HOST / "memory_host.c",

@@ -5,8 +5,8 @@ libclang-rt-14-dev, installed by tests/run.sh).
 
 * Every target runs for TAPMP_FUZZ_SECONDS seconds (default 60) with no finding: no
   AddressSanitizer, LeakSanitizer or UndefinedBehaviorSanitizer report, no crash, no timeout.
-* Every input that once crashed a target is kept in tests/fuzz/regressions/<target>/ and
-  replayed here: each must now run clean.
+* Every input on which the fuzzer found a defect is kept in tests/fuzz/regressions/<target>/
+  and replayed here: each must run clean.
 
 A finding is kept by libFuzzer in the test's temporary folder; the failure message names the
 file: copy it into tests/fuzz/regressions/<target>/ when the bug is fixed.
@@ -69,8 +69,8 @@ def test_the_kept_crash_inputs_run_clean(fuzz_targets, target):
     assert proc.stderr.count("Executed ") == len(inputs)
 
 
-def test_the_kept_inputs_crashed_the_fmus_they_were_found_on():
-    """What each kept input found, as the sanitizer reported it (the defects the checks now refuse)."""
+def test_the_inputs_the_fuzzer_found_defects_with_stay():
+    """The kept inputs and what the sanitizers reported on each, before the FMUs refused those calls."""
     kept = {t: sorted(p.name for p in (REGRESSIONS / t).iterdir()) for t in TARGETS if (REGRESSIONS / t).is_dir()}
     # fmi3GetFloat64 with nValues < number of value references wrote past the caller's array
     # (AddressSanitizer heap-buffer-overflow in tapmp_get_real); FMU states still held at

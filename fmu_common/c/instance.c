@@ -591,10 +591,8 @@ int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
                           state_call(inst, GET_STATE), state_call(inst, DESERIALIZE));
     if (!s) {
         s = calloc(1, sizeof *s);
-        if (!s || !hold(inst, s)) {
-            if (s) free(s);
+        if (!s || !hold(inst, s))  /* hold frees s if it cannot record it */
             return tapmp_fail(inst, "%s: out of memory", state_call(inst, GET_STATE));
-        }
         s->magic = STATE_MAGIC;
     }
     s->copy = *inst;

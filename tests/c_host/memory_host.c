@@ -1,4 +1,4 @@
-/* The call sequences that once broke the native FMUs' memory safety, run on one FMU (its
+/* Call sequences that would show a memory defect of the native FMUs, run on one FMU (its
  * sources/all.c, included below) of either FMI version, built with AddressSanitizer and
  * UndefinedBehaviorSanitizer by tests/test_fmu_memory.py: every value array has exactly the
  * length the call is given, so a read or write past it is a finding; FMU states are still
