@@ -7,7 +7,10 @@
 * all.c compiles without a single warning under -std=c99 -Wall -Wextra -pedantic with gcc
   and with clang, and exports nothing but the fmi2* / fmi3* functions;
 * `fmpy compile --all-warnings --warning-as-error` builds every native FMU, and the binary
-  it builds steps bit for bit like the shipped one;
+  it builds steps bit for bit like the shipped one (FMPy ignores <Library>: its binary does
+  not link libm and loads only where the host has libm loaded, as Python has);
+* a binary built as the build description says (with the external libm) loads in FMI
+  Library, which resolves every symbol at load time, and runs like the shipped binary;
 * with FMI2_FUNCTION_PREFIX / FMI3_FUNCTION_PREFIX the three FMUs link statically into one
   C program (tests/c_host/static_loop.c) that runs the closed loop bit for bit like the
   shipped binaries run by FMPy.
@@ -246,3 +249,40 @@ def test_three_source_fmus_link_into_one_program_with_prefixes_and_run_the_loop_
     plant_q = shipped[:, 24:27]  # the plant's q1..q3 (after 12 trajectory and 12 controller outputs)
     assert np.all(np.isfinite(shipped)) and np.abs(plant_q).max() > 1e-3  # the platform moved (mm)
     assert np.array_equal(linked.view(np.uint64), shipped.view(np.uint64))
+
+
+FMIL_CHECK = ROOT.parent / "shared" / "tools" / "fmil" / "fmil_check"
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_a_build_that_follows_the_build_description_loads_in_fmil_and_runs_like_the_shipped_binary(
+        native_built, family, tmp_path):
+    """FMI Library loads a binary with RTLD_NOW: every symbol must resolve, so the libm the
+    build description declares (external) must really be linked."""
+    if not FMIL_CHECK.exists():
+        pytest.skip(f"needs FMI Library's fmil_check in {FMIL_CHECK.parent} (../shared/tools/fmil)")
+    model = PLANT  # the plant calls sin, cos and sincos of libm
+    fmu = native_built[family][model]
+    configs = ET.fromstring(zipfile.ZipFile(fmu).read("sources/buildDescription.xml")).findall("BuildConfiguration")
+    config = next(c for c in configs if c.get("platform") is None)  # Linux: no configuration of its own
+    fileset = config.find("SourceFileSet")
+    src = extract_sources(fmu, tmp_path / "src")
+    lib = tmp_path / f"{model}.so"
+    proc = compile_c(["-shared", "-fPIC", "-O2", *(fileset.get("compilerOptions") or "").split(),
+                      f"-I{src}", "-o", lib, *(src / f.get("name") for f in fileset.findall("SourceFile")),
+                      *(f"-l{x.get('name')}" for x in config.findall("Library") if x.get("external") == "true")])
+    assert proc.returncode == 0, proc.stderr
+    rebuilt = tmp_path / f"{model}.fmu"
+    platform = "linux64" if family == "fmi2" else "x86_64-linux"
+    with zipfile.ZipFile(fmu) as z, zipfile.ZipFile(rebuilt, "w") as out:
+        for item in z.infolist():
+            data = lib.read_bytes() if item.filename == f"binaries/{platform}/{model}.so" else z.read(item)
+            out.writestr(item, data)
+    runs = {}
+    for name, path in (("shipped", fmu), ("rebuilt", rebuilt)):
+        csv = tmp_path / f"{name}.csv"
+        proc = subprocess.run([str(FMIL_CHECK), "alone", str(path), str(csv), "0.01", "1e-4"], capture_output=True,
+                              text=True, timeout=120)
+        assert proc.returncode == 0 and "100 steps, 0 warnings, 0 errors" in proc.stdout, proc.stdout + proc.stderr
+        runs[name] = csv.read_text()
+    assert runs["rebuilt"] == runs["shipped"] and len(runs["shipped"].splitlines()) == 102
