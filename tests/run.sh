@@ -4,13 +4,16 @@
 # 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
 #    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), gcc-mingw-w64-x86-64 and
 #    wine64 (build the native FMUs' Windows binaries and run them), libminizip1 and libxml2 (the
-#    third-party FMI tools in ../shared/tools: fmusim, OMSimulator). As root directly, else
+#    third-party FMI tools in ../shared/tools: fmusim, OMSimulator), clang and libclang-rt-14-dev
+#    (libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer for the native FMUs' fuzz
+#    targets and sanitizer builds; TAPMP_FUZZ_SECONDS sets the seconds per fuzz target,
+#    default 60). As root directly, else
 #    through sudo; `apt-get update` only if installing fails (empty or stale package lists).
 # 2. Creates .venv with the package and its test extras and runs every test with pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
-PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64 libminizip1 libxml2)
+PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64 libminizip1 libxml2 clang libclang-rt-14-dev)
 
 missing=()
 for package in "${PACKAGES[@]}"; do

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ["libtbb12", "gcc-mingw-w64-x86-64", "wine64", "libminizip1", "libxml2"]
+FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev"]  # libFuzzer and the sanitizers
+PACKAGES = ["libtbb12", "gcc-mingw-w64-x86-64", "wine64", "libminizip1", "libxml2", *FUZZ_PACKAGES]
 TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod")  # the real programs the script and stand-ins use
 
 STANDINS = {
@@ -61,7 +62,7 @@ def test_with_every_package_present_it_installs_nothing_and_runs_pytest_with_the
 
 
 def test_as_root_it_installs_only_the_missing_packages_without_questions(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["gcc-mingw-w64-x86-64"])
+    code, err, log = run_sh(tmp_path, installed=["gcc-mingw-w64-x86-64", *FUZZ_PACKAGES])
     assert code == 7, err
     assert log == ["apt-get install -y libtbb12 wine64 libminizip1 libxml2 [noninteractive]", *the_tests(tmp_path / "repo", "")]
 
@@ -69,9 +70,9 @@ def test_as_root_it_installs_only_the_missing_packages_without_questions(tmp_pat
 def test_the_package_lists_are_updated_only_if_installing_fails(tmp_path):
     code, err, log = run_sh(tmp_path, installed=[], apt_fails_once=True)
     assert code == 7, err
-    assert log[:3] == ["apt-get install -y libtbb12 gcc-mingw-w64-x86-64 wine64 libminizip1 libxml2 [noninteractive]",
+    assert log[:3] == [f"apt-get install -y {' '.join(PACKAGES)} [noninteractive]",
                        "apt-get update [noninteractive]",
-                       "apt-get install -y libtbb12 gcc-mingw-w64-x86-64 wine64 libminizip1 libxml2 [noninteractive]"]
+                       f"apt-get install -y {' '.join(PACKAGES)} [noninteractive]"]
 
 
 def test_a_user_installs_through_sudo(tmp_path):
@@ -83,7 +84,7 @@ def test_a_user_installs_through_sudo(tmp_path):
 
 
 def test_a_user_without_sudo_gets_one_line_naming_the_packages_and_nothing_runs(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["gcc-mingw-w64-x86-64"], uid=1000)
+    code, err, log = run_sh(tmp_path, installed=["gcc-mingw-w64-x86-64", *FUZZ_PACKAGES], uid=1000)
     assert code == 1 and log == []
     assert err == ("tests/run.sh: the Debian packages libtbb12 wine64 libminizip1 libxml2 are missing and this user is not root and "
                    "has no sudo: install them as root (apt-get install libtbb12 wine64 libminizip1 libxml2) and run this again\n")

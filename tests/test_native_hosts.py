@@ -230,19 +230,21 @@ def test_windows_dlls_import_only_windows_system_dlls(native_built, family, tmp_
 # -- 3. Source FMU ---------------------------------------------------------------------------
 
 def declared_sources(fmu: Path, family: str) -> tuple[list[str], list[str], list[str]]:
-    """(C files, compiler options, libraries) as the FMU declares them: <SourceFiles> of the
-    FMI 2.0 modelDescription.xml, sources/buildDescription.xml in FMI 3.0."""
+    """(C files, compiler options, libraries) as the FMU declares them for Linux: <SourceFiles>
+    of the FMI 2.0 modelDescription.xml, sources/buildDescription.xml in FMI 3.0 (its
+    configuration without a platform, the one for every platform but Windows)."""
     with zipfile.ZipFile(fmu) as z:
         if family == "fmi2":
             root = ET.fromstring(z.read("modelDescription.xml"))
             return [f.get("name") for f in root.findall("CoSimulation/SourceFiles/File")], [], []
         root = ET.fromstring(z.read("sources/buildDescription.xml"))
     files, options = [], []
-    for config in root.findall("BuildConfiguration"):
+    for config in [c for c in root.findall("BuildConfiguration") if c.get("platform") is None]:
         for fileset in config.findall("SourceFileSet"):
             options += (fileset.get("compilerOptions") or "").split()
             files += [f.get("name") for f in fileset.findall("SourceFile")]
-    libraries = [lib.get("name") for lib in root.findall("BuildConfiguration/Library")]
+    libraries = [lib.get("name") for c in root.findall("BuildConfiguration") if c.get("platform") is None
+                 for lib in c.findall("Library")]
     return files, options, libraries
 
 
@@ -261,7 +263,8 @@ def test_sources_alone_compile_from_the_declared_file_list_and_step_bit_for_bit_
     sources = src / "sources"
     assert {p.name for p in sources.iterdir()} >= set(files)
     lib = tmp_path / f"{model}.so"
-    proc = subprocess.run(["gcc", "-shared", "-fPIC", "-ffp-contract=off", *options, f"-I{sources}", "-o", str(lib),
+    proc = subprocess.run(["gcc", "-shared", "-fPIC", "-ffp-contract=off", *options, f"-I{sources}",
+                           f"-I{HEADERS}", "-o", str(lib),  # the importer's FMI headers
                            *(str(sources / f) for f in files), *(f"-l{x}" for x in libraries), "-lm"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr

@@ -458,7 +458,7 @@ def test_ctypes_structures_mirror_the_header_layout(tmp_path):
 
 
 def test_every_function_of_the_header_is_exported_and_has_a_prototype_here(native_lib):
-    declared = re.findall(r"^(?:void|int|double)\s+(tapmp_\w+)\(", MODEL_HEADER.read_text(), re.M)
+    declared = re.findall(r"^(?:TAPMP_LINKAGE\s+)?(?:void|int|double)\s+(tapmp_\w+)\(", MODEL_HEADER.read_text(), re.M)
     assert sorted(declared) == sorted(PROTOTYPES)
     for name in declared:
         assert getattr(native_lib, name)

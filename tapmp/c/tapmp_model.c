@@ -7,6 +7,14 @@
 
 #include "tapmp_model.h"
 
+/* No fused multiply-add: a*b + c must round twice, as in Python. gcc in a standard mode
+ * (-std=c99) and MSVC do not contract by default; clang does unless told here. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#elif defined(_MSC_VER)
+#pragma fp_contract(off)
+#endif
+
 #define S3 TAPMP_S3
 #define SQRT3 TAPMP_SQRT3
 #define HALF_PI 1.5707963267948966
