@@ -120,7 +120,7 @@ def cmd_analyze(args) -> int:
     from .experiments.analysis import analyze, pole_table, table
     scenario = load(args.scenario, args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
-    result = analyze(scenario, out, args.f_min, args.f_max, args.points)
+    result = analyze(scenario, out, args.f_min, args.f_max, args.points, responses=args.responses)
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
           "input force, one motor or mode at a time")
     print(table(result))
@@ -334,6 +334,8 @@ def parser() -> argparse.ArgumentParser:
     an.add_argument("--f-max", type=float, default=None, metavar="HZ",
                     help="highest frequency (default: the Nyquist frequency 1/(2 step))")
     an.add_argument("--points", type=int, default=400, help="frequencies, log-spaced (default 400)")
+    an.add_argument("--responses", action="store_true", help="also write frequency_response.csv: magnitude and "
+                    "phase of L, S, T and e/d per run and break point at every frequency")
     an.set_defaults(func=cmd_analyze)
     c = sub.add_parser("compare", help="run a scenario with SC-DC, APD-DC and fair baselines",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "

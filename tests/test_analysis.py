@@ -28,13 +28,18 @@ LINEAR = ["plant.encoder_resolution=0.0", "plant.F_c1=0.0", "plant.F_c2=0.0", "p
 
 
 def scaled_radius(scenario, v, k: float) -> float:
-    """Spectral radius of the loop whose plant-input force in direction v is scaled by k, from the
+    """Spectral radius of the loop whose plant-input force in direction v is scaled by k about the
+    operating force F0 (the command at the linearization point: F = F0 + P (F_ctrl - F0)), from the
     stability pre-check's own one-step map, Jacobian, invariant subspace and eigenvalues."""
     m = OneStepMap(scenario, linear=True)
     step = m.plant.step
-    P = np.eye(3) + (k - 1.0) * np.outer(v, v)
-    m.plant.step = lambda t, h, *F: step(t, h, *(P @ np.array(F)))
     x0 = m.start_state()
+    seen = []
+    m.plant.step = lambda t, h, *F: (seen.append(np.array(F)), step(t, h, *F))[1]
+    m(x0)
+    F0 = seen[0]
+    P = np.eye(3) + (k - 1.0) * np.outer(v, v)
+    m.plant.step = lambda t, h, *F: step(t, h, *(F0 + P @ (np.array(F) - F0)))
     T = _invariant_basis(m)
     return float(max(abs(linalg.eigvals(T.T @ m.jacobian(x0) @ T))))
 
@@ -187,17 +192,27 @@ def test_frequency_response_equals_a_cosimulation_through_the_fmus(native_fmi2, 
 
 def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     out = tmp_path / "an"
-    code = main(["analyze", str(PAPER), "--out", str(out), "--points", "60", "--f-min", "1"])
+    code = main(["analyze", str(PAPER), "--out", str(out), "--points", "60", "--f-min", "1", "--responses"])
     assert code == 0
     text = capsys.readouterr().out
     assert "| sc-dc | diff. B |" in text and "| sc-dc-lp0 | common |" in text
     data = json.loads((out / "analysis.json").read_text())
-    assert len(data["frequencies_hz"]) == 60 and data["frequencies_hz"][-1] == pytest.approx(5000.0)
+    assert data["frequency_grid"] == {"from_hz": 1.0, "to_hz": pytest.approx(5000.0), "points": 60,
+                                      "spacing": "logarithmic"}
     assert set(data["runs"]) == {"sc-dc", "apd-dc", "apd-dc-matched", "apd-dc-diff-stiffness", "apd-dc-mode-matched",
                                  "pid-dc-mode-matched", "sc-dc-b0", "sc-dc-lp0"}
     scdc = data["runs"]["sc-dc"]
     assert set(scdc["loops"]) == set(BREAK_POINTS)
-    assert len(scdc["loops"]["common"]["response"]["S"]["re"]) == 60
+    import csv
+    with open(out / "frequency_response.csv") as f:
+        rows = list(csv.reader(f))
+    assert len(rows) == 61 and len(rows[0]) == 1 + 8 * 6 * 4 * 2
+    col = rows[0].index("sc-dc|common|L|mag")
+    # the magnitude of L crosses 1 at the reported gain crossover
+    f = np.array([float(r[0]) for r in rows[1:]])
+    mag = np.array([float(r[col]) for r in rows[1:]])
+    k = np.nonzero(mag < 1.0)[0][0]
+    assert f[k - 1] < scdc["loops"]["common"]["f_gc_hz"] <= f[k]
     # SC-DC equals its mode-matched PID form for uniform gains: the same margins
     for b in BREAK_POINTS:
         assert data["runs"]["pid-dc-mode-matched"]["loops"][b]["gm"] == pytest.approx(scdc["loops"][b]["gm"], rel=1e-6)
@@ -230,3 +245,10 @@ def test_frequency_grid_reaches_nyquist_exactly():
     assert f[0] == 1.0 and f[-1] == pytest.approx(5000.0, rel=1e-15)
     with pytest.raises(ScenarioError):
         frequency_grid(1e-4, 1.0, 5000.1, 5)
+
+
+def test_an_unstable_loop_gets_no_margins():
+    sc = load(PAPER, ['gains="paper_simulation"'])  # Eq. 40 at 0.1 ms: unstable (docs/stability.md)
+    r = analyze(sc, None, f_min=1.0, points=5, runs={"sc-dc": sc})["runs"]["sc-dc"]
+    assert r["verdict"] == "unstable" and r["spectral_radius"] == pytest.approx(check(sc).spectral_radius, rel=1e-6)
+    assert all(x["gm"] is None and x["pm_deg"] is None and x["Ms"] is None for x in r["loops"].values())

@@ -41,6 +41,10 @@ crosses 1. For each break point:
   v^T e, e = q_d - q (true motor positions), with its peak and its value at the lowest
   frequency of the grid (the static stiffness is its inverse).
 
+A run whose closed loop is not stable (the verdict of ``check``) gets no margins, peaks or
+bandwidth (None): they measure a stable loop's distance to instability, and its responses are
+no steady state (the figures leave it out).
+
 The closed-loop poles z (eigenvalues of A + B C) are given as s = ln(z) / h: natural
 frequency |s| / (2 pi) [Hz] and damping -Re(s) / |s| (python-control's damp).
 
@@ -57,7 +61,7 @@ from scipy import linalg
 from tapmp.modal import MODES
 
 from .scenario import ScenarioError
-from .stability import OneStepMap, _invariant_basis
+from .stability import OneStepMap, _invariant_basis, verdict_for
 
 F_SCALE = 1e-3  # [N] finite-difference step of the plant-input force (as stability's F_held)
 BREAK_POINTS = ("motor 1", "motor 2", "motor 3", "common", "diff. Z", "diff. B")
@@ -189,7 +193,8 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
 
     gm: the upper gain margin, the smallest factor > 1 at a phase crossover (L real and
     negative) that makes |L| = 1 there (inf if none); gm_lower: the largest such factor < 1
-    (a loop that goes unstable when its gain drops; None if none); gm_db = 20 log10(gm);
+    (a loop that goes unstable when its gain drops, e.g. one holding a negative stiffness, whose
+    L is negative at f = 0; None if none); gm_db = 20 log10(gm);
     pm_deg: the phase margin 180 deg + arg L at the gain crossover |L| = 1 of smallest |PM|
     (inf if none); f_pc_hz, f_gc_hz: the frequencies of gm and pm [Hz] (None if none).
     """
@@ -214,9 +219,13 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
             pcs.append(f)
     if vals[-1].real < 0.0 and abs(vals[-1].imag) <= 1e-12 * abs(vals[-1]):
         pcs.append(nyq)  # at Nyquist the response of a real system is real
+    if min(abs(linalg.eigvals(A) - 1.0), default=1.0) > 1e-9:  # no integrator: L(z = 1) is finite and real
+        dc = complex((C @ linalg.solve(eye - A, B))[0, 0] + D[0, 0])
+        if dc.real < 0.0:
+            pcs.append(0.0)  # L < 0 at f = 0 (a negative stiffness the loop holds): a crossover at DC
     gcs = [brentq(lambda x: abs(Lf(x)) - 1.0, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-15)
            for k in np.nonzero(np.diff(np.sign(np.abs(vals) - 1.0)))[0]]
-    gms = [(1.0 / abs(Lf(f)), f) for f in pcs]
+    gms = [(1.0 / abs(Lf(f) if f > 0.0 else dc), f) for f in pcs]
     upper = [g for g in gms if g[0] > 1.0]
     lower = [g for g in gms if g[0] <= 1.0]
     gm, f_pc = min(upper) if upper else (math.inf, None)
@@ -299,8 +308,17 @@ def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
     for name, sc in runs.items():
         split = SplitLoop(sc)
         rho = float(max(abs(linalg.eigvals(split.closed_loop()))))
-        out[name] = {"law": sc.law, "spectral_radius": rho, "poles": poles(split),
-                     "loops": analyze_loop(split, freqs)}
+        verdict = verdict_for(rho)
+        loops = analyze_loop(split, freqs)
+        if verdict != "stable":
+            # margins, peaks and bandwidth describe a stable loop's distance to instability; the
+            # responses of an unstable loop are no steady state that any run would show
+            for x in loops.values():
+                x.update({k: None for k in ("gm", "gm_db", "gm_lower", "pm_deg", "f_pc_hz", "f_gc_hz", "Ms", "Mt",
+                                            "bandwidth_hz", "compliance_peak_m_per_n", "compliance_peak_hz",
+                                            "compliance_low_m_per_n")})
+        out[name] = {"law": sc.law, "spectral_radius": rho, "verdict": verdict, "poles": poles(split),
+                     "loops": loops}
     return out
 
 
@@ -330,6 +348,10 @@ def table(result: dict, breaks=BREAK_POINTS) -> str:
     lines = ["| run | break point | GM [dB] | f_pc [Hz] | PM [deg] | f_gc [Hz] | Ms | Mt | bandwidth [Hz] "
              "| peak e/d [um/N] | low-f e/d [um/N] |", "|---" * 11 + "|"]
     for run, r in result["runs"].items():
+        if r["verdict"] != "stable":
+            lines.append(f"| {run} | all | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}): "
+                         "no margins |" + " |" * 9)
+            continue
         for b in breaks:
             x = r["loops"][b]
             lines.append(f"| {run} | {b} | {_fmt(x['gm_db'], '.2f')} | {_fmt(x['f_pc_hz'], '.4g')} "
@@ -357,12 +379,32 @@ def pole_table(result: dict, count: int = 3) -> str:
     return "\n".join(lines)
 
 
+def write_responses(result: dict, path: Path) -> Path:
+    """frequency_response.csv: the frequency [Hz], then per run, break point and response (L, S,
+    T dimensionless; e_per_d in m/N) its magnitude and phase [deg], one row per frequency."""
+    import csv
+    cols, data = ["frequency_hz"], [np.asarray(result["frequencies_hz"])]
+    for run, r in result["runs"].items():
+        for b, x in r["loops"].items():
+            for key, H in x["response"].items():
+                cols += [f"{run}|{b}|{key}|mag", f"{run}|{b}|{key}|phase_deg"]
+                data += [np.abs(H), np.angle(H, deg=True)]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        w.writerows(np.column_stack(data).tolist())
+    return path
+
+
 def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: float | None = None,
-            points: int = POINTS, runs: dict | None = None, figures: bool = True) -> dict:
+            points: int = POINTS, runs: dict | None = None, figures: bool = True,
+            responses: bool = False) -> dict:
     """Analyze the scenario's loop with SC-DC and the baselines of `tapmp compare` (or ``runs``).
 
-    Returns {"scenario", "h", "nyquist_hz", "frequencies_hz", "runs"}; with ``out`` writes
-    out/analysis.json and (``figures``) the Bode figures, listed under "files".
+    Returns {"scenario", "h", "nyquist_hz", "frequencies_hz", "runs"} (each break point's complex
+    responses under "response"); with ``out`` writes out/analysis.json (everything but the
+    responses), the Bode figures (``figures``) and frequency_response.csv (``responses``),
+    listed under "files".
     """
     from .baselines import compare_runs
     freqs = frequency_grid(scenario.step, f_min, f_max, points)
@@ -378,7 +420,13 @@ def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: floa
         if figures:
             from .analysis_plots import plot_analysis
             files = [str(p) for p in plot_analysis(result, out)]
+        if responses:
+            files.append(str(write_responses(result, out / "frequency_response.csv")))
         result["files"] = files
-        data = _plain({k: (v.tolist() if k == "frequencies_hz" else v) for k, v in result.items()})
-        (out / "analysis.json").write_text(json.dumps(data, indent=1) + "\n")
+        data = {k: v for k, v in result.items() if k != "frequencies_hz"}
+        data["frequency_grid"] = {"from_hz": float(freqs[0]), "to_hz": float(freqs[-1]), "points": len(freqs),
+                                  "spacing": "logarithmic"}
+        data["runs"] = {run: {**r, "loops": {b: {k: v for k, v in x.items() if k != "response"}
+                                             for b, x in r["loops"].items()}} for run, r in result["runs"].items()}
+        (out / "analysis.json").write_text(json.dumps(_plain(data), indent=1) + "\n")
     return result

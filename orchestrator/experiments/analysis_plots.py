@@ -35,10 +35,11 @@ def _legend(fig, axes):
 
 
 def _lines(result):
-    """(run name, label, color, linestyle) per run, SC-DC first and drawn thickest."""
+    """(run name, label, color, linestyle) per run with a stable closed loop (an unstable one has
+    no steady-state response to draw), SC-DC first and drawn thickest."""
     colors = plt.get_cmap("tab10").colors
     return [(name, label(name, r["law"]), colors[k % 10], _STYLE[k // 10 % 4])
-            for k, (name, r) in enumerate(result["runs"].items())]
+            for k, (name, r) in enumerate(result["runs"].items()) if r["verdict"] == "stable"]
 
 
 def _bode(result, breaks, title, path):
