@@ -194,7 +194,8 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
     gm: the upper gain margin, the smallest factor > 1 at a phase crossover (L real and
     negative) that makes |L| = 1 there (inf if none); gm_lower: the largest such factor < 1
     (a loop that goes unstable when its gain drops, e.g. one holding a negative stiffness, whose
-    L is negative at f = 0; None if none); gm_db = 20 log10(gm);
+    L is negative at f = 0; None if none), gm_lower_db and its frequency f_pc_lower_hz [Hz];
+    gm_db = 20 log10(gm);
     pm_deg: the phase margin 180 deg + arg L at the gain crossover |L| = 1 of smallest |PM|
     (inf if none); f_pc_hz, f_gc_hz: the frequencies of gm and pm [Hz] (None if none).
     """
@@ -231,9 +232,10 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
     gm, f_pc = min(upper) if upper else (math.inf, None)
     pms = [(float(np.remainder(np.angle(Lf(f), deg=True), 360.0) - 180.0), f) for f in gcs]
     pm, f_gc = min(pms, key=lambda p: abs(p[0])) if pms else (math.inf, None)
+    gm_lower, f_lower = max(lower) if lower else (None, None)
     return {"gm": gm, "gm_db": 20.0 * math.log10(gm) if gm < math.inf else math.inf,
-            "gm_lower": max(lower)[0] if lower else None, "pm_deg": pm,
-            "f_pc_hz": f_pc, "f_gc_hz": f_gc}
+            "gm_lower": gm_lower, "gm_lower_db": None if gm_lower is None else 20.0 * math.log10(gm_lower),
+            "f_pc_lower_hz": f_lower, "pm_deg": pm, "f_pc_hz": f_pc, "f_gc_hz": f_gc}
 
 
 def poles(split: SplitLoop) -> list:
@@ -314,7 +316,7 @@ def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
             # margins, peaks and bandwidth describe a stable loop's distance to instability; the
             # responses of an unstable loop are no steady state that any run would show
             for x in loops.values():
-                x.update({k: None for k in ("gm", "gm_db", "gm_lower", "pm_deg", "f_pc_hz", "f_gc_hz", "Ms", "Mt",
+                x.update({k: None for k in ("gm", "gm_db", "gm_lower", "gm_lower_db", "f_pc_lower_hz", "pm_deg", "f_pc_hz", "f_gc_hz", "Ms", "Mt",
                                             "bandwidth_hz", "compliance_peak_m_per_n", "compliance_peak_hz",
                                             "compliance_low_m_per_n")})
         out[name] = {"law": sc.law, "spectral_radius": rho, "verdict": verdict, "poles": poles(split),
@@ -345,17 +347,17 @@ def _fmt(x, spec=".3g") -> str:
 
 def table(result: dict, breaks=BREAK_POINTS) -> str:
     """Markdown table: one row per run and break point, margins and the other numbers."""
-    lines = ["| run | break point | GM [dB] | f_pc [Hz] | PM [deg] | f_gc [Hz] | Ms | Mt | bandwidth [Hz] "
-             "| peak e/d [um/N] | low-f e/d [um/N] |", "|---" * 11 + "|"]
+    lines = ["| run | break point | GM [dB] | f_pc [Hz] | lower GM [dB] | PM [deg] | f_gc [Hz] | Ms | Mt "
+             "| bandwidth [Hz] | peak e/d [um/N] | low-f e/d [um/N] |", "|---" * 12 + "|"]
     for run, r in result["runs"].items():
         if r["verdict"] != "stable":
             lines.append(f"| {run} | all | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}): "
-                         "no margins |" + " |" * 9)
+                         "no margins |" + " |" * 10)
             continue
         for b in breaks:
             x = r["loops"][b]
             lines.append(f"| {run} | {b} | {_fmt(x['gm_db'], '.2f')} | {_fmt(x['f_pc_hz'], '.4g')} "
-                         f"| {_fmt(x['pm_deg'], '.2f')} | {_fmt(x['f_gc_hz'], '.4g')} | {_fmt(x['Ms'], '.3f')} "
+                         f"| {_fmt(x['gm_lower_db'], '.1f')} | {_fmt(x['pm_deg'], '.2f')} | {_fmt(x['f_gc_hz'], '.4g')} | {_fmt(x['Ms'], '.3f')} "
                          f"| {_fmt(x['Mt'], '.3f')} | {_fmt(x['bandwidth_hz'], '.4g')} "
                          f"| {_fmt(x['compliance_peak_m_per_n'] * 1e6, '.4g')} "
                          f"| {_fmt(x['compliance_low_m_per_n'] * 1e6, '.4g')} |")
@@ -364,7 +366,8 @@ def table(result: dict, breaks=BREAK_POINTS) -> str:
 
 def pole_table(result: dict, count: int = 3) -> str:
     """Markdown table: per run the ``count`` least damped closed-loop poles (f_n, zeta)."""
-    lines = ["| run | spectral radius | least damped poles: f_n [Hz] (zeta) |", "|---|---|---|"]
+    lines = ["| run | spectral radius | slowest pole: f_n [Hz] (zeta) | least damped poles: f_n [Hz] (zeta) |",
+             "|---|---|---|---|"]
     for run, r in result["runs"].items():
         seen, shown = set(), []
         for p in r["poles"]:
@@ -375,7 +378,9 @@ def pole_table(result: dict, count: int = 3) -> str:
             shown.append(f"{p['f_n_hz']:.4g} ({p['zeta']:.3f})")
             if len(shown) == count:
                 break
-        lines.append(f"| {run} | {r['spectral_radius']:.6f} | {', '.join(shown)} |")
+        slow = min(r["poles"], key=lambda p: p["f_n_hz"])
+        lines.append(f"| {run} | {r['spectral_radius']:.6f} | {slow['f_n_hz']:.4g} ({slow['zeta']:.3f}) "
+                     f"| {', '.join(shown)} |")
     return "\n".join(lines)
 
 
