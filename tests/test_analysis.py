@@ -44,9 +44,9 @@ def scaled_radius(scenario, v, k: float) -> float:
     return float(max(abs(linalg.eigvals(T.T @ m.jacobian(x0) @ T))))
 
 
-@pytest.mark.parametrize("law", ["sc-dc", "apd-dc"])
-def test_gain_margin_of_every_break_point_is_where_the_spectral_radius_crosses_one(law):
-    sc = load(PAPER, [f"law={law!r}".replace("'", '"')])
+@pytest.mark.parametrize("law,ordering", [("sc-dc", "gauss-seidel"), ("apd-dc", "gauss-seidel"), ("sc-dc", "jacobi")])
+def test_gain_margin_of_every_break_point_is_where_the_spectral_radius_crosses_one(law, ordering):
+    sc = load(PAPER, [f'law="{law}"', f'ordering="{ordering}"'])
     split = SplitLoop(sc)
     assert check(sc).spectral_radius == pytest.approx(max(abs(linalg.eigvals(split.closed_loop()))), abs=1e-8)
     for name, v in break_directions().items():
