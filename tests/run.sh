@@ -3,13 +3,14 @@
 #
 # 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
 #    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), gcc-mingw-w64-x86-64 and
-#    wine64 (build the native FMUs' Windows binaries and run them). As root directly, else
+#    wine64 (build the native FMUs' Windows binaries and run them), libminizip1 and libxml2 (the
+#    third-party FMI tools in ../shared/tools: fmusim, OMSimulator). As root directly, else
 #    through sudo; `apt-get update` only if installing fails (empty or stale package lists).
 # 2. Creates .venv with the package and its test extras and runs every test with pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
-PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64)
+PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64 libminizip1 libxml2)
 
 missing=()
 for package in "${PACKAGES[@]}"; do

@@ -304,6 +304,7 @@ def run_fmu_check(fmu: Path, tmp_path: Path) -> tuple[subprocess.CompletedProces
     return proc, log.read_text(), csv
 
 
+@pytest.mark.needs_shared("tools/fmuCheck/fmuCheck.linux64")
 @pytest.mark.parametrize("kind", ["native", "pythonfmu"])
 @pytest.mark.parametrize("model", FMU_NAMES)
 def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(

@@ -170,7 +170,7 @@ def test_move_metrics_of_a_hand_built_signal():
     assert X["cruise_error_mean"] == pytest.approx((1275 * 10.0 + 950 * 500.0) / 1001, rel=1e-9)
     assert Z["rise_time_s"] is None and Z["overshoot"] == 0.0 and Z["settling_time_s"]["1e-07"] == 0.0
     # streamed in blocks of any size: the same numbers
-    stats = metrics.ErrorStatistics(columns, 0.0, spec)
+    stats = metrics.ErrorStatistics(columns, 0.0, move=spec)
     for k in range(0, len(data), 777):
         stats.add(data[k:k + 777])
     assert stats.result()["move"] == m

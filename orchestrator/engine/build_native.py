@@ -27,7 +27,8 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, UNITS, VARIABLES, Var
+from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, UNITS, VARIABLES, Var,
+                             dependencies, dependency_attributes)
 
 ROOT = Path(__file__).resolve().parents[2]
 FAMILIES = ("fmi2", "fmi3")
@@ -144,6 +145,8 @@ def _categories_and_experiment(root: ET.Element, error_status: str) -> None:
     """LogCategories and DefaultExperiment, the same in both FMI versions."""
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", name="logStatusError", description=f"Log messages with {error_status} status.")
+    ET.SubElement(cats, "Category", name="logStatusWarning",
+                  description=f"Log messages with {error_status.replace('Error', 'Warning')} status.")
     ET.SubElement(cats, "Category", name="logAll", description="Log all messages.")
     ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(STOP), stepSize=repr(STEP))
 
@@ -196,9 +199,14 @@ def model_description_fmi2(model: str) -> bytes:
     structure = ET.SubElement(root, "ModelStructure")
     out = ET.SubElement(structure, "Outputs")
     init = ET.SubElement(structure, "InitialUnknowns")
-    for index in outputs:  # no direct feedthrough: outputs change only in doStep
-        ET.SubElement(out, "Unknown", index=str(index), dependencies="")
-        ET.SubElement(init, "Unknown", index=str(index))
+    index = {v.name: vr + 1 for vr, v in enumerate(table)}  # FMI 2.0 declares no independent variable
+    deps = dependencies(model)
+    for i in outputs:
+        name = table[i - 1].name
+        ET.SubElement(out, "Unknown", {"index": str(i), **dependency_attributes(deps[name].step, index)})
+    for i in outputs:
+        name = table[i - 1].name
+        ET.SubElement(init, "Unknown", {"index": str(i), **dependency_attributes(deps[name].initial, index)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
@@ -232,10 +240,15 @@ def model_description_fmi3(model: str) -> bytes:
         if v.causality == "output":
             outputs.append(vr)
     structure = ET.SubElement(root, "ModelStructure")
+    refs = {TIME: len(table), **{v.name: vr for vr, v in enumerate(table)}}
+    place = {TIME: 0, **{v.name: vr + 1 for vr, v in enumerate(table)}}  # time comes first
+    deps = dependencies(model)
     for vr in outputs:
-        ET.SubElement(structure, "Output", valueReference=str(vr), dependencies="")
+        ET.SubElement(structure, "Output", {"valueReference": str(vr),
+                                            **dependency_attributes(deps[table[vr].name].step, refs, place)})
     for vr in outputs:
-        ET.SubElement(structure, "InitialUnknown", valueReference=str(vr))
+        ET.SubElement(structure, "InitialUnknown", {"valueReference": str(vr),
+                                                    **dependency_attributes(deps[table[vr].name].initial, refs, place)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 

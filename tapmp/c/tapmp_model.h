@@ -30,7 +30,11 @@ typedef struct {
     double cogging_amplitude;   /* force ripple amplitude [N] */
     double cogging_pitch;       /* force ripple period in the motor position [m] */
     double cogging_phase[3];    /* force ripple phase per motor [rad] */
+    double disturbance_force[3];  /* external force step per mover [N] */
+    double disturbance_time;    /* when the force step starts [s] */
+    double noise_rms;           /* measurement noise rms per measured position [m] */
     int substeps;               /* RK4 steps per communication step */
+    int noise_seed;             /* seed of the measurement noise */
 } tapmp_plant_config;
 
 /* The plant: parameters, settings, reference gaps and the state (X, Z, B, dX, dZ, dB). */
@@ -39,6 +43,7 @@ typedef struct {
     tapmp_plant_config c;
     double gap12_0, gap23_0;
     double s[6];
+    double sample;              /* completed steps: the index of the measurement noise */
 } tapmp_plant;
 
 /* Controller gains per motor (tapmp.control.Gains) and the PID-DC modal gains
@@ -80,14 +85,18 @@ void tapmp_generalized_force(double B, double dB, const double xdd[3], double dB
 /* --- plant (tapmp/plant.py) --- */
 /* Round q [m] to the nearest encoder count of `resolution` [m] (0 = exact). */
 double tapmp_quantize(double q, double resolution);
-/* Set the initial state and the reference gaps of the pulling law. */
+/* Standard normal number for (seed, sample index, motor 0..2), counter-based (plant.noise_sample). */
+double tapmp_noise_sample(int seed, double sample, int motor);
+/* Set the initial state, the reference gaps of the pulling law and the sample count. */
 void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
 void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6]);
-/* Advance over h [s] with RK4 and `substeps`; F [N] is saturated here. The new state is
- * written to s_new; returns 1 if it is finite with |B| < pi/2, else 0 (state untouched). */
-int tapmp_plant_step(const tapmp_plant *pl, double h, const double F[3], double s_new[6]);
-/* Outputs in the FMU's order: q1..q3 (measured), q_true, dq, X, Z, B, dX, dZ, dB (15). */
+/* Advance from t over h [s] with RK4 and `substeps`; F [N] is saturated here, then the force
+ * step is added from disturbance_time on. The new state is written to s_new; returns 1 if it is
+ * finite with |B| < pi/2, else 0 (state untouched). */
+int tapmp_plant_step(const tapmp_plant *pl, double t, double h, const double F[3], double s_new[6]);
+/* Outputs in the FMU's order: q1..q3 (measured: true + noise of this sample, quantized), q_true,
+ * dq, X, Z, B, dX, dZ, dB (15). */
 void tapmp_plant_outputs(const tapmp_plant *pl, double out[15]);
 
 /* --- control (tapmp/control.py) --- */
@@ -122,6 +131,14 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
                             const tapmp_controller_state *st, double h, const double ref[9],
                             const double q[3], const double dq_in[3], int advance,
                             double out[12], tapmp_controller_state *next, double *arg);
+
+/* tapmp.control.SAMPLE_TOLERANCE: a communication point within this x T_s of a sample
+ * instant t0 + k T_s is that instant. */
+#define TAPMP_SAMPLE_TOLERANCE 1e-4
+
+/* tapmp.control.sample_index: 1 and *k if the communication point t [s] falls on the sample
+ * instant t0 + k T_s (within TAPMP_SAMPLE_TOLERANCE T_s), else 0 (between instants). */
+int tapmp_sample_index(double t, double t0, double T_s, double *k);
 
 /* --- trajectory (tapmp/trajectory.py) --- */
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
