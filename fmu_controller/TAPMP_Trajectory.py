@@ -8,12 +8,14 @@ from tapmp.trajectory import TrajectoryParams, reference
 
 
 class TAPMP_Trajectory(TapmpSlave):
-    """Reference of the paper: XZ circle and B sinusoid, analytic to 2nd order,
-    plus motor references by inverse kinematics. After doStep(t, h) the outputs
-    are the reference at t + h."""
+    """Reference of the paper (XZ circle and B sinusoid) or a point-to-point move (step,
+    ramp, jerk-limited S-curve; parameter profile), analytic to 2nd order, plus motor
+    references by inverse kinematics. After doStep(t, h) the outputs are the reference
+    at t + h."""
 
     VARIABLES = TRAJECTORY_VARS
-    description = "TAPMP reference trajectory (paper Section 5.2 / 6.2): XZ circle and B sinusoid"
+    description = ("TAPMP reference trajectory (paper Section 5.2 / 6.2): XZ circle and B sinusoid, or a "
+                   "point-to-point step, ramp or jerk-limited S-curve")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

@@ -116,6 +116,19 @@ def cmd_check(args) -> int:
     return 0 if report.stable else 1
 
 
+def cmd_analyze(args) -> int:
+    from .experiments.analysis import analyze, pole_table, table
+    scenario = load(args.scenario, args.set)
+    out = Path(args.out) if args.out else result_base(scenario) / "analysis"
+    result = analyze(scenario, out, args.f_min, args.f_max, args.points, responses=args.responses)
+    print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
+          "input force, one motor or mode at a time")
+    print(table(result))
+    print(pole_table(result))
+    print(f"analysis.json and figures in {out}")
+    return 0
+
+
 def cmd_run(args) -> int:
     scenario = _load(args)
     warn_if_implausible(scenario)
@@ -304,6 +317,26 @@ def parser() -> argparse.ArgumentParser:
                     "the FMI-free model, which every FMU family reproduces bit for bit (tests), so the verdict "
                     "is the same for all")
     ck.set_defaults(func=cmd_check)
+    an = sub.add_parser("analyze", help="frequency response, margins and poles of the sampled loop",
+                        description="Linearize the sampled closed loop as `check` does, break it at the plant input "
+                        "force (per motor and per mode: common, differential Z, differential B; the other directions "
+                        "closed) and write analysis.json and Bode figures: loop gain L, sensitivity S, complementary "
+                        "sensitivity T, force-to-error disturbance sensitivity up to the Nyquist frequency; gain and "
+                        "phase margin, peak |S| and |T|, bandwidth; closed-loop poles as natural frequency and "
+                        "damping; for SC-DC and every baseline of `compare`. See docs/analysis.md.",
+                        epilog=PATHS_HELP)
+    an.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    an.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scenario value, e.g. --set step=1e-5")
+    an.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, then "
+                    f"/analysis); {RELATIVE}")
+    an.add_argument("--f-min", type=float, default=0.1, metavar="HZ", help="lowest frequency (default 0.1 Hz)")
+    an.add_argument("--f-max", type=float, default=None, metavar="HZ",
+                    help="highest frequency (default: the Nyquist frequency 1/(2 step))")
+    an.add_argument("--points", type=int, default=400, help="frequencies, log-spaced (default 400)")
+    an.add_argument("--responses", action="store_true", help="also write frequency_response.csv: magnitude and "
+                    "phase of L, S, T and e/d per run and break point at every frequency")
+    an.set_defaults(func=cmd_analyze)
     c = sub.add_parser("compare", help="run a scenario with SC-DC, APD-DC and fair baselines",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "
                        "and differential-mode stiffness, the mode-matched PD and PID (PID-DC) and the SC-DC "

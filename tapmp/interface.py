@@ -39,7 +39,7 @@ UNITS = {
     "rad": {"rad": 1}, "rad/s": {"rad": 1, "s": -1}, "rad/s2": {"rad": 1, "s": -2},
     "N": {"kg": 1, "m": 1, "s": -2}, "kg": {"kg": 1}, "kg.m2": {"kg": 1, "m": 2},
     "N.s/m": {"kg": 1, "s": -1}, "N/m": {"kg": 1, "s": -2}, "N/(m.s)": {"kg": 1, "s": -3},
-    "1/s": {"s": -1},
+    "1/s": {"s": -1}, "m/s3": {"m": 1, "s": -3}, "rad/s3": {"rad": 1, "s": -3},
     "Hz": {"s": -1}, "1": {}, "s": {"s": 1},
     # The controller's command u is a number (command units) with K_T F = u: K_T in 1/N, the
     # gains in command units per error unit, and gain / K_T the force gain in N/m, N s/m, N/(m s).
@@ -175,13 +175,24 @@ _TRAJ_DOC = {
     "f_xz": ("Hz", "circle frequency"), "phase_xz": ("rad", "circle phase (0 = top of the circle)"),
     "B_amplitude": ("rad", "B sinusoid amplitude"), "f_B": ("Hz", "B sinusoid frequency"),
     "phase_B": ("rad", "B sinusoid phase"), "B_offset": ("rad", "B sinusoid offset"),
+    "profile": ("", "reference: 0 = XZ circle and B sinusoid, 1 = step, 2 = ramp, 3 = jerk-limited S-curve "
+                    "from pose A to pose B"),
+    **{f"{a}_{w}": (u, f"point-to-point move {what} pose {a}") for w, what in (("a", "start"), ("b", "end"))
+       for a, u in (("X", "m"), ("Z", "m"), ("B", "rad"))},
+    "t_move": ("s", "time the point-to-point move starts (the reference rests at pose A before)"),
+    **{f"{k}_max_{a}": (u, f"point-to-point {what} limit of axis {a} (> 0)")
+       for k, what, units in (("v", "velocity", ("m/s", "rad/s")), ("a", "acceleration", ("m/s2", "rad/s2")),
+                              ("j", "jerk", ("m/s3", "rad/s3")))
+       for a, u in (("X", units[0]), ("Z", units[0]), ("B", units[1]))},
 }
+_TRAJ_INTEGER = {"profile"}
 
 TRAJECTORY_VARS: tuple[Var, ...] = tuple(
     _pose("_d", "output", "desired")
     + [Var(f"q{i}_d", "output", "m", f"desired position of motor {i} (inverse kinematics, Eq. 2)")
        for i in (1, 2, 3)]
-    + [Var(n, "parameter", u, d, getattr(_TP, n), variability="fixed") for n, (u, d) in _TRAJ_DOC.items()]
+    + [Var(n, "parameter", u, d, getattr(_TP, n), variability="fixed",
+           type="Integer" if n in _TRAJ_INTEGER else "Real") for n, (u, d) in _TRAJ_DOC.items()]
     + [Var("L_1", "parameter", "m", "platform width used for q_d", PAPER_MODEL.L_1, variability="fixed")]
 )
 
@@ -214,6 +225,10 @@ RANGES: dict[str, tuple[float, float]] = {
     "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),
     "phase_xz": (-1e6, 1e6), "B_amplitude": (0.0, 1.5), "f_B": (0.0, 1e4), "phase_B": (-1e6, 1e6),
     "B_offset": (-1.5, 1.5),
+    "profile": (0, 3), "X_a": (-1.0, 1.0), "Z_a": (-1.0, 1.0), "B_a": (-1.5, 1.5),
+    "X_b": (-1.0, 1.0), "Z_b": (-1.0, 1.0), "B_b": (-1.5, 1.5), "t_move": (0.0, 1e6),
+    # > 0: a zero limit would make the move endless; the upper bounds keep a move's times finite
+    **{f"{k}_max_{a}": (1e-12, 1e9) for k in "vaj" for a in "XZB"},
 }
 
 

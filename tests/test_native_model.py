@@ -139,7 +139,7 @@ def c_gains(g: Gains, m: ModalGains = ModalGains()) -> CGains:
 
 
 def c_trajectory(tp: TrajectoryParams) -> CTrajectory:
-    return CTrajectory(*map(float, tp))
+    return CTrajectory(*map(float, tp[:len(CTrajectory._fields_)]))  # the circle's fields; a move is trajectory.c's
 
 
 class Native:

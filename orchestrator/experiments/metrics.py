@@ -10,6 +10,9 @@ Response to a force step (plant.disturbance_force_i from plant.disturbance_time 
 change of the mean tracking error from the window before the step to the last window of the
 run (each RESPONSE_WINDOW long, or what the run has), per motor and for the common mode
 (the mean over the motors), and the peak change after the step.
+A point-to-point run (trajectory profile 1-3) also gets the move metrics (MoveMetrics):
+rise time, overshoot, settling times into bands, peak error while moving and the error at
+constant velocity, per axis and motor.
 """
 
 import numpy as np
@@ -103,10 +106,13 @@ class ErrorStatistics:
     E[e^2] - E[e]^2 cancellation).
     """
 
-    def __init__(self, columns: list[str], force_limit: float = 0.0, step: tuple[float, float] | None = None):
+    def __init__(self, columns: list[str], force_limit: float = 0.0, step: tuple[float, float] | None = None,
+                 move: "MoveSpec | None" = None):
         self.columns = list(columns)
         # step: (disturbance_time, stop_time) [s] of a force step (force_step), None if there is none
         self.response = _StepResponse(*step) if step is not None else None
+        # a point-to-point run (move = its MoveSpec) also gets the move metrics under "move"
+        self.move = MoveMetrics(self.columns, move) if move is not None else None
         self.force_limit = float(force_limit)  # [N]; 0: no saturation is counted
         self.saturated = np.zeros(3, dtype=np.int64)  # samples with |F_i| at the limit
         self._forces = [self.columns.index(c) for c in _FORCES] if set(_FORCES) <= set(self.columns) else None
@@ -124,6 +130,8 @@ class ErrorStatistics:
         if data.size == 0:
             return
         data = data.reshape(-1, len(self.columns))
+        if self.move is not None:
+            self.move.add(data)
         if self.missing:
             self.n += data.shape[0]
             return
@@ -152,6 +160,7 @@ class ErrorStatistics:
                 "the system has no column " + ", ".join(self.missing) + ": tracking, synchronization and axis "
                 "errors need the TAPMP plant and trajectory elements (recorded as plant.* and trajectory.*)")}
         um = 1e6
+        move = {"move": self.move.result()} if self.move is not None else {}
         mae = {g: (self.abs_sum[g] / self.n * um).tolist() for g in _GROUPS}
         std = {g: (np.sqrt(self.m2[g] / self.n) * um).tolist() for g in _GROUPS}
         out = {
@@ -162,14 +171,210 @@ class ErrorStatistics:
             "samples": int(self.n),
             "saturation_fraction": (self.saturated / max(self.n, 1)).tolist(),
             "force_limit_n": self.force_limit,
+            **move,
         }
         if self.response is not None:
             out["force_step"] = self.response.result()
         return out
 
 
-def compute(columns: list[str], data: np.ndarray, force_limit: float = 0.0) -> dict:
+def compute(columns: list[str], data: np.ndarray, force_limit: float = 0.0, move: "MoveSpec | None" = None) -> dict:
     """metrics.json content of a whole results table (see ErrorStatistics.result)."""
-    stats = ErrorStatistics(columns, force_limit)
+    stats = ErrorStatistics(columns, force_limit, move=move)
     stats.add(data)
     return stats.result()
+
+
+# --- point-to-point moves -------------------------------------------------------------------
+
+SETTLING_BANDS = (1e-6, 1e-7)  # default settling bands [m for X, Z and the motors; rad for B]
+CHANNELS = ("X", "Z", "B", "q1", "q2", "q3")
+_ACTUAL = ("plant.X", "plant.Z", "plant.B", "plant.q1_true", "plant.q2_true", "plant.q3_true")
+_REFERENCE = ("trajectory.X_d", "trajectory.Z_d", "trajectory.B_d",
+              "trajectory.q1_d", "trajectory.q2_d", "trajectory.q3_d")
+PROFILE_NAMES = {1: "step", 2: "ramp", 3: "s-curve"}
+
+
+class MoveSpec:
+    """What the move metrics need to know of a point-to-point run: per channel (X, Z, B, q1, q2,
+    q3) the start and end value [m, rad], the move's start t0 and end t1 [s], the constant-velocity
+    window per channel ((start, end) [s] or None) and the settling bands."""
+
+    def __init__(self, tp, L_1: float, bands=SETTLING_BANDS):
+        from tapmp.kinematics import inverse
+        from tapmp.trajectory import move_duration, move_plan
+        self.profile = tp.profile
+        self.t0 = tp.t_move
+        self.t1 = tp.t_move + move_duration(tp)
+        a = (tp.X_a, tp.Z_a, tp.B_a)
+        b = (tp.X_b, tp.Z_b, tp.B_b)
+        self.start = (*a, *inverse(*a, L_1))
+        self.end = (*b, *inverse(*b, L_1))
+        self.bands = tuple(float(x) for x in bands)
+        windows = []
+        if tp.profile in (2, 3):
+            for p in move_plan(tp):
+                windows.append(None if p.D == 0.0 or p.Tv <= 0.0 else
+                               (tp.t_move + (p.Ta if tp.profile == 3 else 0.0),
+                                tp.t_move + (p.Ta if tp.profile == 3 else 0.0) + p.Tv))
+        else:
+            windows = [None, None, None]
+        moving = [w for w, p in zip(windows, move_plan(tp)) if p.D != 0.0] if tp.profile in (2, 3) else []
+        # a motor moves at constant velocity while every moving axis does
+        if moving and all(w is not None for w in moving):
+            lo, hi = max(w[0] for w in moving), min(w[1] for w in moving)
+            joint = (lo, hi) if hi > lo else None
+        else:
+            joint = None
+        self.cruise = (*windows, joint, joint, joint)
+
+
+def move_spec(parameters: dict, bands=SETTLING_BANDS):
+    """The MoveSpec of a run from its FMU parameters by element ({"trajectory": {...}}), or None
+    if its trajectory is not a point-to-point move (profile 0)."""
+    from tapmp.params import PAPER_MODEL
+    from tapmp.trajectory import TrajectoryParams
+    tr = parameters.get("trajectory", {})
+    tp = TrajectoryParams(*(tr.get(n, d) for n, d in zip(TrajectoryParams._fields, TrajectoryParams())))
+    if not tp.profile:
+        return None
+    return MoveSpec(tp, tr.get("L_1", PAPER_MODEL.L_1), bands)
+
+
+class MoveMetrics:
+    """Rise time, overshoot, settling times, peak error while moving and error at constant
+    velocity of a point-to-point run, per channel (X, Z, B, q1, q2, q3), streamed block by block.
+
+    For a channel with start value a and end value b (d = b - a, s = sign d):
+    * rise time [s]: from the first time the true value y passes a + 0.1 d to the first time it
+      passes a + 0.9 d (linear interpolation between samples); None for d = 0;
+    * overshoot: the largest s (y - b) after the move started, >= 0, in um (urad for B) and in
+      % of |d|;
+    * settling time into each band [s]: from the end of the reference move to the first sample
+      from which on |y - b| <= band for the rest of the run (0 if it never leaves the band after
+      the reference ends, None if it is outside at the last sample);
+    * peak error while moving: max |r - y| (r the reference) from the start to the end of the
+      reference move [um, urad];
+    * error at constant velocity: max |r - y| and the mean of r - y while the reference moves at
+      constant velocity (for a motor: while every moving axis does) [um, urad]; None without such
+      a phase (a step, or an S-curve that never reaches v_max).
+    """
+
+    def __init__(self, columns: list[str], spec: MoveSpec):
+        self.spec = spec
+        self.missing = [c for c in ("time", *_ACTUAL, *_REFERENCE) if c not in columns]
+        col = {name: i for i, name in enumerate(columns)}
+        self._cols = None if self.missing else (col["time"], [col[c] for c in _ACTUAL], [col[c] for c in _REFERENCE])
+        self.width = len(columns)
+        n = len(CHANNELS)
+        self.prev = None  # (t, y) of the last sample
+        self.t10 = [None] * n
+        self.t90 = [None] * n
+        self.overshoot = np.zeros(n)
+        self.settled_from = [[None] * len(spec.bands) for _ in range(n)]  # first sample time after a violation
+        self.violation = [[False] * len(spec.bands) for _ in range(n)]   # the last sample was outside
+        self.peak_moving = np.zeros(n)
+        self.cruise_max = np.zeros(n)
+        self.cruise_sum = np.zeros(n)
+        self.cruise_n = np.zeros(n, dtype=np.int64)
+        self.last_t = None
+
+    def add(self, rows) -> None:
+        """Accumulate a block of result rows (a 2-D array with the run's columns)."""
+        if self._cols is None:
+            return
+        data = np.asarray(rows, dtype=float).reshape(-1, self.width)
+        if data.size == 0:
+            return
+        ti, ai, ri = self._cols
+        t = data[:, ti]
+        y = data[:, ai]
+        r = data[:, ri]
+        sp = self.spec
+        a, b = np.array(sp.start), np.array(sp.end)
+        d = b - a
+        after = t >= sp.t0
+        moving = after & (t <= sp.t1)
+        err = np.abs(r - y)
+        for c in range(len(CHANNELS)):
+            yc = y[:, c]
+            if d[c] != 0.0:
+                frac = (yc - a[c]) / d[c]
+                for level, store in ((0.1, self.t10), (0.9, self.t90)):
+                    if store[c] is None:
+                        store[c] = self._crossing(t, frac, level, c)
+                s = 1.0 if d[c] > 0 else -1.0
+                if after.any():
+                    self.overshoot[c] = max(self.overshoot[c], float(np.max(s * (yc[after] - b[c]))))
+            if moving.any():
+                self.peak_moving[c] = max(self.peak_moving[c], float(err[moving, c].max()))
+            w = sp.cruise[c]
+            if w is not None:
+                inside = (t >= w[0]) & (t <= w[1])
+                if inside.any():
+                    self.cruise_max[c] = max(self.cruise_max[c], float(err[inside, c].max()))
+                    self.cruise_sum[c] += float((r[inside, c] - yc[inside]).sum())
+                    self.cruise_n[c] += int(inside.sum())
+            dev = np.abs(yc - b[c])
+            for k, band in enumerate(sp.bands):
+                out = np.nonzero(after & (dev > band))[0]
+                if len(out):
+                    last = out[-1]
+                    if last + 1 < len(t):
+                        self.settled_from[c][k] = float(t[last + 1])
+                        self.violation[c][k] = False
+                    else:
+                        self.violation[c][k] = True
+                elif after.any() and self.violation[c][k]:  # outside at the end of the previous block
+                    self.settled_from[c][k] = float(t[np.nonzero(after)[0][0]])
+                    self.violation[c][k] = False
+        self.prev = (float(t[-1]), y[-1].copy())
+        self.last_t = float(t[-1])
+
+    def _crossing(self, t, frac, level, c):
+        """Time [s] at which frac first reaches level in this block (interpolated), else None."""
+        idx = np.nonzero(frac >= level)[0]
+        if not len(idx):
+            return None
+        k = idx[0]
+        if k == 0:
+            if self.prev is None:
+                return float(t[0])
+            t0, f0 = self.prev[0], (self.prev[1][c] - self.spec.start[c]) / (self.spec.end[c] - self.spec.start[c])
+        else:
+            t0, f0 = float(t[k - 1]), float(frac[k - 1])
+        t1, f1 = float(t[k]), float(frac[k])
+        return t0 + (level - f0) / (f1 - f0) * (t1 - t0) if f1 != f0 else t1
+
+    def result(self) -> dict:
+        """The "move" entry of metrics.json."""
+        sp = self.spec
+        if self.missing:
+            return {"not_computed": "the system has no column " + ", ".join(self.missing)}
+        d = np.array(sp.end) - np.array(sp.start)
+        channels = {}
+        for c, name in enumerate(CHANNELS):
+            rise = (self.t90[c] - self.t10[c]) if self.t10[c] is not None and self.t90[c] is not None else None
+            settling = {}
+            for k, band in enumerate(sp.bands):
+                if self.violation[c][k]:
+                    settling[f"{band:g}"] = None
+                else:
+                    start = self.settled_from[c][k]
+                    settling[f"{band:g}"] = 0.0 if start is None else max(start - sp.t1, 0.0)
+            channels[name] = {
+                "distance": float(d[c]),
+                "rise_time_s": rise,
+                "overshoot": float(self.overshoot[c]) * 1e6,
+                "overshoot_percent": 100.0 * float(self.overshoot[c]) / abs(d[c]) if d[c] else None,
+                "settling_time_s": settling,
+                "peak_error_moving": float(self.peak_moving[c]) * 1e6,
+                "cruise_error_max": float(self.cruise_max[c]) * 1e6 if self.cruise_n[c] else None,
+                "cruise_error_mean": float(self.cruise_sum[c] / self.cruise_n[c]) * 1e6 if self.cruise_n[c] else None,
+            }
+        return {"profile": PROFILE_NAMES.get(sp.profile, str(sp.profile)), "t_move_s": sp.t0, "t_end_s": sp.t1,
+                "bands": list(sp.bands), "channels": channels,
+                "units": {"distance": "m (B: rad)", "overshoot": "um (B: urad)",
+                          "peak_error_moving": "um (B: urad)", "cruise_error_max": "um (B: urad)",
+                          "cruise_error_mean": "um (B: urad)", "bands": "m (B: rad)",
+                          "settling_time_s": "s after the end of the reference move"}}

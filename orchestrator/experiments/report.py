@@ -169,6 +169,45 @@ def summary_table(results: dict) -> str:
     return "\n".join(lines)
 
 
+def _ms(x) -> str:
+    return "not settled" if x is None else f"{1e3 * x:.1f}"
+
+
+def move_tables(results: dict) -> str:
+    """Markdown tables of the move metrics (metrics.json "move") of point-to-point runs: per run
+    and axis (X, Z, B), then per run and motor: rise time, overshoot, settling time into each
+    band after the end of the reference move, peak error while moving, error at constant
+    velocity (max, mean). "" if no run has move metrics."""
+    order = [b.name for b in BASELINES if b.name in results] + [r for r in results if r not in BY_NAME]
+    moves = {r: results[r]["move"] for r in order if "channels" in results[r].get("move", {})}
+    if not moves:
+        return ""
+    first = next(iter(moves.values()))
+    bands = first["bands"]
+    head = ("| run | {what} | rise 10-90 % [ms] | overshoot [{u}] | "
+            + " | ".join(f"settling +-{b:g} [ms]" for b in bands)
+            + " | peak error moving [{u}] | error at constant velocity, max / mean [{u}] |")
+    out = [f"## Point-to-point move ({first['profile']}, from t = {first['t_move_s']:g} s to "
+           f"{first['t_end_s']:.4g} s)", "",
+           "Settling: time after the end of the reference move until the true position stays within "
+           "the band around the end value (0: it already does; not settled: outside at the end of the run). "
+           "Bands in m for X, Z and the motors and in rad for B; B's errors in urad.", ""]
+    for title, channels, what in (("Per axis", ("X", "Z", "B"), "axis"), ("Per motor", ("q1", "q2", "q3"), "motor")):
+        out += [f"### {title}", "", head.format(what=what, u="um or urad" if what == "axis" else "um"),
+                "|---" * (6 + len(bands)) + "|"]
+        for run, mv in moves.items():
+            for c in channels:
+                x = mv["channels"][c]
+                rise = "-" if x["rise_time_s"] is None else f"{1e3 * x['rise_time_s']:.1f}"
+                cruise = ("-" if x["cruise_error_max"] is None
+                          else f"{x['cruise_error_max']:.3f} / {x['cruise_error_mean']:.3f}")
+                out.append(f"| {_label(run)} | {c} | {rise} | {x['overshoot']:.3f} | "
+                           + " | ".join(_ms(x["settling_time_s"][f"{b:g}"]) for b in bands)
+                           + f" | {x['peak_error_moving']:.3f} | {cruise} |")
+        out.append("")
+    return "\n".join(out)
+
+
 def write_comparison(path: Path, scenario, results: dict, command: str, runs: dict | None = None,
                      checks: dict | None = None) -> str:
     """Write comparison.md for a `tapmp compare` run and return its text.
@@ -190,6 +229,9 @@ def write_comparison(path: Path, scenario, results: dict, command: str, runs: di
         parts += ["## Runs", "", runs_table(runs, results, checks or {}), "", modal_note(scenario), ""]
     parts += ["## SC-DC against each run (mean over the three motors)", "", summary_table(results), "",
               comparison_tables(scenario.name, results)]
+    moves = move_tables(results)
+    if moves:
+        parts += [moves]
     text = "\n".join(parts)
     tmp = Path(path).with_suffix(".tmp")
     tmp.write_text(text)

@@ -12,7 +12,9 @@ undriven input, and an entry that is no input of the system or that a connection
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
 see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
 format (the result file: "csv" (default) or "mat", see orchestrator.experiments.results;
-`--format` overrides it). output is the scenario's result folder (default
+`--format` overrides it), settling_bands (the bands of the move metrics of a point-to-point
+run, trajectory.profile 1-3, see orchestrator.experiments.metrics.MoveMetrics; default
+[1e-6, 1e-7], in m, rad for B). output is the scenario's result folder (default
 results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
@@ -52,7 +54,7 @@ CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-        "open_inputs": list, "fmus": str, "format": str}
+        "open_inputs": list, "fmus": str, "format": str, "settling_bands": list}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
 _TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
@@ -155,6 +157,8 @@ class Scenario:
     elements: dict = field(default_factory=dict)  # [ELEMENT] tables: FMU parameters by SSP element name
     fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.engine.families)
     format: str = "csv"   # result file: csv or mat (RESULT_FORMATS)
+    # point-to-point runs: settling bands [m for X, Z and the motors, rad for B] of the move metrics
+    settling_bands: list = field(default_factory=lambda: [1e-6, 1e-7])
     source: str = ""
     gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
 
@@ -325,6 +329,30 @@ def _check_addressing(s: Scenario) -> None:
                                     f"{element})")
 
 
+def _check_move(s: Scenario) -> None:
+    """settling_bands: numbers > 0; a point-to-point move (trajectory.profile 1-3) ends before
+    stop_time, so that the run sees it end and settle."""
+    bands = s.settling_bands
+    if not (isinstance(bands, list) and bands):
+        raise ScenarioError(f"settling_bands = {bands!r} is invalid: allowed is a non-empty list of numbers > 0 "
+                            "[m; rad for B], e.g. [1e-6, 1e-7]")
+    for i, b in enumerate(bands):
+        b = bands[i] = _check_type(f"settling_bands[{i}]", b, float)
+        if not (math.isfinite(b) and b > 0.0):
+            raise ScenarioError(f"settling_bands[{i}] = {b!r} is invalid: allowed is a finite number > 0 "
+                                "[m; rad for B]")
+    from tapmp.trajectory import PROFILES, move_duration
+    tp = model_tuple(TrajectoryParams, s.trajectory)
+    if not tp.profile:
+        return
+    end = tp.t_move + move_duration(tp)
+    if not end < s.stop_time:
+        name = {v: k for k, v in PROFILES.items()}[tp.profile]
+        raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: the {name} move from t_move = {tp.t_move:g} s "
+                            f"ends at t = {end:.6g} s: allowed is a stop_time after the move's end (or raise the "
+                            "trajectory's v_max_*, a_max_*, j_max_*)")
+
+
 def validate(s: Scenario) -> Scenario:
     """Check every value of a scenario; raise ScenarioError naming the key."""
     if s.law not in LAWS:
@@ -377,6 +405,7 @@ def validate(s: Scenario) -> Scenario:
             check()
         except ModelInputError as err:
             raise ScenarioError(f"{section}.{err}") from None
+    _check_move(s)
     for k, v in s.limits.items():
         if k not in LIMITS:
             raise ScenarioError(f"limits.{k} is unknown: allowed are {', '.join(LIMITS)}")

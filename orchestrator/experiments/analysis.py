@@ -1,0 +1,437 @@
+"""Frequency response, margins and closed-loop poles of the sampled loop (`tapmp analyze`).
+
+The loop is the one ``tapmp check`` linearizes (orchestrator.experiments.stability): the
+one-step map of the sampled loop from communication point t to t + h, built from the
+model functions the FMUs run, linearized by central differences about the scenario's
+start with the nonlinear parts left out (quantization, Coulomb friction, saturation).
+Here the map is split at the **plant input force**: the plant steps with a force w
+[N, per motor] instead of the force the controller hands it, and the controller's force
+y [N] (the command F of the sample, or with the ``jacobi`` ordering the command held from
+the previous sample) is an output. Linearized, that is the discrete-time system
+
+    x_{k+1} = A x_k + B w_k,    y_k = C x_k (+ D w_k, D = 0: the command of a sample
+                                            depends on the state at that sample only)
+
+with the loop closed by w = y; A + B C is the matrix whose eigenvalues ``check`` reports
+(on the same invariant subspace: SC-DC's constant sum of the integrals of c and
+PID-DC's unused integral modes are removed).
+
+Break points. A break point is a direction v in the space of the three motor forces:
+a motor (v = e_i) or a mode of the synchronization coupling (tapmp.modal.MODES: common
+(1, 1, 1)/sqrt(3), differential Z (1, 0, -1)/sqrt(2), differential B (1, -2, 1)/sqrt(6)).
+The loop is opened in that direction only, with the other two directions closed (a
+loop-at-a-time break):
+
+    w = (I - v v^T) y + v w_v,   y_v = v^T y,   L_v(z) = -y_v / w_v  (negative feedback)
+
+so that scaling the force in direction v by a factor k turns the closed loop into
+A + B (I + (k - 1) v v^T) C, and the gain margin is the k at which its spectral radius
+crosses 1. For each break point:
+
+* L: the loop gain L_v(e^{j 2 pi f h}), dimensionless (force over force);
+* S = 1 / (1 + L): sensitivity at the plant input (a force disturbance d in direction v
+  to the total force there); T = L / (1 + L) = 1 - S: complementary sensitivity;
+* gain margin GM (factor and dB) at the phase crossover, phase margin PM [deg] at the
+  gain crossover (``margins``: crossings of L evaluated exactly on the unit circle);
+* Ms = max |S| (1 / Ms is the smallest distance of L to -1), Mt = max |T| on the grid;
+* bandwidth: the lowest frequency at which |S| rises to 1/sqrt(2) (-3 dB): below it a
+  disturbance at the plant input is attenuated (Skogestad and Postlethwaite, Sec. 2.4.5);
+* the disturbance sensitivity (compliance) e_v / d_v [m/N]: the closed loop (all
+  directions closed) from a force d v added at the plant input to the tracking error
+  v^T e, e = q_d - q (true motor positions), with its peak and its value at the lowest
+  frequency of the grid (the static stiffness is its inverse).
+
+A run whose closed loop is not stable (the verdict of ``check``) gets no margins, peaks or
+bandwidth (None): they measure a stable loop's distance to instability, and its responses are
+no steady state (the figures leave it out).
+
+The closed-loop poles z (eigenvalues of A + B C) are given as s = ln(z) / h: natural
+frequency |s| / (2 pi) [Hz] and damping -Re(s) / |s| (python-control's damp).
+
+Frequencies are in Hz, up to the Nyquist frequency 1 / (2 h) of the scenario's step h.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy import linalg
+
+from tapmp.modal import MODES
+
+from .scenario import ScenarioError
+from .stability import OneStepMap, _invariant_basis, verdict_for
+
+F_SCALE = 1e-3  # [N] finite-difference step of the plant-input force (as stability's F_held)
+BREAK_POINTS = ("motor 1", "motor 2", "motor 3", "common", "diff. Z", "diff. B")
+POINTS = 400  # default number of frequencies
+F_MIN = 0.1   # default lowest frequency [Hz]
+
+
+def break_directions() -> dict:
+    """{break point name: unit vector v in motor-force space} (module doc)."""
+    eye = np.eye(3)
+    out = {f"motor {i + 1}": eye[i] for i in range(3)}
+    for name, (_, v) in zip(BREAK_POINTS[3:], MODES):
+        out[name] = np.array(v)
+    return out
+
+
+class SplitLoop:
+    """The linearized sampled loop split at the plant input force (module doc).
+
+    Attributes: h [s]; A, B, C, D (scaled coordinates: the state as in
+    ``stability.OneStepMap``, the force in units of F_SCALE newtons, so B and C map
+    force to force); Ce: tracking error [m] per unit of scaled state; names: the states.
+    """
+
+    def __init__(self, scenario):
+        m = self.map = OneStepMap(scenario, linear=True)
+        self.h = m.h
+        self.jacobi = m.jacobi
+        x0 = m.start_state()
+        _, y0 = self.step(x0, np.zeros(3), closed=True)
+        self.w0 = y0  # operating point: the plant steps with the controller's force
+        n = len(x0)
+        A, B = np.empty((n, n)), np.empty((n, 3))
+        C, D = np.empty((3, n)), np.empty((3, 3))
+        for j in range(n):
+            d = np.zeros(n)
+            d[j] = m.scale[j]
+            (xp, yp), (xm, ym) = self.step(x0 + d, y0), self.step(x0 - d, y0)
+            A[:, j] = (xp - xm) / 2.0 / m.scale
+            C[:, j] = (yp - ym) / 2.0 / F_SCALE
+        for j in range(3):
+            d = np.zeros(3)
+            d[j] = F_SCALE
+            (xp, yp), (xm, ym) = self.step(x0, y0 + d), self.step(x0, y0 - d)
+            B[:, j] = (xp - xm) / 2.0 / m.scale
+            D[:, j] = (yp - ym) / 2.0 / F_SCALE
+        # tracking error e = q_d - q_true: minus the motor positions' change with the pose
+        Ce = np.zeros((3, n))
+        for j in range(3):
+            d = np.zeros(6)
+            d[j] = m.scale[j]
+            m.plant.state = [float(v) for v in x0[:6] + d]
+            qp = np.array(m.plant.joint_positions())
+            m.plant.state = [float(v) for v in x0[:6] - d]
+            qm = np.array(m.plant.joint_positions())
+            Ce[:, j] = -(qp - qm) / 2.0
+        T = _invariant_basis(m)
+        self.A, self.B, self.C, self.D = T.T @ A @ T, T.T @ B, C @ T, D
+        self.Ce = Ce @ T
+        self.names = m.names
+
+    def step(self, x: np.ndarray, w: np.ndarray, closed: bool = False):
+        """(state at t + h, controller force y [N]) from the state x at t with the plant stepping
+        under the force w [N] (``closed``: under y itself, the loop of ``tapmp run``)."""
+        m = self.map
+        plant, ctrl = m.plant, m.ctrl
+        plant.state = [float(v) for v in x[:6]]
+        k = 6
+        integral = [0.0, 0.0, 0.0]
+        for i in m.integrals:
+            integral[i] = float(x[k])
+            k += 1
+        ctrl.integral = integral
+        if m.difference:
+            ctrl.q_prev = tuple(float(v) for v in x[k:k + 3])
+            k += 3
+        else:
+            ctrl.q_prev = None
+        q = plant.measured_positions()
+        dq = plant.joint_velocities()
+        F = ctrl.sample(m.t, m.h, m.ref, q, dq)[0]
+        y = np.array(x[k:k + 3], dtype=float) if m.jacobi else np.array(F)
+        plant.step(m.t, m.h, *(float(v) for v in (y if closed else w)))
+        out = list(plant.state) + [ctrl.integral[i] for i in m.integrals]
+        if m.difference:
+            out += list(ctrl.q_prev)
+        if m.jacobi:
+            out += list(F)
+        return np.array(out, dtype=float), y
+
+    def closed_loop(self) -> np.ndarray:
+        """A + B C: the closed loop's one-step matrix (scaled coordinates)."""
+        return self.A + self.B @ self.C
+
+    def loop(self, v, gain: float = 1.0):
+        """-L_v as a python-control discrete-time StateSpace (input w_v, output y_v), the loop
+        opened in direction v with the other directions closed; ``gain`` scales the closed part
+        (1 = the loop as it runs)."""
+        import control
+        v = np.asarray(v, dtype=float).reshape(3, 1)
+        P = gain * (np.eye(3) - v @ v.T)
+        A = self.A + self.B @ P @ self.C
+        return control.ss(A, self.B @ v, v.T @ self.C, v.T @ self.D @ v, self.h)
+
+    def disturbance(self, v):
+        """The closed loop from a force d v at the plant input [N] to the tracking error v^T e [m]
+        (python-control StateSpace)."""
+        import control
+        v = np.asarray(v, dtype=float).reshape(3, 1)
+        return control.ss(self.closed_loop(), self.B @ v / F_SCALE, v.T @ self.Ce, np.zeros((1, 1)), self.h)
+
+
+def _response(sys, freqs: np.ndarray, h: float) -> np.ndarray:
+    """Complex frequency response of a discrete-time SISO system at freqs [Hz]."""
+    z = np.exp(1j * 2.0 * np.pi * freqs * h)
+    A, B, C, D = (np.asarray(M) for M in (sys.A, sys.B, sys.C, sys.D))
+    n = A.shape[0]
+    # solve (z I - A) x = B per frequency: exact evaluation on the unit circle
+    return np.array([(C @ linalg.solve(zk * np.eye(n) - A, B))[0, 0] + D[0, 0] for zk in z])
+
+
+SEARCH_POINTS = 4000  # frequencies on which crossings are bracketed before brentq refines them
+
+
+def margins(L, h: float, f_low: float = 1e-3) -> dict:
+    """Gain and phase margins of the loop gain L (a discrete-time python-control system,
+    negative feedback), from crossings bracketed on a log grid from f_low [Hz] to the Nyquist
+    frequency and refined by brentq on L evaluated exactly at z = exp(j 2 pi f h).
+
+    gm: the upper gain margin, the smallest factor > 1 at a phase crossover (L real and
+    negative) that makes |L| = 1 there (inf if none); gm_lower: the largest such factor < 1
+    (a loop that goes unstable when its gain drops, e.g. one holding a negative stiffness, whose
+    L is negative at f = 0; None if none), gm_lower_db and its frequency f_pc_lower_hz [Hz];
+    gm_db = 20 log10(gm);
+    pm_deg: the phase margin 180 deg + arg L at the gain crossover |L| = 1 of smallest |PM|
+    (inf if none); f_pc_hz, f_gc_hz: the frequencies of gm and pm [Hz] (None if none).
+    """
+    import control
+    from scipy.optimize import brentq
+    nyq = 0.5 / h
+    ss = control.ss(L)
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (ss.A, ss.B, ss.C, ss.D))
+    eye = np.eye(A.shape[0])
+
+    def Lf(f):
+        z = np.exp(1j * 2.0 * math.pi * f * h)
+        return complex((C @ linalg.solve(z * eye - A, B))[0, 0] + D[0, 0])
+
+    grid = np.geomspace(f_low, nyq, SEARCH_POINTS)
+    grid[-1] = nyq
+    vals = np.array([Lf(f) for f in grid])
+    pcs = []  # phase crossovers: Im L = 0 with Re L < 0
+    for k in np.nonzero(np.diff(np.sign(vals.imag)))[0]:
+        f = brentq(lambda x: Lf(x).imag, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-15)
+        if Lf(f).real < 0.0:
+            pcs.append(f)
+    if vals[-1].real < 0.0 and abs(vals[-1].imag) <= 1e-12 * abs(vals[-1]):
+        pcs.append(nyq)  # at Nyquist the response of a real system is real
+    if min(abs(linalg.eigvals(A) - 1.0), default=1.0) > 1e-9:  # no integrator: L(z = 1) is finite and real
+        dc = complex((C @ linalg.solve(eye - A, B))[0, 0] + D[0, 0])
+        if dc.real < 0.0:
+            pcs.append(0.0)  # L < 0 at f = 0 (a negative stiffness the loop holds): a crossover at DC
+    gcs = [brentq(lambda x: abs(Lf(x)) - 1.0, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-15)
+           for k in np.nonzero(np.diff(np.sign(np.abs(vals) - 1.0)))[0]]
+    gms = [(1.0 / abs(Lf(f) if f > 0.0 else dc), f) for f in pcs]
+    upper = [g for g in gms if g[0] > 1.0]
+    lower = [g for g in gms if g[0] <= 1.0]
+    gm, f_pc = min(upper) if upper else (math.inf, None)
+    pms = [(float(np.remainder(np.angle(Lf(f), deg=True), 360.0) - 180.0), f) for f in gcs]
+    pm, f_gc = min(pms, key=lambda p: abs(p[0])) if pms else (math.inf, None)
+    gm_lower, f_lower = max(lower) if lower else (None, None)
+    return {"gm": gm, "gm_db": 20.0 * math.log10(gm) if gm < math.inf else math.inf,
+            "gm_lower": gm_lower, "gm_lower_db": None if gm_lower is None else 20.0 * math.log10(gm_lower),
+            "f_pc_lower_hz": f_lower, "pm_deg": pm, "f_pc_hz": f_pc, "f_gc_hz": f_gc}
+
+
+def poles(split: SplitLoop) -> list:
+    """Closed-loop poles: [{"z": [re, im], "f_n_hz": natural frequency, "zeta": damping}],
+    least damped first (s = ln(z) / h, f_n = |s| / (2 pi), zeta = -Re(s) / |s|)."""
+    out = []
+    for z in linalg.eigvals(split.closed_loop()):
+        s = np.log(complex(z)) / split.h if z != 0 else complex(-math.inf, 0.0)
+        wn = abs(s)
+        zeta = -s.real / wn if wn > 0 and np.isfinite(wn) else 1.0
+        out.append({"z": [float(z.real), float(z.imag)], "f_n_hz": float(wn / (2.0 * math.pi)),
+                    "zeta": float(zeta)})
+    return sorted(out, key=lambda p: (p["zeta"], p["f_n_hz"]))
+
+
+def frequency_grid(h: float, f_min: float = F_MIN, f_max: float | None = None, points: int = POINTS) -> np.ndarray:
+    """Log-spaced frequencies [Hz] from f_min to f_max (default: the Nyquist frequency 1/(2h));
+    ScenarioError names a bound outside (0, Nyquist] or fewer than 2 points."""
+    nyq = 0.5 / h
+    f_max = nyq if f_max is None else f_max
+    for key, f in (("--f-min", f_min), ("--f-max", f_max)):
+        if not (math.isfinite(f) and 0.0 < f <= nyq * (1.0 + 1e-12)):
+            raise ScenarioError(f"{key} = {f!r} is invalid: allowed is a frequency in (0, {nyq:g}] Hz "
+                                f"(up to the Nyquist frequency 1/(2 step), step = {h:g} s)")
+    if not f_min < f_max:
+        raise ScenarioError(f"--f-min = {f_min!r} is invalid: allowed is a frequency below --f-max = {f_max!r} Hz")
+    if not (isinstance(points, int) and points >= 2):
+        raise ScenarioError(f"--points = {points!r} is invalid: allowed is an integer >= 2")
+    return np.geomspace(f_min, min(f_max, nyq), points)
+
+
+def _bandwidth(freqs, S) -> float | None:
+    """Lowest frequency [Hz] where |S| reaches 1/sqrt(2) from below (linear interpolation in
+    log f); None if |S| stays below (or starts above) it on the grid."""
+    mag = np.abs(S)
+    level = 1.0 / math.sqrt(2.0)
+    if mag[0] >= level:
+        return None
+    above = np.nonzero(mag >= level)[0]
+    if len(above) == 0:
+        return None
+    k = above[0]
+    lf0, lf1 = math.log(freqs[k - 1]), math.log(freqs[k])
+    return float(math.exp(lf0 + (level - mag[k - 1]) / (mag[k] - mag[k - 1]) * (lf1 - lf0)))
+
+
+def analyze_loop(split: SplitLoop, freqs: np.ndarray) -> dict:
+    """Per break point (BREAK_POINTS): margins, Ms, Mt, bandwidth, compliance, and the
+    responses L, S, T, e/d on freqs (complex arrays under "response")."""
+    out = {}
+    for name, v in break_directions().items():
+        G = split.loop(v)           # y_v / w_v
+        L = -G
+        Lf = -_response(G, freqs, split.h)
+        S = 1.0 / (1.0 + Lf)
+        Tc = Lf / (1.0 + Lf)
+        E = _response(split.disturbance(v), freqs, split.h)
+        r = margins(L, split.h)
+        r.update({"Ms": float(np.max(np.abs(S))), "Mt": float(np.max(np.abs(Tc))),
+                  "bandwidth_hz": _bandwidth(freqs, S),
+                  "compliance_peak_m_per_n": float(np.max(np.abs(E))),
+                  "compliance_peak_hz": float(freqs[int(np.argmax(np.abs(E)))]),
+                  "compliance_low_m_per_n": float(abs(E[0])),
+                  "response": {"L": Lf, "S": S, "T": Tc, "e_per_d": E}})
+        out[name] = r
+    return out
+
+
+def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
+    """{run name: {"law", "spectral_radius", "poles", "loops"}} for the scenarios of ``runs``."""
+    out = {}
+    for name, sc in runs.items():
+        split = SplitLoop(sc)
+        rho = float(max(abs(linalg.eigvals(split.closed_loop()))))
+        verdict = verdict_for(rho)
+        loops = analyze_loop(split, freqs)
+        if verdict != "stable":
+            # margins, peaks and bandwidth describe a stable loop's distance to instability; the
+            # responses of an unstable loop are no steady state that any run would show
+            for x in loops.values():
+                x.update({k: None for k in ("gm", "gm_db", "gm_lower", "gm_lower_db", "f_pc_lower_hz", "pm_deg", "f_pc_hz", "f_gc_hz", "Ms", "Mt",
+                                            "bandwidth_hz", "compliance_peak_m_per_n", "compliance_peak_hz",
+                                            "compliance_low_m_per_n")})
+        out[name] = {"law": sc.law, "spectral_radius": rho, "verdict": verdict, "poles": poles(split),
+                     "loops": loops}
+    return out
+
+
+def _plain(x):
+    """JSON-ready copy: complex arrays as {"re": [...], "im": [...]}, inf as the string "inf"."""
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray):
+        return {"re": x.real.tolist(), "im": x.imag.tolist()}
+    if isinstance(x, float) and not math.isfinite(x):
+        return "inf" if x > 0 else "-inf" if x < 0 else "nan"
+    if isinstance(x, list):
+        return [_plain(v) for v in x]
+    return x
+
+
+def _fmt(x, spec=".3g") -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float) and math.isinf(x):
+        return "inf"
+    return format(x, spec)
+
+
+def table(result: dict, breaks=BREAK_POINTS) -> str:
+    """Markdown table: one row per run and break point, margins and the other numbers."""
+    lines = ["| run | break point | GM [dB] | f_pc [Hz] | lower GM [dB] | PM [deg] | f_gc [Hz] | Ms | Mt "
+             "| bandwidth [Hz] | peak e/d [um/N] | low-f e/d [um/N] |", "|---" * 12 + "|"]
+    for run, r in result["runs"].items():
+        if r["verdict"] != "stable":
+            lines.append(f"| {run} | all | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}): "
+                         "no margins |" + " |" * 10)
+            continue
+        for b in breaks:
+            x = r["loops"][b]
+            lines.append(f"| {run} | {b} | {_fmt(x['gm_db'], '.2f')} | {_fmt(x['f_pc_hz'], '.4g')} "
+                         f"| {_fmt(x['gm_lower_db'], '.1f')} | {_fmt(x['pm_deg'], '.2f')} | {_fmt(x['f_gc_hz'], '.4g')} | {_fmt(x['Ms'], '.3f')} "
+                         f"| {_fmt(x['Mt'], '.3f')} | {_fmt(x['bandwidth_hz'], '.4g')} "
+                         f"| {_fmt(x['compliance_peak_m_per_n'] * 1e6, '.4g')} "
+                         f"| {_fmt(x['compliance_low_m_per_n'] * 1e6, '.4g')} |")
+    return "\n".join(lines)
+
+
+def pole_table(result: dict, count: int = 3) -> str:
+    """Markdown table: per run the ``count`` least damped closed-loop poles (f_n, zeta)."""
+    lines = ["| run | spectral radius | slowest pole: f_n [Hz] (zeta) | least damped poles: f_n [Hz] (zeta) |",
+             "|---|---|---|---|"]
+    for run, r in result["runs"].items():
+        seen, shown = set(), []
+        for p in r["poles"]:
+            key = (round(p["f_n_hz"], 6), round(p["zeta"], 6))
+            if key in seen:  # a conjugate pair once
+                continue
+            seen.add(key)
+            shown.append(f"{p['f_n_hz']:.4g} ({p['zeta']:.3f})")
+            if len(shown) == count:
+                break
+        slow = min(r["poles"], key=lambda p: p["f_n_hz"])
+        lines.append(f"| {run} | {r['spectral_radius']:.6f} | {slow['f_n_hz']:.4g} ({slow['zeta']:.3f}) "
+                     f"| {', '.join(shown)} |")
+    return "\n".join(lines)
+
+
+def write_responses(result: dict, path: Path) -> Path:
+    """frequency_response.csv: the frequency [Hz], then per run, break point and response (L, S,
+    T dimensionless; e_per_d in m/N) its magnitude and phase [deg], one row per frequency."""
+    import csv
+    cols, data = ["frequency_hz"], [np.asarray(result["frequencies_hz"])]
+    for run, r in result["runs"].items():
+        for b, x in r["loops"].items():
+            for key, H in x["response"].items():
+                cols += [f"{run}|{b}|{key}|mag", f"{run}|{b}|{key}|phase_deg"]
+                data += [np.abs(H), np.angle(H, deg=True)]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        w.writerows(np.column_stack(data).tolist())
+    return path
+
+
+def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: float | None = None,
+            points: int = POINTS, runs: dict | None = None, figures: bool = True,
+            responses: bool = False) -> dict:
+    """Analyze the scenario's loop with SC-DC and the baselines of `tapmp compare` (or ``runs``).
+
+    Returns {"scenario", "h", "nyquist_hz", "frequencies_hz", "runs"} (each break point's complex
+    responses under "response"); with ``out`` writes out/analysis.json (everything but the
+    responses), the Bode figures (``figures``) and frequency_response.csv (``responses``),
+    listed under "files".
+    """
+    from .baselines import compare_runs
+    freqs = frequency_grid(scenario.step, f_min, f_max, points)
+    runs = compare_runs(scenario) if runs is None else runs
+    result = {"scenario": scenario.name, "h": scenario.step, "nyquist_hz": 0.5 / scenario.step,
+              "ordering": scenario.ordering, "break": "plant input force, one direction at a time, the others "
+              "closed; L = -y_v / w_v (negative feedback)",
+              "frequencies_hz": freqs, "runs": analyze_runs(runs, freqs)}
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        files = []
+        if figures:
+            from .analysis_plots import plot_analysis
+            files = [str(p) for p in plot_analysis(result, out)]
+        if responses:
+            files.append(str(write_responses(result, out / "frequency_response.csv")))
+        result["files"] = files
+        data = {k: v for k, v in result.items() if k != "frequencies_hz"}
+        data["frequency_grid"] = {"from_hz": float(freqs[0]), "to_hz": float(freqs[-1]), "points": len(freqs),
+                                  "spacing": "logarithmic"}
+        data["runs"] = {run: {**r, "loops": {b: {k: v for k, v in x.items() if k != "response"}
+                                             for b, x in r["loops"].items()}} for run, r in result["runs"].items()}
+        (out / "analysis.json").write_text(json.dumps(_plain(data), indent=1) + "\n")
+    return result
