@@ -120,7 +120,9 @@ def cmd_analyze(args) -> int:
     from .experiments.analysis import analyze, pole_table, table
     scenario = load(args.scenario, args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
-    result = analyze(scenario, out, args.f_min, args.f_max, args.points, responses=args.responses)
+    from .experiments.baselines import compare_runs
+    result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
+                     responses=args.responses)
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
           "input force, one motor or mode at a time")
     print(table(result))

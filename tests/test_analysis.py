@@ -200,13 +200,13 @@ def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     assert data["frequency_grid"] == {"from_hz": 1.0, "to_hz": pytest.approx(5000.0), "points": 60,
                                       "spacing": "logarithmic"}
     assert set(data["runs"]) == {"sc-dc", "apd-dc", "apd-dc-matched", "apd-dc-diff-stiffness", "apd-dc-mode-matched",
-                                 "pid-dc-mode-matched", "sc-dc-b0", "sc-dc-lp0"}
+                                 "apd-dc-ms-matched", "pid-dc-mode-matched", "sc-dc-b0", "sc-dc-lp0"}
     scdc = data["runs"]["sc-dc"]
     assert set(scdc["loops"]) == set(BREAK_POINTS)
     import csv
     with open(out / "frequency_response.csv") as f:
         rows = list(csv.reader(f))
-    assert len(rows) == 61 and len(rows[0]) == 1 + 8 * 6 * 4 * 2
+    assert len(rows) == 61 and len(rows[0]) == 1 + 9 * 6 * 4 * 2
     col = rows[0].index("sc-dc|common|L|mag")
     # the magnitude of L crosses 1 at the reported gain crossover
     f = np.array([float(r[0]) for r in rows[1:]])

@@ -404,16 +404,16 @@ def write_responses(result: dict, path: Path) -> Path:
 def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: float | None = None,
             points: int = POINTS, runs: dict | None = None, figures: bool = True,
             responses: bool = False) -> dict:
-    """Analyze the scenario's loop with SC-DC and the baselines of `tapmp compare` (or ``runs``).
+    """Analyze the sampled loops of ``runs`` ({name: Scenario}; `tapmp analyze` passes SC-DC and the
+    baselines of `tapmp compare`, None: the scenario alone under its own law) at the scenario's step.
 
     Returns {"scenario", "h", "nyquist_hz", "frequencies_hz", "runs"} (each break point's complex
     responses under "response"); with ``out`` writes out/analysis.json (everything but the
     responses), the Bode figures (``figures``) and frequency_response.csv (``responses``),
     listed under "files".
     """
-    from .baselines import compare_runs
     freqs = frequency_grid(scenario.step, f_min, f_max, points)
-    runs = compare_runs(scenario) if runs is None else runs
+    runs = {scenario.law: scenario} if runs is None else runs
     result = {"scenario": scenario.name, "h": scenario.step, "nyquist_hz": 0.5 / scenario.step,
               "ordering": scenario.ordering, "break": "plant input force, one direction at a time, the others "
               "closed; L = -y_v / w_v (negative feedback)",

@@ -1,4 +1,4 @@
-"""The runs of `tapmp compare`: SC-DC, the paper's APD-DC and the fair baselines of issue 14.
+"""The runs of `tapmp compare`: SC-DC, the paper's APD-DC and the fair baselines.
 
 Written in the tracking error e [m], SC-DC (Eq. 22-25) is a PID on e with Laplacian
 coupling (tapmp.modal): on the common mode (1, 1, 1)/sqrt(3) its proportional gain is
@@ -14,6 +14,8 @@ The baselines here take the structure apart, one change per run:
     apd-dc-diff-stiffness  APD-DC  k_p = Lambda_v D + 3 (Lambda_v b + Lambda_p): SC-DC's
                                    differential-mode P on every mode
     apd-dc-mode-matched    PID-DC  SC-DC's P and D per mode, no integral (ki_c = ki_d = 0)
+    apd-dc-ms-matched      PID-DC  SC-DC's D per mode, no integral, P per mode tuned to SC-DC's
+                                   peak sensitivity Ms (orchestrator.experiments.robustness)
     pid-dc-mode-matched    PID-DC  SC-DC's P, D and I per mode (equals SC-DC for uniform gains)
     sc-dc-b0               SC-DC   b = 0 (no integral of c, differential P down by 3 Lambda_v b)
     sc-dc-lp0              SC-DC   Lambda_p = 0 (differential P down by 3 Lambda_p)
@@ -32,6 +34,7 @@ from tapmp.control import Gains, ModalGains
 from tapmp.modal import modal_gains, scdc_matrices
 from tapmp.params import scdc_mode_gains
 
+from .robustness import ms_matched
 from .scenario import model_tuple
 
 
@@ -53,6 +56,9 @@ BASELINES = (
              "SC-DC's differential-mode P and D on all modes, no integral: what stiffness alone gives"),
     Baseline("apd-dc-mode-matched", "APD-DC mode-matched (PID-DC, SC-DC's P and D per mode, ki = 0)",
              "SC-DC's P and D mode by mode without the integral: what the integral on c adds"),
+    Baseline("apd-dc-ms-matched", "APD-DC robustness-matched (PID-DC, ki = 0, P per mode for SC-DC's Ms)",
+             "a PD at SC-DC's robustness: the same peak sensitivity Ms per mode, so a difference is not "
+             "bought with a smaller stability margin"),
     Baseline("pid-dc-mode-matched", "PID-DC mode-matched (SC-DC's P, D and I per mode)",
              "SC-DC as a modal PID; for uniform gains the same law (a check of the identity)"),
     Baseline("sc-dc-b0", "SC-DC ablation, b = 0",
@@ -115,10 +121,19 @@ def compare_runs(scenario) -> dict:
         "apd-dc-diff-stiffness": scenario.with_changes(
             law="apd-dc", gain_overrides=dict(ov, Lambda_p=differential_stiffness(g))),
         "apd-dc-mode-matched": pid(no_integral),
+        "apd-dc-ms-matched": pid(robustness_matched(scenario).gains),
         "pid-dc-mode-matched": pid(mg),
         "sc-dc-b0": scenario.with_changes(law="sc-dc", gain_overrides=dict(ov, b=[0.0, 0.0, 0.0])),
         "sc-dc-lp0": scenario.with_changes(law="sc-dc", gain_overrides=dict(ov, Lambda_p=[0.0, 0.0, 0.0])),
     }
+
+
+def robustness_matched(scenario):
+    """orchestrator.experiments.robustness.Matched for the scenario's SC-DC and its mode-matched PD."""
+    mg, _ = scdc_modal(scenario.gain_values())
+    pd = scenario.with_changes(law="pid-dc", controller={**scenario.controller,
+                                                         **mg._replace(ki_c=0.0, ki_d=0.0)._asdict()})
+    return ms_matched(scenario.with_changes(law="sc-dc"), pd)
 
 
 def run_gains_text(sc) -> str:

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from .baselines import BASELINES, BY_NAME, run_gains_text, scdc_modal
+from .baselines import BASELINES, BY_NAME, robustness_matched, run_gains_text, scdc_modal
 
 # The paper's Tables 1-6 as printed (Zhou et al. 2024, Section 5.2 and 6.2): per table the rows
 # APD-DC, proposed (SC-DC) and "Reduction (%)", each STD q1..q3 (or X, Z, B) then MAE. The
@@ -131,7 +131,8 @@ def _mean(values) -> float:
 
 def modal_note(scenario) -> str:
     """One sentence: how the PID-DC rows' modal gains were obtained from the scenario's gains."""
-    return f"Modal gains of the PID-DC rows: {scdc_modal(scenario.gain_values())[1]}."
+    return (f"Modal gains of the PID-DC rows: {scdc_modal(scenario.gain_values())[1]}. "
+            + robustness_matched(scenario).text())
 
 
 def runs_table(runs: dict, results: dict, checks: dict) -> str:
