@@ -405,30 +405,40 @@ def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
 
 def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: _StopRequest, progress):
     """The step loop: rows to the result file in whole blocks, metrics over every step;
-    returns the metrics.ErrorStatistics. Stops at a step boundary when ``stop`` is set."""
+    returns the metrics.ErrorStatistics. Stops at a block boundary when ``stop`` is set.
+    The rows of a block are stored by CoSimulation.advance (the compiled core or the
+    Python loop) into one preallocated array."""
     n, every = scenario.n_steps, scenario.record_every
     writer = (_CsvBlocks if fmt == "csv" else _MatBlocks)(out, sim.columns)
+    buffer = np.empty((BLOCK, len(sim.columns)))
+    filled, first = 0, 0  # rows of buffer (steps first, first + 1, ...) not yet written
     try:
         stats = metrics.ErrorStatistics(sim.columns, metrics.saturation_limit(sim.parameters))
-        rows, first = [sim.row()], 0  # rows of steps first, first + 1, ... not yet written
-        for k in range(1, n + 1):
+        buffer[0] = sim.row()
+        filled, k = 1, 0
+        while k < n:
             if stop.signal is not None:
                 stop.check(sim.time)
-            sim.step()
-            rows.append(sim.row())
-            if len(rows) == BLOCK:
-                block = _as_block(rows)
+            m = min(BLOCK - filled, n - k)
+            try:
+                sim.advance(buffer[filled:filled + m])
+            except BaseException:
+                filled += sim.filled  # the rows stored before the failure
+                raise
+            filled, k = filled + m, k + m
+            if filled == BLOCK:
+                block = buffer[:filled]
                 writer.write(_recorded(block, first, every, n))
                 stats.add(block)
-                first, rows = first + BLOCK, []
+                first, filled = first + BLOCK, 0
                 if progress:
                     progress(k, n)
         stop.check(sim.time)
-        if rows:
-            block = _as_block(rows)
+        if filled:
+            block = buffer[:filled]
             writer.write(_recorded(block, first, every, n))
             stats.add(block)
-            rows = []
+            filled = 0
         writer.finish()
         if progress:
             progress(n, n)
@@ -437,8 +447,8 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
         writer.finish(quiet=True)
         raise
     except BaseException:
-        if rows:  # the whole rows so far stay
-            writer.write(_recorded(_as_block(rows), first, every, n), quiet=True)
+        if filled:  # the whole rows so far stay
+            writer.write(_recorded(buffer[:filled], first, every, n), quiet=True)
         writer.finish(quiet=True)
         raise
     finally:
