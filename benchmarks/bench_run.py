@@ -5,7 +5,8 @@ Run from the repository root after `bash build_fmus.sh`:
 
 On the paper scenario (scenarios/paper_simulation.toml), in one process, interleaved, the
 fastest of --repeat runs of each:
-  * cosim:     CoSimulation opened and stepped stop_time / step times, nothing read or written
+  * cosim:     CoSimulation opened and stepped stop_time / step times as tapmp run steps it
+               (CoSimulation.advance, blocks of rows in memory), nothing written
                (the floor: what the master and the FMUs cost);
   * run csv:   orchestrator.cli.main(["run", ..., "--format", "csv"]): scenario, plausibility
                and stability checks, the co-simulation, every row to results.csv, metrics.json;
@@ -27,9 +28,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
+
 from orchestrator.cli import main  # noqa: E402
 from orchestrator.engine.families import resolve_ssp  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.results import BLOCK  # noqa: E402
 from orchestrator.experiments.scenario import load  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_simulation.toml"
@@ -41,8 +45,10 @@ def cosim_alone(scenario, ssp) -> float:
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, scenario.ordering,
                       limits=scenario.limit_values(), clock=scenario.clock,
                       connection_start=scenario.connection_start, open_inputs=scenario.open_inputs) as sim:
-        for _ in range(scenario.n_steps):
-            sim.step()
+        block = np.empty((BLOCK, len(sim.columns)))
+        left = scenario.n_steps
+        while left:  # the stepping of tapmp run: blocks of rows, compiled core unless TAPMP_STEPPER=python
+            left -= sim.advance(block[:min(left, BLOCK)])
     return time.perf_counter() - start
 
 
