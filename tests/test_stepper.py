@@ -171,7 +171,7 @@ def test_csv_rows_read_back_to_the_same_doubles_at_every_magnitude():
 
     def digits(text):  # the significant digits of a number's text
         return text.lstrip("-").split("e")[0].replace(".", "").strip("0")
-    assert all(digits(x) == digits(repr(v)) for line, row in zip(lines, block)
+    assert all(digits(x) == digits(repr(float(v))) for line, row in zip(lines, block)
                for x, v in zip(line.split(","), row))  # the digits of Python's repr: the shortest
     block[1, 3] = np.inf
     assert format_csv_rows(block[:2]).decode().splitlines()[1].split(",")[3] == "inf"
