@@ -321,7 +321,8 @@ def _stops(stop: _StopRequest, token: str | None):
 
 
 def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = False,
-                 progress=None, stop_token: str | None = None) -> dict:
+                 progress=None, stop_token: str | None = None, keep_rows: list | None = None,
+                 keep_bytes: int = 0) -> dict:
     """Run one scenario; write run.json, metrics.json and results.csv or results.mat
     (``scenario.format``) into ``out`` (prepare_output: a completed run there is kept
     unless ``overwrite``, a failed or interrupted one is replaced).
@@ -337,10 +338,14 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     written) and the error is raised again: CoSimulationError, Interrupted, or
     ResultsWriteError if a result file cannot be written (it is then cut back to its
     last whole block of rows).
+
+    ``keep_rows``, a list, receives the recorded rows block by block (arrays) as they are
+    written, for a caller that plots them, as long as they total at most ``keep_bytes``;
+    beyond that it is emptied (read the result file instead).
     """
     with output_lock(out):
         out = prepare_output(out, overwrite)
-        return _run_locked(scenario, ssp, out, progress, stop_token)
+        return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)
 
 
 def _write_result(path: Path, data) -> None:
@@ -351,7 +356,8 @@ def _write_result(path: Path, data) -> None:
         raise ResultsWriteError(f"cannot write {path}: {err.strerror or err} (errno {err.errno})") from err
 
 
-def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) -> dict:
+def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, keep_rows=None,
+                keep_bytes: int = 0) -> dict:
     """run_scenario's body, in the locked and prepared output folder ``out``."""
     fmt = getattr(scenario, "format", "csv")
     info = {"kind": "run", "format": fmt, "results_file": FORMATS[fmt],
@@ -374,7 +380,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token) 
                 info["columns"] = list(sim.columns)
                 if fmt == "mat":  # results.part.npy needs its column names on record (a killed run)
                     _write_result(out / "run.json", info)
-                stats = _simulate(sim, scenario, out, fmt, stop, progress)
+                stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes)
             result = stats.result()
             if "not_computed" in result:
                 print(f"note: metrics not computed: {result['not_computed']}", file=sys.stderr)
@@ -404,13 +410,15 @@ def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
     return block[(steps % every == 0) | (steps == n)]
 
 
-def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: _StopRequest, progress):
+def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: _StopRequest, progress,
+              keep_rows: list | None = None, keep_bytes: int = 0):
     """The step loop: rows to the result file in whole blocks, metrics over every step;
     returns the metrics.ErrorStatistics. Stops at a block boundary when ``stop`` is set.
     The rows of a block are stored by CoSimulation.advance (the compiled core or the
     Python loop) into one preallocated array."""
     n, every = scenario.n_steps, scenario.record_every
-    writer = (_CsvBlocks if fmt == "csv" else _MatBlocks)(out, sim.columns)
+    base_writer = (_CsvBlocks if fmt == "csv" else _MatBlocks)(out, sim.columns)
+    writer = base_writer if keep_rows is None else _Keeping(base_writer, keep_rows, keep_bytes)
     buffer = np.empty((BLOCK, len(sim.columns)))
     filled, first = 0, 0  # rows of buffer (steps first, first + 1, ...) not yet written
     try:
@@ -454,6 +462,29 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
         raise
     finally:
         writer.close()
+
+
+class _Keeping:
+    """A result writer that also keeps copies of the blocks it writes in ``rows`` while they
+    total at most ``limit`` bytes (then ``rows`` is emptied and nothing more is kept)."""
+
+    def __init__(self, writer, rows: list, limit: int):
+        self.writer, self.rows, self.limit, self.size = writer, rows, limit, 0
+
+    def write(self, block: np.ndarray, quiet: bool = False) -> None:
+        self.writer.write(block, quiet)
+        if self.size <= self.limit:
+            self.size += block.nbytes
+            if self.size <= self.limit:
+                self.rows.append(block.copy())
+            else:
+                self.rows.clear()
+
+    def finish(self, quiet: bool = False) -> None:
+        self.writer.finish(quiet)
+
+    def close(self) -> None:
+        self.writer.close()
 
 
 def _write_error(path: Path, err: OSError, detail: str = "") -> ResultsWriteError:
@@ -638,6 +669,22 @@ def _record_failure(path: Path, info: dict, err: BaseException, sim, start: floa
         pass  # e.g. still a full disk: the error itself is raised all the same
 
 
+def _read_csv_rows(path: Path, n_columns: int) -> np.ndarray:
+    """The rows of results.csv (n x n_columns): parsed as one JSON array by orjson (exact
+    decimal-to-double conversion, about 3x faster than np.loadtxt); a file orjson cannot
+    read that way (inf or nan written by repr, a ragged row) goes through np.loadtxt."""
+    with open(path, "rb") as f:
+        f.readline()
+        text = f.read().rstrip(b"\n")
+    try:
+        flat = np.array(orjson.loads(b"[" + text.replace(b"\n", b",") + b"]"), dtype=float)
+        if text and flat.size % n_columns == 0 and flat.size == (text.count(b"\n") + 1) * n_columns:
+            return flat.reshape(-1, n_columns)
+    except (orjson.JSONDecodeError, ValueError, TypeError):
+        pass
+    return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+
+
 def read_results(folder: Path) -> tuple[list[str], np.ndarray]:
     """Columns and rows (n x columns, SI units, time [s] first) of a run folder, from
     results.mat, results.csv or (a killed MAT run) results.part.npy with the columns
@@ -652,7 +699,7 @@ def read_results(folder: Path) -> tuple[list[str], np.ndarray]:
     if csv_path.is_file():
         with open(csv_path) as f:
             columns = next(csv.reader(f))
-        return columns, np.loadtxt(csv_path, delimiter=",", skiprows=1, ndmin=2)
+        return columns, _read_csv_rows(csv_path, len(columns))
     if part.is_file():
         info = _read_json(folder / "run.json") or {}
         if "columns" not in info:
