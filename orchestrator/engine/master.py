@@ -161,6 +161,23 @@ def remove_stale_folders(tmpdir=None) -> list:
     return removed
 
 
+_DESCRIPTIONS = {}  # sha-1 of an FMU archive -> its parsed modelDescription (read-only)
+
+
+def _model_description(fmu_path: Path):
+    """fmpy's read_model_description, parsed once per process for each FMU content: a study
+    worker runs the same FMUs case after case (parsing costs ~15 ms per FMU)."""
+    import hashlib
+    key = hashlib.sha1(Path(fmu_path).read_bytes()).hexdigest()
+    md = _DESCRIPTIONS.get(key)
+    if md is None:
+        md = read_model_description(str(fmu_path))
+        if len(_DESCRIPTIONS) >= 64:
+            _DESCRIPTIONS.clear()
+        _DESCRIPTIONS[key] = md
+    return md
+
+
 class _Unit:
     """One FMU instance in the system, its cached outputs and its input connections.
 
@@ -170,7 +187,7 @@ class _Unit:
 
     def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
         self.name = name
-        self.md = read_model_description(str(fmu_path))
+        self.md = _model_description(fmu_path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.log = log
