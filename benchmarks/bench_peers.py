@@ -91,6 +91,19 @@ def time_c_loop(ssp: Path, scenario, tmp: Path) -> float:
     return time_c_master(ssp, scenario, tmp)
 
 
+def is_native_fmi2(ssp: Path) -> bool:
+    """Whether the SSP holds the native FMI 2.0 TAPMP FMUs (C sources inside, FMI 2.0), which
+    benchmarks/c_master.c steps."""
+    import io
+    import zipfile
+    with zipfile.ZipFile(ssp) as z:
+        if "resources/TAPMP_Plant.fmu" not in z.namelist():
+            return False
+        with zipfile.ZipFile(io.BytesIO(z.read("resources/TAPMP_Plant.fmu"))) as fmu:
+            names = fmu.namelist()
+            return "sources/tapmp_model.c" in names and 'fmiVersion="2.0"' in fmu.read("modelDescription.xml").decode()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--ssp", default=str(ROOT / "build" / "native" / "fmi2" / "TAPMP.ssp"))
@@ -102,7 +115,7 @@ def main(argv=None) -> int:
         print(f"error: {ssp} does not exist: run bash build_fmus.sh first", file=sys.stderr)
         return 2
     sc = load(ROOT / "scenarios" / "paper_simulation.toml", [f"stop_time={args.stop_time}"])
-    native_fmi2 = "native" in ssp.parts and "fmi2" in ssp.parts
+    native_fmi2 = is_native_fmi2(ssp)
     with tempfile.TemporaryDirectory(prefix="tapmp_peers_") as tmp:
         masters = [("tapmp (Python loop)", lambda: time_tapmp(ssp, sc, "python")),
                    ("tapmp (compiled core)", lambda: time_tapmp(ssp, sc, "compiled")),

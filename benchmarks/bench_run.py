@@ -67,13 +67,14 @@ def tapmp_run(args: list[str], out: Path, fmt: str) -> float:
 def main_bench() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--fmus", default="native", help="FMU family (default native)")
+    p.add_argument("--ssp", help="SSP file (default: the built SSP of --fmus)")
     p.add_argument("--stop-time", type=float, default=2.5, help="simulated time [s] (default 2.5)")
     p.add_argument("--repeat", type=int, default=3, help="runs of each configuration (default 3)")
     p.add_argument("--profile", choices=("csv", "mat"), help="print the cProfile of one run in this format")
     a = p.parse_args()
     scenario = load(SCENARIO, [f"stop_time={a.stop_time}"])
-    ssp = resolve_ssp(None, a.fmus)
-    args = ["--fmus", a.fmus, "--set", f"stop_time={a.stop_time}"]
+    ssp = resolve_ssp(a.ssp, a.fmus)
+    args = ["--ssp", str(ssp), "--set", f"stop_time={a.stop_time}"]
     with tempfile.TemporaryDirectory(prefix="bench_run_") as tmp:
         tmp = Path(tmp)
         if a.profile:
@@ -94,7 +95,7 @@ def main_bench() -> None:
     print(f"{'configuration':<10} {'wall [s]':>9} {'us/step':>8} {'x cosim':>8}  result file")
     for name, wall in best.items():
         fmt = name.split()[-1]
-        size = f"results.{fmt}: {sizes[fmt] / 1e6:.2f} MB" if name != "cosim" else ""
+        size = f"results.{fmt}: {sizes[fmt] / 1e6:.2f} MB" if name != "cosim" else "-"
         print(f"{name:<10} {wall:9.3f} {wall / n * 1e6:8.1f} {wall / best['cosim']:8.2f}  {size}")
 
 

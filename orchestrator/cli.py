@@ -92,6 +92,9 @@ def warn_if_implausible(scenario) -> None:
 
 def cmd_build(args) -> int:
     build_mod.build_all(Path(args.out))
+    from .engine import stepper
+    if stepper.available():  # else a note says why; runs then step in Python
+        print(f"compiled stepping core in {stepper.library_path()}")
     return 0
 
 

@@ -62,12 +62,8 @@ def test_bench_cosim_prints_every_configuration(built, tmp_path):
     assert re.search(rf"peak memory \(max RSS of this process\): {NUMBER} MiB", out)
 
 
-def test_bench_peers_prints_tapmp_ecos_libcosim_and_the_c_loop(built, tmp_path):
-    ssp = ROOT / "build" / "native" / "fmi2" / "TAPMP.ssp"
-    if not ssp.is_file():
-        from orchestrator.engine.build_native import build_native
-        ssp = build_native(tmp_path / "native", log=lambda *_: None, windows=False)["fmi2"]["ssp"]
-    out = bench("bench_peers.py", "--ssp", ssp, "--stop-time", "0.01", "--repeat", "1", tmp_path=tmp_path)
+def test_bench_peers_prints_tapmp_ecos_libcosim_and_the_c_loop(native_built, tmp_path):
+    out = bench("bench_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.01", "--repeat", "1", tmp_path=tmp_path)
     rows = table(out, "master")
     assert [r[0] for r in rows] == ["tapmp (Python loop)", "tapmp (compiled core)", "Ecos (ecospy)",
                                     "libcosim (libcosimpy)", "C loop (c_master.c)"]
@@ -75,8 +71,9 @@ def test_bench_peers_prints_tapmp_ecos_libcosim_and_the_c_loop(built, tmp_path):
     assert re.search(rf"^tapmp compiled core / Ecos: {NUMBER}$", out, re.M)
 
 
-def test_bench_run_prints_the_cost_of_writing_each_format(built, tmp_path):
-    out = bench("bench_run.py", "--stop-time", "0.05", "--repeat", "1", tmp_path=tmp_path)
+def test_bench_run_prints_the_cost_of_writing_each_format(native_built, tmp_path):
+    out = bench("bench_run.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.05", "--repeat", "1",
+                tmp_path=tmp_path)
     rows = table(out, "configuration")
     assert [r[0] for r in rows] == ["cosim", "run csv", "run mat"]
     assert rows[0][3] == "1.00"
@@ -111,3 +108,12 @@ def test_reference_run_regenerates_the_stored_reference_bit_for_bit(tmp_path):
     out = bench("reference_run.py", "--out", tmp_path / "ref.csv", tmp_path=tmp_path)
     assert out.strip() == f"wrote {tmp_path / 'ref.csv'}"
     assert (tmp_path / "ref.csv").read_bytes() == (ROOT / "tests" / "data" / "reference_run.csv").read_bytes()
+
+
+def test_bench_compare_prints_compare_against_one_run(native_built, tmp_path):
+    out = bench("bench_compare.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02", "--repeat", "1",
+                tmp_path=tmp_path)
+    rows = table(out, "command")
+    assert [r[0] for r in rows] == ["tapmp run", "tapmp compare"] and all(float(r[1]) > 0 for r in rows)
+    m = re.search(rf"^compare / run: ({NUMBER})$", out, re.M)
+    assert m and float(m.group(1)) == pytest.approx(float(rows[1][1]) / float(rows[0][1]), abs=0.02)
