@@ -103,8 +103,9 @@ def build_native_systems(tmp: Path, log) -> dict[str, Path]:
     return systems
 
 
-def time_c_master(fmi2_ssp: Path, scenario, tmp: Path) -> float:
-    """Wall seconds of the native FMI 2.0 loop stepped by benchmarks/c_master.c."""
+def time_c_master(fmi2_ssp: Path, scenario, tmp: Path, every_output: bool = False) -> float:
+    """Wall seconds of the native FMI 2.0 loop stepped by benchmarks/c_master.c (reading every
+    output after each step if ``every_output``, else those the connections need)."""
     import subprocess
     import zipfile
 
@@ -120,7 +121,8 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path) -> float:
                     f.extractall(tmp / "cm" / model)
     dirs = [str(tmp / "cm" / m) for m in ("TAPMP_Trajectory", "TAPMP_Controller", "TAPMP_Plant")]
     order = "gs" if scenario.ordering == "gauss-seidel" else "jacobi"
-    out = subprocess.run([str(exe), *dirs, str(scenario.n_steps), order], check=True, capture_output=True, text=True)
+    out = subprocess.run([str(exe), *dirs, str(scenario.n_steps), order, *(["all"] if every_output else [])],
+                         check=True, capture_output=True, text=True)
     return float(out.stdout.split()[0])
 
 

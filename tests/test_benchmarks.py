@@ -66,7 +66,7 @@ def test_bench_peers_prints_tapmp_ecos_libcosim_and_the_c_loop(native_built, tmp
     out = bench("bench_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.01", "--repeat", "1", tmp_path=tmp_path)
     rows = table(out, "master")
     assert [r[0] for r in rows] == ["tapmp (Python loop)", "tapmp (compiled core)", "Ecos (ecospy)",
-                                    "libcosim (libcosimpy)", "C loop (c_master.c)"]
+                                    "libcosim (libcosimpy)", "C loop, all outputs", "C loop (c_master.c)"]
     assert all(float(r[1]) > 0 for r in rows) and rows[-1][2] == "1.00"
     assert re.search(rf"^tapmp compiled core / Ecos: {NUMBER}$", out, re.M)
 
