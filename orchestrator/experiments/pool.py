@@ -9,12 +9,14 @@ block of steps with status "interrupted", as a run in the foreground does.
 
 import os
 import signal
+from contextlib import ExitStack
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from multiprocessing import get_context
 from pathlib import Path
 
 from ..engine.master import CoSimulationError
-from .results import STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError, one_line
+from .results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError, one_line,
+                      output_lock)
 
 KEEP_ROWS_BYTES = 64 << 20  # a run's rows come back for the figures up to this size, else they are read
 
@@ -74,15 +76,19 @@ def _worker_init() -> None:
         signal.signal(s, signal.SIG_IGN)
 
 
-def run_one(scenario, ssp, out, keep: bool, progress=None) -> dict:
-    """One run (results.run_scenario, overwrite) as a record: {"metrics", "columns", "rows"}
-    ("rows": the recorded rows if ``keep`` and they fit KEEP_ROWS_BYTES, else None) or
-    {"error", ...} for a failure, never an exception."""
-    from .results import run_scenario
+def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -> dict:
+    """One run (results.run_scenario, overwrite; ``held``: its folder's lock is held by the
+    parent process) as a record: {"metrics", "rows"} ("rows": the recorded rows if ``keep`` and
+    they fit KEEP_ROWS_BYTES, else None) or {"error", ...} for a failure, never an exception."""
+    from .results import run_scenario, run_scenario_held
     rows = [] if keep else None
     try:
-        metrics = run_scenario(scenario, Path(ssp), Path(out), True, progress, keep_rows=rows,
-                               keep_bytes=KEEP_ROWS_BYTES)
+        if held:
+            metrics = run_scenario_held(scenario, Path(ssp), Path(out), progress, keep_rows=rows,
+                                        keep_bytes=KEEP_ROWS_BYTES)
+        else:
+            metrics = run_scenario(scenario, Path(ssp), Path(out), True, progress, keep_rows=rows,
+                                   keep_bytes=KEEP_ROWS_BYTES)
     except BaseException as err:  # noqa: B902  (reported to the parent, which raises it)
         return _error_record(err)
     if rows:
@@ -96,7 +102,15 @@ def run_many(tasks: dict, jobs: int, keep: bool = True, progress=None, label: st
     process if jobs == 1 or there is one task); {name: record of run_one} in the order of
     ``tasks``. The first failure is raised (see the module docstring). ``progress(name)``
     makes a per-run progress callback when running in this process; a pool shows one bar
-    of completed runs instead (when ``progress`` is given)."""
+    of completed runs instead (when ``progress`` is given). Every run folder is locked by this
+    process from the start to the end of the set (a pool's workers run in them)."""
+    with ExitStack() as locks:
+        for _, _, out in tasks.values():
+            locks.enter_context(output_lock(out))
+        return _run_many(tasks, jobs, keep, progress, label)
+
+
+def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
     records = {}
     if jobs == 1 or len(tasks) == 1:
         for name, (sc, ssp, out) in tasks.items():
@@ -114,7 +128,7 @@ def run_many(tasks: dict, jobs: int, keep: bool = True, progress=None, label: st
         bar = tqdm(total=len(tasks), desc=f"{label} runs", unit="run", delay=1.0, leave=False)
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=get_context("fork"),
                                initializer=_worker_init)
-    futures = {pool.submit(run_one, sc, ssp, out, keep): name for name, (sc, ssp, out) in tasks.items()}
+    futures = {pool.submit(run_one, sc, ssp, out, keep, None, True): name for name, (sc, ssp, out) in tasks.items()}
     try:
         pending = set(futures)
         while pending:

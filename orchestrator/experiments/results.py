@@ -348,6 +348,14 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
         return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)
 
 
+def run_scenario_held(scenario: Scenario, ssp: Path, out: Path, progress=None, stop_token: str | None = None,
+                      keep_rows: list | None = None, keep_bytes: int = 0) -> dict:
+    """run_scenario (overwrite) into ``out`` whose output_lock another process of this command
+    holds for it (a worker of `tapmp compare`'s pool: the command locks every run folder)."""
+    out = prepare_output(out, True)
+    return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)
+
+
 def _write_result(path: Path, data) -> None:
     """write_json, with an OSError (e.g. a full disk) as ResultsWriteError naming the file."""
     try:
