@@ -117,3 +117,12 @@ def test_bench_compare_prints_compare_against_one_run(native_built, tmp_path):
     assert [r[0] for r in rows] == ["tapmp run", "tapmp compare"] and all(float(r[1]) > 0 for r in rows)
     m = re.search(rf"^compare / run: ({NUMBER})$", out, re.M)
     assert m and float(m.group(1)) == pytest.approx(float(rows[1][1]) / float(rows[0][1]), abs=0.02)
+
+
+def test_bench_compare_times_the_stages_of_a_comparison(native_built, tmp_path):
+    out = bench("bench_compare.py", "--stages", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02",
+                "--jobs", "1", tmp_path=tmp_path)
+    rows = dict(table(out, "stage"))
+    assert list(rows) == ["imports", "stability checks", "runs", "figures", "whole comparison"]
+    parts = sum(float(rows[k]) for k in ("stability checks", "runs", "figures"))
+    assert 0 < parts <= float(rows["whole comparison"]) + 0.02
