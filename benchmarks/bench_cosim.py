@@ -262,10 +262,10 @@ def main(argv=None) -> int:
     }
     print(f"\npaper scenario, {sim_time:g} s simulated = {n} macro steps of {base.step:g} s; "
           f"best of {args.repeat}")
-    print(f"{'configuration':22s} {'ordering':13s} {'us/step':>9s} {'wall s':>8s} {'RTF':>7s}")
-    for row in rows:
-        print(f"{row['config']:22s} {row['ordering']:13s} {row['us_per_step']:9.1f} "
-              f"{row['wall_s']:8.3f} {row['real_time_factor']:7.3f}")
+    print(f"{'configuration':22s} {'ordering':13s} {'us/step':>9s} {'wall s':>8s} {'RTF':>8s}")
+    for row in rows:  # columns at least two spaces apart, however large a value
+        print(f"{row['config']:22s} {row['ordering']:13s} {row['us_per_step']:9.1f}  "
+              f"{row['wall_s']:8.3f}  {row['real_time_factor']:7.3f}")
     for o in ratios:
         print(f"full / floor ({o}): {ratios[o]:.2f}   full / pythonfmu floor: {ratios_pythonfmu[o]:.2f}")
         print("  " + ", ".join(f"{k} {v:.2f}" for k, v in native[o].items()))

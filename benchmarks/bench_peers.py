@@ -138,7 +138,7 @@ def main(argv=None) -> int:
     print(f"{'master':24s} {'us/step':>9s} {'x C loop':>9s}")
     for name, wall in best.items():
         ratio = f"{wall / limit:9.2f}" if limit else f"{'-':>9s}"
-        print(f"{name:24s} {wall / n * 1e6:9.2f} {ratio}")
+        print(f"{name:24s}  {wall / n * 1e6:9.2f}  {ratio}")
     compiled, ecos = best["tapmp (compiled core)"], best["Ecos (ecospy)"]
     print(f"tapmp compiled core / Ecos: {compiled / ecos:.2f}")
     return 0

@@ -96,7 +96,7 @@ def main_bench() -> None:
     for name, wall in best.items():
         fmt = name.split()[-1]
         size = f"results.{fmt}: {sizes[fmt] / 1e6:.2f} MB" if name != "cosim" else "-"
-        print(f"{name:<10} {wall:9.3f} {wall / n * 1e6:8.1f} {wall / best['cosim']:8.2f}  {size}")
+        print(f"{name:<10}  {wall:9.3f}  {wall / n * 1e6:8.1f}  {wall / best['cosim']:8.2f}  {size}")
 
 
 if __name__ == "__main__":

@@ -167,7 +167,7 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
         results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
         kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
-        plot(out, {name: (records_columns(out / name), rows) for name, rows in kept.items()}, jobs)
+        plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs)
     return runs, results, checks, text
 
 
@@ -177,7 +177,7 @@ def _jobs(args) -> int:
     return parse_jobs(args.jobs)
 
 
-def records_columns(folder: Path) -> list:
+def _run_columns(folder: Path) -> list:
     """The columns a run recorded (its run.json)."""
     import json
     return json.loads((Path(folder) / "run.json").read_text())["columns"]

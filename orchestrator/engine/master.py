@@ -451,7 +451,7 @@ class CoSimulation:
                 self._core = stepper_core.CompiledStepper(
                     self._row_units, self._step_units, self.ordering == "jacobi", self.clock, envelope_units,
                     self._log_count, self._log_errors)
-            except stepper_core.StepperBuildError as err:
+            except (stepper_core.StepperBuildError, OSError) as err:
                 raise CoSimulationError(f"stepper = 'compiled' is unavailable: {err}") from None
 
     def _plan(self, connections) -> None:
@@ -697,12 +697,15 @@ class CoSimulation:
         failure raises what :meth:`step` raises, after setting :attr:`filled` to the rows
         stored before it."""
         self.filled = 0
-        if self._core is None:
+        if self._core is None:  # the reference loop
             for i in range(len(rows)):
                 self.step()
                 rows[i] = self.row()
                 self.filled = i + 1
             return self.filled
+        if rows.dtype != c_double or not rows.flags.c_contiguous or rows.shape[1:] != (len(self.columns),):
+            raise ValueError(f"rows must be a C-contiguous float64 array of {len(self.columns)} columns, "
+                             f"not {rows.dtype} {rows.shape}")  # the C core writes into its memory
         while self.filled < len(rows):
             s = self._core.advance(self.k, rows[self.filled:], len(rows) - self.filled)
             self.filled += s.rows
