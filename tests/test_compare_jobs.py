@@ -91,3 +91,25 @@ def test_the_decimated_envelope_contains_every_sample(n):
         near = yd[lo[i]:hi[i]]
         assert near.min() <= y[i] <= near.max(), i
     assert yd.max() == y.max() and yd.min() == y.min()
+
+
+def test_sigterm_stops_the_pools_runs_and_starts_no_more(built, tmp_path):
+    import signal
+    import time
+    out = tmp_path / "c"
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "compare", str(PAPER), "--ssp", str(built["ssp"]),
+                             "--out", str(out), "--set", "stop_time=10", "--jobs", str(min(2, cores())),
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, TMPDIR=str(tmp_path)))
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not list(out.glob("*/results.csv")):
+        time.sleep(0.05)  # the first runs are stepping
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert err.splitlines()[-1] == "interrupted by SIGTERM: the results so far are in the output folder"
+    assert json.loads((out / "comparison.json").read_text())["status"] == "interrupted"
+    runs = {p.parent.name: json.loads(p.read_text()) for p in out.glob("*/run.json")}
+    assert any(r["status"] == "interrupted" and r["exit_code"] == 143 for r in runs.values())
+    assert {r["status"] for r in runs.values()} <= {"completed", "interrupted"}
+    assert len(runs) <= min(2, cores()) + 1  # the runs going at the signal (and one just done): no new one started

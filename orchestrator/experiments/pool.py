@@ -70,8 +70,14 @@ def _raise(record: dict):
     raise cls(record["error"])
 
 
-def _worker_init() -> None:
-    """An idle worker ignores stop signals (a run installs its own handlers while it runs)."""
+_CANCEL = None  # in a worker: the parent's event "start no more runs"
+
+
+def _worker_init(cancel) -> None:
+    """An idle worker ignores stop signals (a run installs its own handlers while it runs) and
+    keeps the parent's cancel event."""
+    global _CANCEL
+    _CANCEL = cancel
     for s in STOP_SIGNALS:
         signal.signal(s, signal.SIG_IGN)
 
@@ -81,6 +87,8 @@ def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -
     parent process) as a record: {"metrics", "rows"} ("rows": the recorded rows if ``keep`` and
     they fit KEEP_ROWS_BYTES, else None) or {"error", ...} for a failure, never an exception."""
     from .results import run_scenario, run_scenario_held
+    if _CANCEL is not None and _CANCEL.is_set():  # the set failed or was stopped: start nothing more
+        return {"error": "not run", "type": "CoSimulationError", "exit_code": 2, "skipped": True}
     rows = [] if keep else None
     try:
         if held:
@@ -126,8 +134,10 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(tasks), desc=f"{label} runs", unit="run", delay=1.0, leave=False)
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=get_context("fork"),
-                               initializer=_worker_init)
+    context = get_context("fork")
+    cancel = context.Event()  # queued runs that a worker has already taken must not start either
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context,
+                               initializer=_worker_init, initargs=(cancel,))
     futures = {pool.submit(run_one, sc, ssp, out, keep, None, True): name for name, (sc, ssp, out) in tasks.items()}
     try:
         pending = set(futures)
@@ -138,11 +148,13 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
                 if bar is not None:
                     bar.update(1)
                 if "error" in record:
+                    cancel.set()
                     for p in pending:
                         p.cancel()
                     wait(pending)
                     _raise(record)
     except BaseException as err:
+        cancel.set()
         if isinstance(err, KeyboardInterrupt):  # a stop signal here: stop the runs in the workers too
             signum = getattr(err, "signum", int(signal.SIGINT))
             for proc in list(getattr(pool, "_processes", {}).values()):
