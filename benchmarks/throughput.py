@@ -2,7 +2,8 @@
 
 Usage (from the repository root, after bash build_fmus.sh):
 
-    .venv/bin/python benchmarks/throughput.py [--study benchmarks/bench_study.toml] [--fmus native] [--workers 1 2] [--repeat 1]
+    .venv/bin/python benchmarks/throughput.py [--study benchmarks/bench_study.toml] [--fmus native]
+                                              [--ssp FILE] [--workers 1 2] [--repeat 1]
 
 For each worker count it starts a LocalCluster (processes, one thread each), warms every
 worker up (imports, one short case each, not timed), then times the cases of `run_study`

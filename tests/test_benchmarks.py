@@ -63,7 +63,8 @@ def test_bench_cosim_prints_every_configuration(built, tmp_path):
 
 
 def test_bench_peers_prints_tapmp_ecos_libcosim_and_the_c_loop(native_built, tmp_path):
-    out = bench("bench_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.01", "--repeat", "1", tmp_path=tmp_path)
+    out = bench("bench_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.01", "--repeat", "1",
+                tmp_path=tmp_path)
     rows = table(out, "master")
     assert [r[0] for r in rows] == ["tapmp (Python loop)", "tapmp (compiled core)", "Ecos (ecospy)",
                                     "libcosim (libcosimpy)", "C loop, all outputs", "C loop (c_master.c)"]
