@@ -175,3 +175,13 @@ def test_csv_rows_read_back_to_the_same_doubles_at_every_magnitude():
                for x, v in zip(line.split(","), row))  # the digits of Python's repr: the shortest
     block[1, 3] = np.inf
     assert format_csv_rows(block[:2]).decode().splitlines()[1].split(",")[3] == "inf"
+
+
+def test_tapmp_build_builds_the_core_into_the_cache(tmp_path):
+    env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), TMPDIR=str(tmp_path))
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "build", "--out", str(tmp_path / "build")],
+                         capture_output=True, text=True, timeout=600, env=env)
+    assert res.returncode == 0, res.stderr
+    built = list((tmp_path / "cache").glob("tapmp_stepper_*.so"))
+    assert len(built) == 1 and f"compiled stepping core in {built[0]}" in res.stdout.splitlines()
+    assert (tmp_path / "build" / "TAPMP.ssp").is_file()
