@@ -1,11 +1,12 @@
 """Co-simulation speed on the paper scenario, in one process so the ratios hold on a noisy
-machine (issue 7). Run from the repository root:
+machine. Run from the repository root:
 
     .venv/bin/python benchmarks/bench_cosim.py [--stop-time 2.5] [--repeat 3] [--json PATH]
 
 Measures, per ordering, microseconds per macro step and the real-time factor (wall time /
 simulated time) of
-  * full:           the three TAPMP FMUs through the orchestrator's master loop;
+  * full:           the three TAPMP FMUs through the orchestrator's master, Python loop
+                    (CoSimulation stepper "python", the reference);
   * floor:          the same loop, the same FMI calls and values, against pass-through
                     FMUs with the same interfaces whose doStep does nothing, built with
                     this project's FMU binary;
@@ -15,6 +16,8 @@ simulated time) of
   * full-native, floor-native, full-fmi3, floor-fmi3: the same for the native C FMUs
                     (FMI 2.0 and 3.0; the floor is benchmarks/floor_model.c in place of
                     each model file);
+  * full compiled, full-native compiled, full-fmi3 compiled: the same FMUs stepped by the
+                    master's compiled core (orchestrator/engine/stepper.c), as tapmp run does;
   * c-master:       the native FMI 2.0 closed loop stepped from C (benchmarks/c_master.c),
                     no Python in the process: the cost without a Python master;
 plus `tapmp run` end to end (results.csv written every step) and the peak memory.
@@ -32,6 +35,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
 
 from orchestrator.engine import build  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
@@ -98,8 +103,9 @@ def build_native_systems(tmp: Path, log) -> dict[str, Path]:
     return systems
 
 
-def time_c_master(fmi2_ssp: Path, scenario, tmp: Path) -> float:
-    """Wall seconds of the native FMI 2.0 loop stepped by benchmarks/c_master.c."""
+def time_c_master(fmi2_ssp: Path, scenario, tmp: Path, every_output: bool = False) -> float:
+    """Wall seconds of the native FMI 2.0 loop stepped by benchmarks/c_master.c (reading every
+    output after each step if ``every_output``, else those the connections need)."""
     import subprocess
     import zipfile
 
@@ -115,8 +121,38 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path) -> float:
                     f.extractall(tmp / "cm" / model)
     dirs = [str(tmp / "cm" / m) for m in ("TAPMP_Trajectory", "TAPMP_Controller", "TAPMP_Plant")]
     order = "gs" if scenario.ordering == "gauss-seidel" else "jacobi"
-    out = subprocess.run([str(exe), *dirs, str(scenario.n_steps), order], check=True, capture_output=True, text=True)
+    out = subprocess.run([str(exe), *dirs, str(scenario.n_steps), order, *(["all"] if every_output else [])],
+                         check=True, capture_output=True, text=True)
     return float(out.stdout.split()[0])
+
+
+def declare_no_feedthrough(fmu: Path) -> Path:
+    """Declare in ``fmu``'s modelDescription that its outputs depend on no input
+    (ModelStructure/Outputs dependencies=""), as the TAPMP FMUs do: pythonfmu writes no
+    dependencies, which means every input, and the master refuses the loop as algebraic."""
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    with zipfile.ZipFile(fmu) as z:
+        members = {i: z.read(i) for i in z.infolist()}
+    for info in members:
+        if info.filename == "modelDescription.xml":
+            root = ET.fromstring(members[info])
+            outputs = [i for i, v in enumerate(root.find("ModelVariables"), start=1) if v.get("causality") == "output"]
+            structure = root.find("ModelStructure")
+            for child in list(structure):
+                structure.remove(child)
+            out, init = ET.SubElement(structure, "Outputs"), ET.SubElement(structure, "InitialUnknowns")
+            for index in outputs:
+                ET.SubElement(out, "Unknown", index=str(index), dependencies="")
+                ET.SubElement(init, "Unknown", index=str(index))
+            members[info] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    tmp = fmu.with_suffix(".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for info, data in members.items():
+            z.writestr(info, data)
+    tmp.replace(fmu)
+    return fmu
 
 
 def build_systems(tmp: Path, log) -> dict[str, Path]:
@@ -138,20 +174,23 @@ def build_systems(tmp: Path, log) -> dict[str, Path]:
             if kind == "floor":
                 fmus[model] = build.build_fmu(model, out, binaries, script)
             else:
-                fmus[model] = Path(FmuBuilder.build_FMU(script, dest=out, project_files=[ROOT / "tapmp"]))
+                fmus[model] = declare_no_feedthrough(
+                    Path(FmuBuilder.build_FMU(script, dest=out, project_files=[ROOT / "tapmp"])))
         systems[kind] = write_ssp(out / "TAPMP.ssp", fmus)
         log(f"built the {kind} system")
     return systems
 
 
-def time_loop(ssp: Path, scenario) -> float:
-    """Wall seconds of the master loop (steps and row recording, no file output)."""
+def time_loop(ssp: Path, scenario, stepper: str = "python") -> float:
+    """Wall seconds of the master loop (steps and rows stored in blocks, no file output) with
+    the Python loop or the compiled core (``stepper``)."""
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                      scenario.ordering) as sim:
+                      scenario.ordering, stepper=stepper) as sim:
+        block = np.empty((1000, len(sim.columns)))
+        left = scenario.n_steps
         start = time.perf_counter()
-        for _ in range(scenario.n_steps):
-            sim.step()
-            sim.row()
+        while left:
+            left -= sim.advance(block[:min(left, 1000)])
         return time.perf_counter() - start
 
 
@@ -186,6 +225,9 @@ def main(argv=None) -> int:
             for kind in ("full", "floor", "floor-pythonfmu", "full-native", "floor-native", "full-fmi3",
                          "floor-fmi3"):
                 configs.append((kind, ordering, lambda s=systems[kind], sc=sc: time_loop(s, sc)))
+            for kind in ("full", "full-native", "full-fmi3"):
+                configs.append((f"{kind} compiled", ordering,
+                                lambda s=systems[kind], sc=sc: time_loop(s, sc, "compiled")))
             configs.append(("plain", ordering, lambda sc=sc: time_plain(sc)))
             configs.append(("c-master", ordering, lambda sc=sc: time_c_master(systems["full-native"], sc, tmp)))
         configs.append(("tapmp run (csv)", "gauss-seidel",
@@ -205,7 +247,8 @@ def main(argv=None) -> int:
                   "full_fmi3_over_floor_fmi3": best[("full-fmi3", o)] / best[("floor-fmi3", o)],
                   "speedup_native_over_pythonfmu": best[("full", o)] / best[("full-native", o)],
                   "speedup_fmi3_over_pythonfmu": best[("full", o)] / best[("full-fmi3", o)],
-                  "python_master_over_c_master": best[("full-native", o)] / best[("c-master", o)]}
+                  "python_master_over_c_master": best[("full-native", o)] / best[("c-master", o)],
+                  "compiled_core_over_c_master": best[("full-native compiled", o)] / best[("c-master", o)]}
               for o in ("gauss-seidel", "jacobi")}
     ratios_pythonfmu = {o: best[("full", o)] / best[("floor-pythonfmu", o)] for o in ("gauss-seidel", "jacobi")}
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -219,10 +262,10 @@ def main(argv=None) -> int:
     }
     print(f"\npaper scenario, {sim_time:g} s simulated = {n} macro steps of {base.step:g} s; "
           f"best of {args.repeat}")
-    print(f"{'configuration':18s} {'ordering':13s} {'us/step':>9s} {'wall s':>8s} {'RTF':>7s}")
-    for row in rows:
-        print(f"{row['config']:18s} {row['ordering']:13s} {row['us_per_step']:9.1f} "
-              f"{row['wall_s']:8.3f} {row['real_time_factor']:7.3f}")
+    print(f"{'configuration':22s} {'ordering':13s} {'us/step':>9s} {'wall s':>8s} {'RTF':>8s}")
+    for row in rows:  # columns at least two spaces apart, however large a value
+        print(f"{row['config']:22s} {row['ordering']:13s} {row['us_per_step']:9.1f}  "
+              f"{row['wall_s']:8.3f}  {row['real_time_factor']:7.3f}")
     for o in ratios:
         print(f"full / floor ({o}): {ratios[o]:.2f}   full / pythonfmu floor: {ratios_pythonfmu[o]:.2f}")
         print("  " + ", ".join(f"{k} {v:.2f}" for k, v in native[o].items()))

@@ -5,7 +5,8 @@ Run from the repository root after `bash build_fmus.sh`:
 
 On the paper scenario (scenarios/paper_simulation.toml), in one process, interleaved, the
 fastest of --repeat runs of each:
-  * cosim:     CoSimulation opened and stepped stop_time / step times, nothing read or written
+  * cosim:     CoSimulation opened and stepped stop_time / step times as tapmp run steps it
+               (CoSimulation.advance, blocks of rows in memory), nothing written
                (the floor: what the master and the FMUs cost);
   * run csv:   orchestrator.cli.main(["run", ..., "--format", "csv"]): scenario, plausibility
                and stability checks, the co-simulation, every row to results.csv, metrics.json;
@@ -27,9 +28,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
+
 from orchestrator.cli import main  # noqa: E402
 from orchestrator.engine.families import resolve_ssp  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.results import BLOCK  # noqa: E402
 from orchestrator.experiments.scenario import load  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_simulation.toml"
@@ -41,8 +45,10 @@ def cosim_alone(scenario, ssp) -> float:
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, scenario.ordering,
                       limits=scenario.limit_values(), clock=scenario.clock,
                       connection_start=scenario.connection_start, open_inputs=scenario.open_inputs) as sim:
-        for _ in range(scenario.n_steps):
-            sim.step()
+        block = np.empty((BLOCK, len(sim.columns)))
+        left = scenario.n_steps
+        while left:  # the stepping of tapmp run: blocks of rows, compiled core unless TAPMP_STEPPER=python
+            left -= sim.advance(block[:min(left, BLOCK)])
     return time.perf_counter() - start
 
 
@@ -61,13 +67,14 @@ def tapmp_run(args: list[str], out: Path, fmt: str) -> float:
 def main_bench() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--fmus", default="native", help="FMU family (default native)")
+    p.add_argument("--ssp", help="SSP file (default: the built SSP of --fmus)")
     p.add_argument("--stop-time", type=float, default=2.5, help="simulated time [s] (default 2.5)")
     p.add_argument("--repeat", type=int, default=3, help="runs of each configuration (default 3)")
     p.add_argument("--profile", choices=("csv", "mat"), help="print the cProfile of one run in this format")
     a = p.parse_args()
     scenario = load(SCENARIO, [f"stop_time={a.stop_time}"])
-    ssp = resolve_ssp(None, a.fmus)
-    args = ["--fmus", a.fmus, "--set", f"stop_time={a.stop_time}"]
+    ssp = resolve_ssp(a.ssp, a.fmus)
+    args = ["--ssp", str(ssp), "--set", f"stop_time={a.stop_time}"]
     with tempfile.TemporaryDirectory(prefix="bench_run_") as tmp:
         tmp = Path(tmp)
         if a.profile:
@@ -88,8 +95,8 @@ def main_bench() -> None:
     print(f"{'configuration':<10} {'wall [s]':>9} {'us/step':>8} {'x cosim':>8}  result file")
     for name, wall in best.items():
         fmt = name.split()[-1]
-        size = f"results.{fmt}: {sizes[fmt] / 1e6:.2f} MB" if name != "cosim" else ""
-        print(f"{name:<10} {wall:9.3f} {wall / n * 1e6:8.1f} {wall / best['cosim']:8.2f}  {size}")
+        size = f"results.{fmt}: {sizes[fmt] / 1e6:.2f} MB" if name != "cosim" else "-"
+        print(f"{name:<10}  {wall:9.3f}  {wall / n * 1e6:8.1f}  {wall / best['cosim']:8.2f}  {size}")
 
 
 if __name__ == "__main__":

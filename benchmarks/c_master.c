@@ -1,10 +1,12 @@
 /* The TAPMP closed loop of native FMI 2.0 FMUs stepped from C, with no Python in the
  * process: the cost of the co-simulation without a Python master, for
  * benchmarks/bench_cosim.py. Usage:
- *   c_master TRAJECTORY_DIR CONTROLLER_DIR PLANT_DIR STEPS ORDERING(gs|jacobi)
+ *   c_master TRAJECTORY_DIR CONTROLLER_DIR PLANT_DIR STEPS ORDERING(gs|jacobi) [all]
  * (unzipped FMUs). Connections as in TAPMP.ssp (tapmp/interface.py): trajectory X_d..ddB_d
  * -> controller, plant q1..q3, dq1..dq3 -> controller, controller F1..F3 -> plant; the plant
- * starts on the reference (X0..dB0 = the trajectory's first outputs). Prints the wall
+ * starts on the reference (X0..dB0 = the trajectory's first outputs). With "all", every
+ * output of every FMU is read after each step (39 values, as a master that records them all;
+ * else only the 18 the connections need). Prints the wall
  * seconds of the stepping loop and the last true motor positions. */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -78,7 +80,9 @@ static int exit_init(unit *u)
 
 int main(int argc, char **argv)
 {
-    if (argc != 6) return fprintf(stderr, "usage: c_master TRAJ CTRL PLANT STEPS gs|jacobi\n"), 2;
+    if (argc != 6 && !(argc == 7 && strcmp(argv[6], "all") == 0))
+        return fprintf(stderr, "usage: c_master TRAJ CTRL PLANT STEPS gs|jacobi [all]\n"), 2;
+    int all = argc == 7;
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     unit tr, ct, pl;
     long steps = atol(argv[4]);
@@ -91,7 +95,11 @@ int main(int argc, char **argv)
     const fmi2ValueReference ref_vr[9] = {0, 1, 2, 3, 4, 5, 6, 7, 8}, q_vr[6] = {3, 4, 5, 9, 10, 11},
                              cq_vr[6] = {9, 10, 11, 12, 13, 14}, F_vr[3] = {15, 16, 17}, pF_vr[3] = {0, 1, 2},
                              init_vr[6] = {25, 26, 27, 28, 29, 30}, qt_vr[3] = {6, 7, 8};
-    double ref[9], q[6], F[3], qt[3];
+    /* every output: trajectory 0..11, controller 15..26, plant 3..17 */
+    const fmi2ValueReference tr_all[12] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11},
+                             ct_all[12] = {15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26},
+                             pl_all[15] = {3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17};
+    double ref[9], q[6], F[3], qt[3], tr_out[12], ct_out[12], pl_out[15];
     tr.get(tr.c, ref_vr, 9, ref);
     double init[6] = {ref[0], ref[1], ref[2], ref[3], ref[4], ref[5]};
     if (pl.set(pl.c, init_vr, 6, init) != fmi2OK) return 1;
@@ -121,8 +129,17 @@ int main(int argc, char **argv)
                 pl.step(pl.c, t, h, fmi2True) != fmi2OK) return 1;
             ct.get(ct.c, F_vr, 3, F);
         }
-        tr.get(tr.c, ref_vr, 9, ref);
-        pl.get(pl.c, q_vr, 6, q);
+        if (all) {
+            tr.get(tr.c, tr_all, 12, tr_out);
+            ct.get(ct.c, ct_all, 12, ct_out);
+            pl.get(pl.c, pl_all, 15, pl_out);
+            memcpy(ref, tr_out, sizeof ref);
+            memcpy(q, pl_out, 3 * sizeof(double));
+            memcpy(q + 3, pl_out + 6, 3 * sizeof(double));
+        } else {
+            tr.get(tr.c, ref_vr, 9, ref);
+            pl.get(pl.c, q_vr, 6, q);
+        }
     }
     clock_gettime(CLOCK_MONOTONIC, &t1);
     pl.get(pl.c, qt_vr, 3, qt);

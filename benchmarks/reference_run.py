@@ -42,15 +42,19 @@ def run_case(ssp: Path, law: str, ordering: str):
 
 
 def main():
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default=str(REFERENCE), help=f"file to write (default {REFERENCE})")
+    out = Path(ap.parse_args().out)
     with tempfile.TemporaryDirectory() as tmp:
         ssp = build_all(Path(tmp), log=lambda *_: None)["ssp"]
-        with open(REFERENCE, "w", newline="") as f:
+        with open(out, "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(["law", "ordering", "time", *SIGNALS])
             for law, ordering in CASES:
                 for row in run_case(ssp, law, ordering):
                     w.writerow([law, ordering, *(repr(v) for v in row)])
-    print(f"wrote {REFERENCE}")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,8 @@
 
 Usage (from the repository root, after bash build_fmus.sh):
 
-    .venv/bin/python benchmarks/throughput.py [--study benchmarks/bench_study.toml] [--workers 1 2] [--repeat 1]
+    .venv/bin/python benchmarks/throughput.py [--study benchmarks/bench_study.toml] [--fmus native]
+                                              [--ssp FILE] [--workers 1 2] [--repeat 1]
 
 For each worker count it starts a LocalCluster (processes, one thread each), warms every
 worker up (imports, one short case each, not timed), then times the cases of `run_study`
@@ -20,6 +21,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from orchestrator.engine.families import DEFAULT_FAMILY, resolve_ssp  # noqa: E402
 from orchestrator.studies.run import run_study  # noqa: E402
 from orchestrator.studies.study import (close_client, load_study, open_client, read_study_csv,  # noqa: E402
                                         run_case, scenario_data)
@@ -58,10 +60,12 @@ def measure(study_path: Path, ssp: Path, n_workers: int) -> tuple:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--study", default=str(ROOT / "benchmarks" / "bench_study.toml"))
-    p.add_argument("--ssp", default=str(ROOT / "build" / "TAPMP.ssp"))
+    p.add_argument("--ssp", help="SSP file (default: the built SSP of --fmus)")
+    p.add_argument("--fmus", default=DEFAULT_FAMILY, help=f"FMU family (default {DEFAULT_FAMILY})")
     p.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     p.add_argument("--repeat", type=int, default=1, help="runs per worker count; the best is kept")
     args = p.parse_args()
+    args.ssp = str(resolve_ssp(args.ssp, args.fmus))
     if not Path(args.ssp).exists():
         print(f"error: {args.ssp} does not exist: run bash build_fmus.sh first", file=sys.stderr)
         return 2

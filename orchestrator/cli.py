@@ -92,6 +92,9 @@ def warn_if_implausible(scenario) -> None:
 
 def cmd_build(args) -> int:
     build_mod.build_all(Path(args.out))
+    from .engine import stepper
+    if stepper.available():  # else a note says why; runs then step in Python
+        print(f"compiled stepping core in {stepper.library_path()}")
     return 0
 
 
@@ -163,20 +166,36 @@ def check_runs(runs: dict) -> dict:
     return checks
 
 
-def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str):
-    """Run every compare run of ``scenario`` into out/<run>, write out/comparison.md and the
-    figures; returns (runs, results, checks, comparison.md text)."""
+def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1):
+    """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
+    out/comparison.md and the figures; returns (runs, results, checks, comparison.md text)."""
     from .experiments.plots import plot
+    from .experiments.pool import run_many
     from .experiments.report import write_comparison
 
     runs = compare_runs(scenario)
     checks = check_runs(runs)
     with comparison_folder(out, overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
-        results = {name: _run_one(sc, ssp, out / name, True, progress, f"{scenario.name} {name}")
-                   for name, sc in runs.items()}
+        bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
+        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, True, bars,
+                           scenario.name)
+        results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
-        plot(out)
+        kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
+        plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs)
     return runs, results, checks, text
+
+
+def _jobs(args) -> int:
+    """--jobs checked: a positive integer up to the cores (default: one per core)."""
+    from .experiments.pool import parse_jobs
+    return parse_jobs(args.jobs)
+
+
+def _run_columns(folder: Path) -> list:
+    """The columns a run recorded (its run.json)."""
+    import json
+    return json.loads((Path(folder) / "run.json").read_text())["columns"]
 
 
 def cmd_compare(args) -> int:
@@ -184,7 +203,9 @@ def cmd_compare(args) -> int:
     warn_if_implausible(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / "compare"
     command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-    _, _, _, text = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, command)
+    jobs = _jobs(args)
+    _, _, _, text = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, command,
+                                   jobs)
     print(text)
     print(f"results, figures and comparison.md in {out}")
     return 0
@@ -193,10 +214,11 @@ def cmd_compare(args) -> int:
 def cmd_reproduce(args) -> int:
     from .experiments.reproduction import reproduce
     command = "tapmp reproduce " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    jobs = _jobs(args)
 
     def compare(scenario, out):
         return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress,
-                              f"tapmp compare {out.parent.name}")
+                              f"tapmp compare {out.parent.name}", jobs)
 
     reproduce(Path(args.scenarios), Path(args.results), Path(args.out), compare, command,
               paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args))
@@ -347,6 +369,7 @@ def parser() -> argparse.ArgumentParser:
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
     scenario_args(c)
+    c.add_argument("--jobs", metavar="N", help="runs at once, each in its own process (default: one per core)")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write docs/paper-reproduction.md",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "
@@ -364,6 +387,8 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--paper-gains-stop-time", type=float, default=0.2, metavar="S",
                     help="horizon [s] of each run of the paper's gains at 1 us, 10 us and 0.1 ms (default 0.2)")
     rp.add_argument("--workers", type=int, default=2, help="processes for the paper-gain runs (default 2)")
+    rp.add_argument("--jobs", metavar="N", help="compare runs at once, each in its own process (default: one per "
+                    "core)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
     rp.set_defaults(func=cmd_reproduce)
     st = sub.add_parser("study", help="run a parameter study on Dask",

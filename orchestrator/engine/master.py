@@ -46,7 +46,7 @@ import socket
 import tempfile
 import weakref
 import zipfile
-from ctypes import byref, c_bool, c_double, c_uint
+from ctypes import byref, c_bool, c_double, c_int64, c_uint
 from pathlib import Path
 
 from fmpy import calloc, extract, free, read_model_description
@@ -57,12 +57,14 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 from fmpy.ssp.ssd import read_ssd
 
 
+from . import stepper as stepper_core
 from .clocks import Clock
 from .ssp import ROLES, ParameterAddressError, resolve_parameters
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
                        initialization_order)
 
 ORDERINGS = ("gauss-seidel", "jacobi")
+STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
 CONNECTION_STARTS = ("propagated", "zero")
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
@@ -159,6 +161,23 @@ def remove_stale_folders(tmpdir=None) -> list:
     return removed
 
 
+_DESCRIPTIONS = {}  # sha-1 of an FMU archive -> its parsed modelDescription (read-only)
+
+
+def _model_description(fmu_path: Path):
+    """fmpy's read_model_description, parsed once per process for each FMU content: a study
+    worker runs the same FMUs case after case (parsing costs ~15 ms per FMU)."""
+    import hashlib
+    key = hashlib.sha1(Path(fmu_path).read_bytes()).hexdigest()
+    md = _DESCRIPTIONS.get(key)
+    if md is None:
+        md = read_model_description(str(fmu_path))
+        if len(_DESCRIPTIONS) >= 64:
+            _DESCRIPTIONS.clear()
+        _DESCRIPTIONS[key] = md
+    return md
+
+
 class _Unit:
     """One FMU instance in the system, its cached outputs and its input connections.
 
@@ -168,7 +187,7 @@ class _Unit:
 
     def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
         self.name = name
-        self.md = read_model_description(str(fmu_path))
+        self.md = _model_description(fmu_path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.log = log
@@ -298,7 +317,7 @@ class CoSimulation:
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
                  limits: dict | None = None, clock: str = "exact",
-                 connection_start: str = "propagated", open_inputs=(), order=None):
+                 connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -306,6 +325,14 @@ class CoSimulation:
             raise CoSimulationError(f"order = {order!r} is invalid with ordering = {ordering!r}: allowed is an "
                                     "order only with ordering = 'gauss-seidel' (Jacobi steps all at once)")
         self.order = order
+        stepper = stepper or os.environ.get("TAPMP_STEPPER") or "auto"
+        if stepper not in STEPPERS:
+            raise CoSimulationError(f"stepper = {stepper!r} is invalid (TAPMP_STEPPER or the stepper argument): "
+                                    f"allowed are {', '.join(STEPPERS)}")
+        self.stepper = stepper
+        self._core = None        # the CompiledStepper once opened, if used
+        self.filled = 0          # rows the last advance() stored, also when it raised
+        self._log_count, self._log_errors = c_int64(), c_int64()  # read by the compiled core
         if not step_size > 0.0:
             raise CoSimulationError(f"step_size = {step_size!r} is invalid: allowed is a number > 0")
         if connection_start not in CONNECTION_STARTS:
@@ -338,6 +365,9 @@ class CoSimulation:
 
     # --- setup ---------------------------------------------------------------------
     def _logger(self, env, instance, status, category, message):
+        self._log_count.value += 1
+        if status in (3, 4):  # fmi2Error/fmi3Error, Fatal: the message starts [ERROR] or [FATAL]
+            self._log_errors.value += 1
         self.log.append(f"[{_STATUS[status] if 0 <= status < 6 else status}] "
                         f"{instance.decode(errors='replace')}: {message.decode(errors='replace')}")
 
@@ -407,13 +437,22 @@ class CoSimulation:
         self._step_units = [self.units[n] for n in self.step_order]
         by_prefix = {prefix[n]: u for n, u in self.units.items()}
         self._envelope = []  # (outputs array, index, signal, limit, unit, limit name, element)
+        envelope_units = []  # (unit, output index, limit) for the compiled core
         for key, limit in self.limits.items():
             for element, output, unit_name in ENVELOPE[key]:
                 unit = by_prefix.get(element)
                 if limit > 0.0 and unit is not None and output in unit.outputs:
                     self._envelope.append((unit.out, unit.outputs.index(output),
                                            f"{element}.{output}", float(limit), unit_name, key, unit.name))
+                    envelope_units.append((unit, unit.outputs.index(output), float(limit)))
         self._check_outputs(self.t0)
+        if self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
+            try:
+                self._core = stepper_core.CompiledStepper(
+                    self._row_units, self._step_units, self.ordering == "jacobi", self.clock, envelope_units,
+                    self._log_count, self._log_errors)
+            except (stepper_core.StepperBuildError, OSError) as err:
+                raise CoSimulationError(f"stepper = 'compiled' is unavailable: {err}") from None
 
     def _plan(self, connections) -> None:
         """:attr:`init_order` and :attr:`step_order` from the connection graph and the FMUs'
@@ -659,6 +698,41 @@ class CoSimulation:
                     self._step_failed(unit, t, n_log, status)
         self.k += 1
         self._check_outputs(self.clock.at(self.k))
+
+    def advance(self, rows) -> int:
+        """Step ``len(rows)`` times, storing :meth:`row` after each step into ``rows`` (a
+        C-contiguous float64 array, one row per step, len(:attr:`columns`) wide); returns the
+        rows stored. Compiled core or Python loop (:attr:`stepper`), same rows to the bit; a
+        failure raises what :meth:`step` raises, after setting :attr:`filled` to the rows
+        stored before it."""
+        self.filled = 0
+        if self._core is None:  # the reference loop
+            for i in range(len(rows)):
+                self.step()
+                rows[i] = self.row()
+                self.filled = i + 1
+            return self.filled
+        if rows.dtype != c_double or not rows.flags.c_contiguous or rows.shape[1:] != (len(self.columns),):
+            raise ValueError(f"rows must be a C-contiguous float64 array of {len(self.columns)} columns, "
+                             f"not {rows.dtype} {rows.shape}")  # the C core writes into its memory
+        while self.filled < len(rows):
+            s = self._core.advance(self.k, rows[self.filled:], len(rows) - self.filled)
+            self.filled += s.rows
+            if s.outcome == stepper_core.SUSPECT_OUTPUT:
+                self.k = s.k
+                self._check_outputs(self.time)  # raises as step() does, unless only the C check was stricter
+                rows[self.filled] = self.row()
+                self.filled += 1
+            elif s.outcome == stepper_core.FAIL_CALL:
+                self.k = s.k
+                unit, t = self._row_units[s.unit], self.clock.at(s.k)
+                self._step_failed(unit, t, s.n_log, s.status)
+                raise CoSimulationError(f"{unit.name}: {stepper_core.CALLS[s.call]} failed at t = {t:.6g} s: "
+                                        f"status {_STATUS[s.status] if 0 <= s.status < 6 else s.status}",
+                                        unit.name, t, list(self.log))
+            else:
+                self.k = s.k
+        return self.filled
 
     def _check_outputs(self, t: float) -> None:
         """Raise DivergenceError if an output is not finite or leaves the envelope."""

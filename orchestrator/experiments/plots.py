@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -34,15 +35,41 @@ ERRORS = (  # key of error_signals, file stem, title, y labels, scale from SI
      ("X [µm]", "Z [µm]", "B [µrad]"), 1e6))
 
 
+DPI = 110  # of the PNG files
+# Pixel columns a trace is reduced to: as many as the figure is wide (8 in at 110 dpi = 880 px,
+# wider than its axes), so the drawn trace covers the same pixels as with every sample.
+COLUMNS = 880
+
+
+def decimate(x, y, columns: int = COLUMNS):
+    """(x, y) reduced for drawing: the samples split into at most ``columns`` consecutive
+    groups of equal count; each keeps its first sample, its minimum and its maximum (in time
+    order), so every pixel column shows the full range of the samples that fall into it
+    (min/max decimation). The last sample and any remainder are kept. Fewer than 4 samples
+    per group: returned unchanged."""
+    x, y = np.asarray(x), np.asarray(y)
+    n = len(y)
+    m = -(-n // columns)  # samples per group
+    if m < 4:
+        return x, y
+    groups = n // m
+    body = y[:groups * m].reshape(groups, m)
+    base = np.arange(groups) * m
+    keep = np.concatenate([base, base + body.argmin(1), base + body.argmax(1), np.arange(groups * m, n), [n - 1]])
+    keep = np.unique(keep)  # sorted: time order
+    return x[keep], y[keep]
+
+
 def label(name: str, law: str | None = None) -> str:
     """Legend label of a run: by its comparison folder name, else by its law."""
     return LAW_LABELS.get(name) or LAW_LABELS.get(law or "", (law or name).upper())
 
 
-def load_folder(folder: Path) -> tuple[str, dict[str, dict]]:
+def load_folder(folder: Path, rows: dict | None = None) -> tuple[str, dict[str, dict]]:
     """(kind, {label: run}) of a result folder, kind "run" or "comparison"; each run is the
     error_signals of its rows plus "columns" and "data". ResultFolderError (one line)
-    for a folder that is missing or holds no readable results."""
+    for a folder that is missing or holds no readable results. ``rows`` ({run folder name:
+    (columns, rows)}) gives rows already in memory (the runs just made) instead of reading them."""
     folder = Path(folder)
     if not folder.is_dir():
         raise ResultFolderError(f"result folder {folder} does not exist{' (a file)' if folder.exists() else ''}: "
@@ -61,7 +88,7 @@ def load_folder(folder: Path) -> tuple[str, dict[str, dict]]:
     runs = {}
     for name, path in paths.items():
         try:
-            columns, data = read_results(path)
+            columns, data = (rows or {}).get(path.name) or read_results(path)
         except ResultFolderError:
             status = (_read_json(path / "run.json") or {}).get("status", "unknown")
             raise ResultFolderError(f"{path} holds no rows to plot (its run is {status}; run.json says why)") from None
@@ -99,7 +126,7 @@ def trajectory_figure(runs: dict):
     fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), layout="constrained")
     ax[0].plot(data[:, c["trajectory.X_d"]] * 1e3, data[:, c["trajectory.Z_d"]] * 1e3, label="desired")
     ax[0].set(xlabel="X [mm]", ylabel="Z [mm]", title="(a) X- and Z-axis", aspect="equal")
-    ax[1].plot(data[:, 0], data[:, c["trajectory.B_d"]] * 180 / math.pi, label="desired")
+    ax[1].plot(*decimate(data[:, 0], data[:, c["trajectory.B_d"]] * 180 / math.pi), label="desired")
     ax[1].set(xlabel="time [s]", ylabel="B [deg]", title="(b) B-axis")
     fig.suptitle(_title("Desired trajectory in task space (cf. paper Fig. 4), the reference of", runs, sep=", "))
     return fig
@@ -111,7 +138,7 @@ def error_figure(runs: dict, key: str):
     fig, axes = plt.subplots(3, 1, figsize=(8, 8.6), sharex=True, layout="constrained")
     for name, sig in runs.items():
         for i in range(3):
-            axes[i].plot(sig["time"], sig[key][:, i] * scale, label=name, lw=0.8)
+            axes[i].plot(*decimate(sig["time"], sig[key][:, i] * scale), label=name, lw=0.8)
     for i in range(3):
         axes[i].set_ylabel(ylabels[i])
         axes[i].grid(True, alpha=0.3)
@@ -139,7 +166,7 @@ def force_figure(runs: dict):
     for name, run in runs.items():
         cols = force_columns(run["columns"])
         for i in range(3):
-            axes[i].plot(run["data"][:, 0], run["data"][:, cols[i]], label=name, lw=0.8)
+            axes[i].plot(*decimate(run["data"][:, 0], run["data"][:, cols[i]]), label=name, lw=0.8)
     for i in range(3):
         axes[i].set_ylabel(f"F{i + 1} [N]")
         axes[i].grid(True, alpha=0.3)
@@ -149,26 +176,52 @@ def force_figure(runs: dict):
     return fig
 
 
-def figures(runs: dict) -> dict:
-    """{file stem: Figure} of Fig. 4-8 for ``runs`` ({label: run} as load_folder gives)."""
-    out = {"fig4_trajectory": trajectory_figure(runs)}
+def _makers() -> dict:
+    """{file stem: function(runs) -> Figure} of Fig. 4-8."""
+    out = {"fig4_trajectory": trajectory_figure}
     for key, stem, *_ in ERRORS:
-        out[stem] = error_figure(runs, key)
-    out["fig8_force_commands"] = force_figure(runs)
+        out[stem] = lambda runs, key=key: error_figure(runs, key)
+    out["fig8_force_commands"] = force_figure
     return out
 
 
-def plot(folder: Path) -> list[Path]:
+def figures(runs: dict) -> dict:
+    """{file stem: Figure} of Fig. 4-8 for ``runs`` ({label: run} as load_folder gives)."""
+    return {stem: make(runs) for stem, make in _makers().items()}
+
+
+_RUNS = {}  # the runs a forked figure worker draws (inherited from the parent, never pickled)
+
+
+def _draw(stem: str, path: str) -> str:
+    """Draw and write one figure of _RUNS (in this process or a forked worker)."""
+    fig = _makers()[stem](_RUNS)
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def plot(folder: Path, rows: dict | None = None, jobs: int = 1) -> list[Path]:
     """Write the figures of a run folder (run_fig4_trajectory.png ... run_fig8_force_commands.png)
     or of a comparison folder (fig4_trajectory.png ... fig8_force_commands.png) into ``folder``;
-    return their paths."""
+    return their paths. ``rows``: see load_folder. ``jobs`` > 1 draws the figures in that many
+    forked processes (the same files)."""
+    global _RUNS
     folder = Path(folder)
-    kind, runs = load_folder(folder)
+    kind, runs = load_folder(folder, rows)
     prefix = "run_" if kind == "run" else ""
-    written = []
-    for stem, fig in figures(runs).items():
-        path = folder / f"{prefix}{stem}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
-    return written
+    paths = {stem: folder / f"{prefix}{stem}.png" for stem in _makers()}
+    _RUNS = runs
+    try:
+        if jobs > 1:
+            from concurrent.futures import ProcessPoolExecutor
+            from multiprocessing import get_context
+            with ProcessPoolExecutor(min(jobs, len(paths)), mp_context=get_context("fork")) as pool:
+                # the heaviest figures first, so the pool ends together
+                list(pool.map(_draw, reversed(list(paths)), [str(paths[s]) for s in reversed(list(paths))]))
+        else:
+            for stem, path in paths.items():
+                _draw(stem, str(path))
+    finally:
+        _RUNS = {}
+    return list(paths.values())

@@ -381,6 +381,8 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
             row.update(status="rejected", error=f"not run: {report.verdict} (spectral radius "
                        f"{report.spectral_radius:.4g})")
         else:
+            if not keep_results:  # rows that would be deleted: keep the first and last only (the metrics
+                scenario = scenario.with_changes(record_every=scenario.n_steps)  # use every step regardless)
             m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token)
             row.update(_metric_columns(m), status="completed", metrics=m)
             if not keep_results:

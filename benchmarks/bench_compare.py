@@ -1,0 +1,103 @@
+"""What a user waits for: `tapmp compare` against one `tapmp run` of the same scenario, each a
+fresh command (interpreter start, imports, checks, runs, files, figures), interleaved, the
+fastest of --repeat. Run from the repository root after `bash build_fmus.sh`:
+
+    .venv/bin/python benchmarks/bench_compare.py [--scenario scenarios/paper_simulation.toml] [--repeat 3]
+                                                 [--jobs N] [--stop-time S] [--ssp FILE]
+
+Prints the wall time of each command and the ratio compare / run (target <= 3). --stages
+instead times the stages of one comparison in this process (imports, stability checks, the
+runs, the figures).
+"""
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def timed(args: list[str]) -> float:
+    """Wall seconds of one `tapmp` command in a fresh process; exits if it fails."""
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "orchestrator", *args, "--no-progress", "--overwrite"],
+                          cwd=ROOT, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise SystemExit(f"tapmp {' '.join(args)} failed (exit {proc.returncode}):\n{proc.stderr}")
+    return wall
+
+
+def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -> None:
+    """Print the wall time of each stage of one `tapmp compare` run in this process."""
+    start = time.perf_counter()
+    sys.path.insert(0, str(ROOT))
+    from orchestrator import cli
+    from orchestrator.experiments import plots, pool
+    from orchestrator.experiments.scenario import load
+    times = {"imports": time.perf_counter() - start}
+
+    def timed(module, name, stage):
+        original = getattr(module, name)
+
+        def wrapper(*a, **k):
+            t = time.perf_counter()
+            try:
+                return original(*a, **k)
+            finally:
+                times[stage] = times.get(stage, 0.0) + time.perf_counter() - t
+        setattr(module, name, wrapper)
+    timed(cli, "check_runs", "stability checks")
+    timed(pool, "run_many", "runs")
+    timed(plots, "plot", "figures")
+    sc = load(scenario, [f"stop_time={stop_time}"] if stop_time else [])
+    ssp = cli.resolve_ssp(ssp, sc.fmus)
+    with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
+        t = time.perf_counter()
+        cli.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
+        times["whole comparison"] = time.perf_counter() - t
+    print(f"{'stage':18s}  {'wall [s]':>8s}")
+    for stage, wall in times.items():
+        print(f"{stage:18s}  {wall:8.2f}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_simulation.toml"))
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each command (default 3)")
+    ap.add_argument("--jobs", help="--jobs of tapmp compare (default: its own, one per core)")
+    ap.add_argument("--stop-time", type=float, help="override the scenario's stop_time [s]")
+    ap.add_argument("--ssp", help="SSP file (default: tapmp's, the built SSP of the scenario's FMU family)")
+    ap.add_argument("--stages", action="store_true", help="time the stages of one comparison in this process")
+    args = ap.parse_args(argv)
+    extra = ["--set", f"stop_time={args.stop_time}"] if args.stop_time else []
+    extra += ["--ssp", args.ssp] if args.ssp else []
+    jobs = ["--jobs", args.jobs] if args.jobs else []
+    if args.stages:
+        sys.path.insert(0, str(ROOT))
+        from orchestrator.experiments.pool import parse_jobs
+        stages(args.scenario, parse_jobs(args.jobs), args.stop_time, args.ssp)
+        return 0
+    best = {"tapmp run": float("inf"), "tapmp compare": float("inf")}
+    with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
+        for r in range(args.repeat):
+            for name, cmd in (("tapmp run", ["run", args.scenario, "--out", f"{tmp}/run", *extra]),
+                              ("tapmp compare", ["compare", args.scenario, "--out", f"{tmp}/compare", *extra,
+                                                 *jobs])):
+                wall = timed(cmd)
+                best[name] = min(best[name], wall)
+                print(f"run {r + 1}/{args.repeat} {name:14s} {wall:7.2f} s", file=sys.stderr)
+    print(f"{Path(args.scenario).name}{' stop_time=%g' % args.stop_time if args.stop_time else ''}, "
+          f"fastest of {args.repeat}")
+    print(f"{'command':14s}  {'wall [s]':>8s}")
+    for name, wall in best.items():
+        print(f"{name:14s}  {wall:8.2f}")
+    print(f"compare / run: {best['tapmp compare'] / best['tapmp run']:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

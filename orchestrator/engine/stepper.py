@@ -1,0 +1,196 @@
+"""The compiled stepping core: the master's macro-step loop in C (``stepper.c``).
+
+fmpy reads the modelDescriptions, loads the binaries, instantiates, initializes and
+terminates; :class:`CompiledStepper` then steps the instances from C through the FMI
+function pointers of the libraries fmpy loaded, a block of steps per call, and returns to
+Python after every block (progress, stop requests, recording) and at the first failed call
+or suspect output, which the master reports with the same error as its Python loop
+(``CoSimulation.step``). The rows are the Python loop's to the bit
+(tests/test_stepper.py).
+
+The C file is compiled on first use (or by ``tapmp build``) into a cache folder outside
+the package: ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
+named after a hash of the source and the compiler command, under a file lock so that
+concurrent processes build it once. If it cannot be built, the master says so in one line
+on stderr and steps in Python. ``TAPMP_STEPPER=python`` selects the Python loop.
+"""
+
+import ctypes
+import fcntl
+import hashlib
+import os
+import subprocess
+import sys
+import tempfile
+from ctypes import POINTER, Structure, c_double, c_int32, c_int64, c_uint32, c_void_p
+from pathlib import Path
+
+SOURCE = Path(__file__).with_name("stepper.c")
+STEPPERS = ("auto", "compiled", "python")
+# No -ffast-math, no contraction: the core only copies and compares doubles, and must keep them.
+CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fPIC", "-shared", "-Wall"]
+
+DONE, FAIL_CALL, SUSPECT_OUTPUT = 0, 1, 2
+CALLS = ("setReal", "doStep", "getReal")
+CLOCK_KINDS = {"exact": 0, "accumulated": 1, "nanoseconds": 2}
+
+
+class StepperBuildError(RuntimeError):
+    """The compiled stepping core cannot be built or loaded; the message says why."""
+
+
+def cache_dir() -> Path:
+    """Folder of the compiled core: $TAPMP_CACHE, $XDG_CACHE_HOME/tapmp or ~/.cache/tapmp."""
+    if os.environ.get("TAPMP_CACHE"):
+        return Path(os.environ["TAPMP_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "tapmp"
+
+
+def compiler_command(source: Path, output: Path) -> list[str]:
+    """The command that compiles ``source`` into the shared library ``output``; the one place
+    that chooses the C compiler ($CC, else gcc, as orchestrator.engine.build_native does)."""
+    return [os.environ.get("CC", "gcc"), *CFLAGS, "-o", str(output), str(source), "-lm"]
+
+
+def compile_core(source: Path, output: Path) -> Path:
+    """Compile the stepping core ``source`` into ``output``; StepperBuildError with the
+    compiler's first error line if it fails."""
+    cmd = compiler_command(source, output)
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as err:
+        raise StepperBuildError(f"C compiler {cmd[0]!r} cannot run: {err.strerror or err} (install gcc or "
+                                "set CC)") from None
+    if proc.returncode != 0:
+        first = next((line for line in proc.stderr.splitlines() if "error" in line), proc.stderr.strip()[:200])
+        raise StepperBuildError(f"{cmd[0]} failed on {source.name}: {first}")
+    return output
+
+
+def library_path() -> Path:
+    """Where the compiled core of this source and compiler command lives in the cache."""
+    key = hashlib.sha256(SOURCE.read_bytes() + "\0".join(compiler_command(SOURCE, Path("x"))).encode())
+    return cache_dir() / f"tapmp_stepper_{key.hexdigest()[:16]}.so"
+
+
+def build() -> Path:
+    """Build the compiled core into the cache unless it is there; returns its path.
+    A file lock makes concurrent builds (a study's workers) wait for the first one."""
+    path = library_path()
+    if path.is_file():
+        return path
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path.parent / ".stepper.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not path.is_file():
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".stepper.", suffix=".so")
+                os.close(fd)
+                try:
+                    compile_core(SOURCE, Path(tmp))
+                    os.chmod(tmp, 0o755)
+                    os.replace(tmp, path)
+                finally:
+                    Path(tmp).unlink(missing_ok=True)
+    except OSError as err:
+        raise StepperBuildError(f"cannot write the compiled core into {path.parent}: "
+                                f"{err.strerror or err} (set TAPMP_CACHE to a writable folder)") from None
+    return path
+
+
+_LIB = None
+_NOTE_GIVEN = False
+
+
+def load():
+    """The loaded core (ctypes.CDLL), built on first use; StepperBuildError if impossible."""
+    global _LIB
+    if _LIB is None:
+        lib = ctypes.CDLL(str(build()))
+        lib.tapmp_advance.restype = c_int32
+        lib.tapmp_advance.argtypes = [POINTER(_Plan), POINTER(_State), c_int64, c_void_p, c_int32]
+        _LIB = lib
+    return _LIB
+
+
+def available(quiet: bool = False) -> bool:
+    """Whether the compiled core can be used; if not, say why once on stderr (unless quiet)."""
+    global _NOTE_GIVEN
+    try:
+        load()
+        return True
+    except (StepperBuildError, OSError) as err:
+        if not quiet and not _NOTE_GIVEN:
+            _NOTE_GIVEN = True
+            print(f"note: compiled stepping core unavailable ({err}); stepping in Python", file=sys.stderr)
+        return False
+
+
+class _UnitC(Structure):
+    _fields_ = [("instance", c_void_p), ("get", c_void_p), ("set", c_void_p), ("step", c_void_p),
+                ("fmi3", c_int32), ("n_out", c_int32), ("n_in", c_int32),
+                ("out_vrs", c_void_p), ("out", c_void_p), ("in_vrs", c_void_p), ("inp", c_void_p),
+                ("src", c_void_p)]
+
+
+class _Plan(Structure):
+    _fields_ = [("units", c_void_p), ("n_units", c_int32), ("jacobi", c_int32), ("step_order", c_void_p),
+                ("clock", c_int32), ("t0", c_double), ("h", c_double), ("t0_ns", c_int64), ("h_ns", c_int64),
+                ("n_env", c_int32), ("env_unit", c_void_p), ("env_index", c_void_p), ("env_limit", c_void_p),
+                ("log_count", c_void_p), ("log_errors", c_void_p)]
+
+
+class _State(Structure):
+    _fields_ = [("k", c_int64), ("acc_t", c_double), ("rows", c_int64), ("outcome", c_int32),
+                ("unit", c_int32), ("call", c_int32), ("status", c_int32), ("n_log", c_int64)]
+
+
+def _addr(obj) -> int:
+    return ctypes.addressof(obj)
+
+
+class CompiledStepper:
+    """The C loop bound to the units of one opened CoSimulation (``sim``): ``units`` in row
+    order, ``step_order`` their indices in step order, the envelope as (unit index, output
+    index, limit), the logger's counters ``log_count`` and ``log_errors`` (c_int64)."""
+
+    def __init__(self, units, step_order, jacobi: bool, clock, envelope, log_count, log_errors):
+        self.lib = load()
+        self._keep = []  # every ctypes object the C side points into
+        index = {id(u): i for i, u in enumerate(units)}
+        cunits = (_UnitC * len(units))()
+        for i, u in enumerate(units):
+            dll = u.slave.dll
+            names = (("fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep") if u.fmi3
+                     else ("fmi2GetReal", "fmi2SetReal", "fmi2DoStep"))
+            get, set_, step = (ctypes.cast(getattr(dll, n), c_void_p).value for n in names)
+            src = (c_void_p * max(u.n_in, 1))(*(_addr(s.out) + j * 8 for s, j, _ in u.sources))
+            self._keep.append(src)
+            cunits[i] = _UnitC(u.slave.component, get, set_, step, int(u.fmi3), u.n_out, u.n_in,
+                               _addr(u.out_vrs), _addr(u.out), _addr(u.in_vrs) if u.n_in else None,
+                               _addr(u.inp) if u.n_in else None, _addr(src))
+        order = (c_int32 * len(step_order))(*(index[id(u)] for u in step_order))
+        env_unit = (c_int32 * max(len(envelope), 1))(*(index[id(u)] for u, _, _ in envelope))
+        env_index = (c_int32 * max(len(envelope), 1))(*(i for _, i, _ in envelope))
+        env_limit = (c_double * max(len(envelope), 1))(*(lim for _, _, lim in envelope))
+        self._keep += [cunits, order, env_unit, env_index, env_limit, log_count, log_errors]
+        ns = clock.kind == "nanoseconds"
+        self.plan = _Plan(_addr(cunits), len(units), int(jacobi), _addr(order), CLOCK_KINDS[clock.kind],
+                          clock.t0, clock.h, clock._t0_ns if ns else 0, clock._h_ns if ns else 0,
+                          len(envelope), _addr(env_unit), _addr(env_index), _addr(env_limit),
+                          _addr(log_count), _addr(log_errors))
+        self.state = _State()
+        self.clock = clock
+
+    def advance(self, k: int, rows, n: int) -> _State:
+        """Step from communication point ``k`` at most ``n`` times into ``rows`` (a C-contiguous
+        float64 array of at least n rows); returns the state (k reached, rows stored, outcome)."""
+        s = self.state
+        s.k = k
+        if self.clock.kind == "accumulated":
+            s.acc_t = self.clock.at(k)
+        self.lib.tapmp_advance(ctypes.byref(self.plan), ctypes.byref(s), n, rows.ctypes.data, rows.shape[1])
+        if self.clock.kind == "accumulated":  # the Python clock continues from where C stopped
+            self.clock._acc_k, self.clock._acc_t = s.k, s.acc_t
+        return s
