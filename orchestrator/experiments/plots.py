@@ -24,7 +24,7 @@ LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched":
               "pid-dc": "PID-DC",
               # the other runs of `tapmp compare` (orchestrator.experiments.baselines): one label each
               "apd-dc-diff-stiffness": "APD-DC diff. stiffness", "apd-dc-mode-matched": "APD-DC mode-matched",
-              "pid-dc-mode-matched": "PID-DC mode-matched", "sc-dc-b0": "SC-DC b = 0",
+              "apd-dc-ms-matched": "APD-DC Ms-matched", "pid-dc-mode-matched": "PID-DC mode-matched", "sc-dc-b0": "SC-DC b = 0",
               "sc-dc-lp0": "SC-DC Lambda_p = 0"}
 ERRORS = (  # key of error_signals, file stem, title, y labels, scale from SI
     ("tracking", "fig5_tracking_errors", "Tracking error of each motor (cf. Fig. 5)",
