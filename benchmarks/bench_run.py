@@ -1,4 +1,4 @@
-"""Cost of writing results: `tapmp run` end to end against the co-simulation alone (issue 12).
+"""Cost of writing results: `tapmp run` end to end against the co-simulation alone.
 Run from the repository root after `bash build_fmus.sh`:
 
     .venv/bin/python benchmarks/bench_run.py [--fmus native] [--stop-time 2.5] [--repeat 3] [--profile FORMAT]

@@ -1,5 +1,5 @@
 """Control laws: SC-DC (paper Section 4, Eq. 15-26), the APD-DC baseline (Eq. 38-39) and
-PID-DC, a PID on e with modal gains and the same feedforward (a fair baseline, issue 14).
+PID-DC, a PID on e with modal gains and the same feedforward (a fair baseline).
 
 Units: positions [m], velocities [m/s], motor forces [N]. The command u relates to
 the motor force by K_T F = u (the closed-loop setting K_T u_1 = u_sc in the proof

@@ -1,4 +1,4 @@
-"""Calibration on APD-DC, prediction of SC-DC (orchestrator/experiments/calibration.py, issue 14 item 5).
+"""Calibration on APD-DC, prediction of SC-DC (orchestrator/experiments/calibration.py).
 
 The objective is computed from real co-simulations (checked by hand against the runs'
 metrics.json); the calibrated scenario files load, pass the stability pre-check for both

@@ -1,5 +1,5 @@
 """`tapmp check`, `tapmp study` and `tapmp reproduce` through the real command line in child
-processes (issue 15, item 13), on short horizons: exit codes, the printed numbers against the
+processes, on short horizons: exit codes, the printed numbers against the
 library's own values, the files written."""
 
 import csv

@@ -1,4 +1,4 @@
-"""`tapmp compare`'s fair baselines and SC-DC ablations (issue 14, item 2), on a 0.05 s horizon
+"""`tapmp compare`'s fair baselines and SC-DC ablations, on a 0.05 s horizon
 through the real CLI and FMUs: every row exists with the numbers of its run, the gains each run
 gets are the hand-derived modal gains of the scenario's preset, and what is identical is pinned
 on the plant's true positions."""

@@ -174,7 +174,7 @@ def test_pid_gain_matrices_are_k_c_on_the_common_and_k_d_on_the_differential_mod
 
 
 def test_pid_dc_with_the_modal_image_reproduces_scdc_for_uniform_gains_on_random_states():
-    """The identity of issue 14: SC-DC = K_T u_d + Lambda_v de + [Lambda_v D I + (Lambda_v b +
+    """The modal identity: SC-DC = K_T u_d + Lambda_v de + [Lambda_v D I + (Lambda_v b +
     Lambda_p) L] e + Lambda_v D b L int(e), L = 3 I - 1 1^T; so with c = L e and int(c) = L int(e),
     scdc_command equals pid_command with kp_c = Lambda_v D, kp_d = Lambda_v D + 3 (Lambda_v b +
     Lambda_p), kv = Lambda_v, ki_c = 0, ki_d = 3 Lambda_v D b."""
@@ -200,7 +200,7 @@ def test_pid_dc_with_the_modal_image_reproduces_scdc_for_uniform_gains_on_random
 
 def test_modal_image_of_the_default_preset_is_the_pid_dc_default():
     # Lambda_v 0.36, D 900, Lambda_p 300, b 50: kp_c = 324, kp_d = 324 + 3 (18 + 300) = 1278,
-    # kv = 0.36, ki_c = 0, ki_d = 3 * 0.36 * 900 * 50 = 48600 (issue 14: X 324 N/m, differential 1278 N/m)
+    # kv = 0.36, ki_c = 0, ki_d = 3 * 0.36 * 900 * 50 = 48600 (common mode 324, differential 1278, in u/m)
     assert tuple(ModalGains()) == pytest.approx((324.0, 0.36, 0.0, 1278.0, 0.36, 48600.0), rel=1e-12)
     assert ModalGains() == ModalGains(**DEFAULT_MODAL_GAINS)
     with pytest.raises(ValueError, match=r"Lambda_p = \(1.0, 2.0, 1.0\) is not uniform"):

@@ -1,4 +1,4 @@
-"""Issue 15, items 8 and 10: a stop time that is no whole number of steps, and output or
+"""A stop time that is no whole number of steps, and output or
 scenario paths the file system refuses, are one line and exit 2 from the real CLI."""
 
 import os

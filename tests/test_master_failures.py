@@ -1,4 +1,4 @@
-"""The master's failure paths (issue 15, item 12), for both orderings, through the real
+"""The master's failure paths, for both orderings, through the real
 CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on:
 
 * ``status``: doStep returns fmi2Error and logs nothing;

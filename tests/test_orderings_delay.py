@@ -1,4 +1,4 @@
-"""The orderings' delay through the real master (issue 15, item 13): with Jacobi the plant
+"""The orderings' delay through the real master: with Jacobi the plant
 steps from t_k on the force command the controller published at t_k (computed in the step
 before: one sample of delay); with Gauss-Seidel on the command the controller computed in
 the same macro step, from the measurement at t_k. Read back from the plant FMU's own inputs."""

@@ -1,4 +1,4 @@
-"""Encoder quantization pinned directly (issue 15, item 13): every measured position q_i the
+"""Encoder quantization pinned directly: every measured position q_i the
 plant FMU publishes is a whole number of encoder counts, q_i / encoder_resolution within 1e-6
 of an integer, for both FMU families, the default and an odd resolution; the true positions
 are not (the quantization is really applied to q_i only)."""

@@ -1,4 +1,4 @@
-"""`tapmp reproduce` (issue 14, item 7) through the real command line on short horizons: the page
+"""`tapmp reproduce` through the real command line on short horizons: the page
 carries the paper's Tables 1-6 as printed (against the paper's own text where it is on this machine,
 and a few cells copied here by hand), every compare run's row with the numbers of its metrics.json,
 the paper-gain runs, the calibrated scenarios' section and closing note, and claims whose verdicts

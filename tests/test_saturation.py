@@ -1,4 +1,4 @@
-"""Saturation made visible (issue 14, item 6): metrics.json's saturation_fraction per motor, the
+"""Saturation made visible: metrics.json's saturation_fraction per motor, the
 share of samples whose force command |F_i| is at the force limit, against a hand-counted table
 and a real run; the limit is the plant's, else the controller's, else none."""
 

@@ -1,4 +1,4 @@
-"""The stability verdict's band around rho = 1 (issue 15, item 13): stable below 1 - 1e-6,
+"""The stability verdict's band around rho = 1: stable below 1 - 1e-6,
 unstable above 1 + 1e-6, marginal between, pinned at 1 - 2e-6, 1 and 1 + 2e-6 and at the edges."""
 
 import pytest

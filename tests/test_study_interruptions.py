@@ -1,4 +1,4 @@
-"""Studies that were cut or stopped (issue 15, item 9), through the real `tapmp study` in child
+"""Studies that were cut or stopped, through the real `tapmp study` in child
 processes on a real Dask LocalCluster: a cut last row of study.csv is dropped (the whole rows stay
 byte for byte) and its case runs again on --resume; SIGINT and SIGHUP to the whole process group
 (a Ctrl-C or a hangup in a terminal) and SIGTERM to the client end it with one line, exit

@@ -1,4 +1,4 @@
-"""Calibrate the plant on APD-DC, then predict SC-DC (issue 14, item 5).
+"""Calibrate the plant on APD-DC, then predict SC-DC.
 
 The plant's disturbance and mismatch levels are chosen so that APD-DC reproduces the
 magnitudes of the paper's APD-DC rows: Tables 1-2 (simulation, Section 5.2) or Tables
@@ -312,7 +312,7 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
     paper = PAPER[target]
     apd, scdc = pred["apd-dc"]["metrics"], pred["sc-dc"]["metrics"]
     lines = [
-        f"# Calibrated plant for the paper's {target} (issue 14, item 5): APD-DC fitted to Tables "
+        f"# Calibrated plant for the paper's {target}: APD-DC fitted to Tables "
         f"{paper['tables'][0]}-{paper['tables'][1]}, SC-DC predicted.",
         f"# Written by: .venv/bin/python -m orchestrator.experiments.calibration --target {target}",
         f"# Base: scenarios/{base_file(target).name} (trajectory, step, horizon); see docs/calibration.md.",
