@@ -37,7 +37,7 @@ HOST = "x86_64-linux"
 SUFFIX = {"linux": ".so", "windows": ".dll", "darwin": ".dylib"}
 EXE_SUFFIX = {"linux": "", "windows": ".exe", "darwin": ""}
 # No -ffast-math and no fused multiply-add: the C model must give the Python model's doubles.
-CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math", "-fvisibility=hidden", "-Wall", "-g0"]
+CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-g0"]
 
 
 class ToolchainError(RuntimeError):
