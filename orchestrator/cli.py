@@ -105,6 +105,9 @@ def warn_if_implausible(scenario) -> None:
 def cmd_build(args) -> int:
     from .engine.build_native import NativeBuildError, build_native
     out = Path(args.out or default_build_dir())
+    for p in args.platform or ():  # before building anything
+        if p not in PLATFORMS:
+            raise ValueError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
     try:
         build_mod.build_all(out)
         build_native(out / "native", platforms=args.platform)
@@ -266,13 +269,6 @@ def cmd_plot(args) -> int:
 
 RELATIVE = "a relative path is relative to the current directory"
 PLATFORM_NAMES = tuple(PLATFORMS)
-
-
-def _platform(value: str) -> str:
-    """An argparse type: a platform name of the toolchain (exit 2 naming the allowed ones)."""
-    if value not in PLATFORMS:
-        raise argparse.ArgumentTypeError(f"--platform = {value!r} is invalid: allowed are {', '.join(PLATFORMS)}")
-    return value
 PATHS_HELP = ("Paths: scenario files, --out, --ssp, --fmus-dir and a scenario's 'output' are relative to the "
               "current directory; a scenario may also be named (paper_simulation: the scenario shipped with the "
               "package); a scenario's gains_file is relative to the scenario file; the SSP of --fmus is found in "
@@ -297,7 +293,7 @@ def parser() -> argparse.ArgumentParser:
                        "ziglang package ($CC for x86_64-linux if set). No system compiler needed.")
     b.add_argument("--out", help=f"output folder (default: ${FMUS_DIR_ENV}, else the repository's build/ in a "
                    "checkout, else ./build)")
-    b.add_argument("--platform", action="append", metavar="P", type=_platform,
+    b.add_argument("--platform", action="append", metavar="P",
                    help="build the native FMUs' binaries for these platforms only (repeatable): "
                    f"{', '.join(PLATFORM_NAMES)} (default: all)")
     b.set_defaults(func=cmd_build)

@@ -271,7 +271,7 @@ def compile_sources(sources_dir: Path, model: str, family: str, output: Path,
     files = [sources_dir / name for name in c_sources(model, family)]
     try:
         return toolchain.compile_c(files, output, platform, includes=[sources_dir], libs=["m"],
-                                   what=f"{model}.fmu ({family})")
+                                   what=f"{family}/{model}.fmu")
     except ToolchainError as err:
         raise NativeBuildError(str(err)) from None
 
@@ -384,6 +384,10 @@ def main(argv=None) -> int:
                    help=f"build only these platforms (repeatable): {', '.join(ALL_PLATFORMS)} (default: all)")
     p.add_argument("--no-windows", action="store_true", help="the host's x86_64-linux binaries only")
     args = p.parse_args(argv)
+    for platform in args.platform or ():  # before building anything
+        if platform not in PLATFORMS:
+            print(f"error: --platform = {platform!r} is invalid: allowed are {', '.join(PLATFORMS)}", file=sys.stderr)
+            return 2
     try:
         platforms = args.platform or (None if not args.no_windows else (toolchain.HOST,))
         build_native(Path(args.out), platforms=platforms)
