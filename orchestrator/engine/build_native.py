@@ -294,7 +294,8 @@ def _binaries(tmp: Path, src: Path, model: str, family: str, platforms) -> dict[
     """Compile every platform (in parallel: each is its own compiler process) and return
     {member name in the FMU: bytes}; FMI 2.0's darwin64 is the universal file of both Macs."""
     def one(platform):
-        lib = tmp / f"{model}_{platform}{SUFFIX[toolchain.os_of(platform)]}"
+        (tmp / platform).mkdir()
+        lib = tmp / platform / f"{model}{SUFFIX[toolchain.os_of(platform)]}"  # the name a dylib records
         return platform, compile_sources(src, model, family, lib, platform).read_bytes()
 
     with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1)) as pool:

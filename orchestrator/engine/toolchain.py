@@ -99,7 +99,8 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
             args.append("-fPIC")
     elif kind == "windows":
         args.append("-static")
-    args += ["-o", "out", *(str(Path(s).resolve()) for s in sources)]
+    # -o names the file in the private folder: a dylib records that name as its install name
+    args += ["-o", output.name, *(str(Path(s).resolve()) for s in sources)]
     # libm, libdl and libpthread are part of the C runtime on Windows and macOS
     args += [f"-l{lib}" for lib in libs if kind == "linux" or lib not in ("m", "dl", "pthread")]
     label = what or output.name
@@ -111,7 +112,7 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
         except FileNotFoundError:
             raise ToolchainError(f"{label} ({platform}): C compiler {cmd[0]!r} not found "
                                  "(unset CC to use zig cc from the ziglang package)") from None
-        built = Path(tmp) / "out"
+        built = Path(tmp) / output.name
         if proc.returncode != 0 or not built.is_file():
             name = "zig cc" if cmd[0] == sys.executable else cmd[0]
             raise ToolchainError(f"{label} ({platform}): {name} failed: {first_error(proc.stderr or proc.stdout)}")
