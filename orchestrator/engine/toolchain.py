@@ -57,7 +57,14 @@ def check_platform(platform: str) -> str:
 
 
 def zig_command() -> list[str]:
-    """The command that runs ``zig cc`` from the ziglang package of this interpreter."""
+    """The command that runs ``zig cc`` from the ziglang package of this interpreter: its zig
+    executable directly (no Python start per compile), else ``python -m ziglang``."""
+    import importlib.util
+    spec = importlib.util.find_spec("ziglang")
+    if spec and spec.origin:
+        zig = Path(spec.origin).parent / ("zig.exe" if os.name == "nt" else "zig")
+        if zig.is_file() and os.access(zig, os.X_OK):
+            return [str(zig), "cc"]
     return [sys.executable, "-m", "ziglang", "cc"]
 
 
@@ -114,7 +121,7 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
                                  "(unset CC to use zig cc from the ziglang package)") from None
         built = Path(tmp) / output.name
         if proc.returncode != 0 or not built.is_file():
-            name = "zig cc" if cmd[0] == sys.executable else cmd[0]
+            name = "zig cc" if platform != HOST or not os.environ.get("CC", "").strip() else cmd[0]
             raise ToolchainError(f"{label} ({platform}): {name} failed: {first_error(proc.stderr or proc.stdout)}")
         partial = output.with_name(f".{output.name}.{os.getpid()}.partial")
         shutil.copyfile(built, partial)
