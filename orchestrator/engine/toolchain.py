@@ -23,19 +23,19 @@ import tempfile
 from pathlib import Path
 
 # FMI 3.0 platform name -> Zig target. Linux against glibc 2.17 (CentOS 7, 2014) so that the
-# binaries load on every Linux of the last decade; Windows against mingw-w64's runtime linked
-# in statically; macOS against Zig's libSystem stubs (macOS 11 and later by default).
+# binaries load on every Linux of the last decade; Windows with mingw-w64's start-up code linked
+# in and the Universal C Runtime of Windows 10 and later (api-ms-win-crt-*); macOS against
+# Zig's libSystem stubs, for macOS 11 (the first on Apple silicon) and later.
 PLATFORMS = {
     "x86_64-linux": "x86_64-linux-gnu.2.17",
     "aarch64-linux": "aarch64-linux-gnu.2.17",
     "x86_64-windows": "x86_64-windows-gnu",
     "x86-windows": "x86-windows-gnu",
-    "x86_64-darwin": "x86_64-macos",
-    "aarch64-darwin": "aarch64-macos",
+    "x86_64-darwin": "x86_64-macos.11.0",
+    "aarch64-darwin": "aarch64-macos.11.0",
 }
-HOST = "x86_64-linux"
+HOST = "x86_64-linux"  # the platform the builds run on, and the pythonfmu family's (binaries/linux64)
 SUFFIX = {"linux": ".so", "windows": ".dll", "darwin": ".dylib"}
-EXE_SUFFIX = {"linux": "", "windows": ".exe", "darwin": ""}
 # No -ffast-math and no fused multiply-add: the C model must give the Python model's doubles.
 CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-g0"]
 
