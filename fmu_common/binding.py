@@ -30,13 +30,17 @@ def _load_adapter(resources: Path, module_name: str):
     return module
 
 
+GUID_FILE = "guid.txt"  # in resources/: the guid of the FMU's modelDescription.xml, written at build time
+
+
 class GuidMismatch(ValueError):
     """The host's fmuGUID is not the one of this FMU's modelDescription.xml."""
 
 
 def _own_guid(resources: Path) -> str:
-    from xml.etree import ElementTree as ET
-    return ET.parse(resources.parent / "modelDescription.xml").getroot().get("guid", "")
+    # The standard guarantees only the resources folder to the FMU (fmpy simulate unpacks
+    # nothing else), so the guid is read from its copy there, not from ../modelDescription.xml.
+    return (resources / GUID_FILE).read_text(encoding="utf-8").strip()
 
 
 def instantiate(resources: str, instance_name: str, visible: int, logging_on: int,

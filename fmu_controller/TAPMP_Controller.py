@@ -3,7 +3,7 @@ tapmp.control.ControllerModel."""
 
 import math
 
-from fmu_common.slave import TapmpSlave
+from fmu_common.slave import WARNING, TapmpSlave
 from tapmp.control import ControllerModel, Gains, ModalGains
 from tapmp.interface import CONTROLLER_VARS
 from tapmp.params import GAIN_NAMES, ModelParams
@@ -13,7 +13,9 @@ class TAPMP_Controller(TapmpSlave):
     """Discrete-time SC-DC controller (Eq. 15-26) with the APD-DC baseline (Eq. 38-39) and
     the PID-DC baseline (modal PID on e, same feedforward).
 
-    On doStep(t, h) it samples its inputs, computes the command and holds it."""
+    On doStep(t, h) at a sample instant t0 + k T_s it samples its inputs, computes the
+    command and holds it; at any other communication point it keeps its outputs
+    (tapmp.control.ControllerModel.communication_point)."""
 
     VARIABLES = CONTROLLER_VARS
     description = ("SC-DC synchronization controller with dynamics compensation (law 0), the "
@@ -28,7 +30,8 @@ class TAPMP_Controller(TapmpSlave):
         params = ModelParams(*(getattr(self, n) for n in ModelParams._fields))
         gains = Gains(*(tuple(getattr(self, f"{n}{i}") for i in (1, 2, 3)) for n in GAIN_NAMES))
         modal = ModalGains(*(getattr(self, n) for n in ModalGains._fields))
-        return ControllerModel(params, gains, self.law, self.velocity_source, self.force_limit, modal)
+        return ControllerModel(params, gains, self.law, self.velocity_source, self.force_limit, modal,
+                               self.T_s, self.time)
 
     def setup_model(self):
         self.model = self._build()
@@ -38,39 +41,54 @@ class TAPMP_Controller(TapmpSlave):
         super().check_parameters()
 
     def check_hidden_state(self, hidden):
-        values = [] if hidden is None else list(hidden[0]) + list(hidden[1] or [])
-        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+        ok = hidden is None or (isinstance(hidden, list) and len(hidden) == 3 and isinstance(hidden[2], list)
+                                and len(hidden[2]) == 3)
+        values = [] if not ok or hidden is None else (list(hidden[0]) + list(hidden[1] or [])
+                                                      + [v for v in hidden[2][:2] if v is not None])
+        if not (ok and all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)):
             raise ValueError(f"FMU state: controller state {hidden!r} is invalid: allowed are finite numbers")
 
-    def _sample(self, t, h, advance):
-        r = self.reals
-        F, u, e, es = self.model.sample(t, h, r[_REF], r[_Q], r[_DQ], advance)
-        self.publish_block(_OUTPUTS, (*F, *u, *e, *es))
-
     def initial_outputs(self):
-        self._sample(self.time, 0.0, advance=False)
+        r = self.reals
+        F, u, e, es = self.model.sample(self.time, self.T_s, r[_REF], r[_Q], r[_DQ], advance=False)
+        self.publish_block(_OUTPUTS, (*F, *u, *e, *es))
 
     def step(self, t, h):
         if self.retune:  # new gains take effect at this sample; the loop state carries over
             old = self.model
             self.model = self._build()
-            self.model.integral, self.model.q_prev = old.integral, old.q_prev
+            self._carry(old, self.model)
             self.retune = False
-        self._sample(t, h, advance=True)
+        r = self.reals
+        out, warning = self.model.communication_point(t, h, r[_REF], r[_Q], r[_DQ])
+        if warning:
+            self.log(warning, WARNING, "logStatusWarning")
+        if out is not None:  # else the outputs hold
+            F, u, e, es = out
+            self.publish_block(_OUTPUTS, (*F, *u, *e, *es))
+
+    @staticmethod
+    def _carry(old, new):
+        """The loop state and the sample clock of ``old`` into ``new``."""
+        new.integral, new.q_prev = old.integral, old.q_prev
+        new.t0, new.k_last, new.warned = old.t0, old.k_last, old.warned
 
     def hidden_state(self):
         if self.model is None:
             return None
-        q_prev = None if self.model.q_prev is None else list(self.model.q_prev)
-        return [list(self.model.integral), q_prev]
+        m = self.model
+        q_prev = None if m.q_prev is None else list(m.q_prev)
+        return [list(m.integral), q_prev, [m.t0, m.k_last, m.warned]]
 
     def restore_hidden_state(self, hidden):
         if hidden is None:
             self.model = None
             return
-        self.model = self._build()
-        self.model.integral = [float(v) for v in hidden[0]]
-        self.model.q_prev = None if hidden[1] is None else tuple(float(v) for v in hidden[1])
+        self.model = m = self._build()
+        m.integral = [float(v) for v in hidden[0]]
+        m.q_prev = None if hidden[1] is None else tuple(float(v) for v in hidden[1])
+        t0, k_last, warned = hidden[2]
+        m.t0, m.k_last, m.warned = float(t0), None if k_last is None else int(k_last), bool(warned)
 
 
 _REF = TAPMP_Controller.block("X_d", 9)     # X_d, Z_d, B_d and their rates and accelerations

@@ -1,7 +1,8 @@
 /* Native TAPMP_Controller FMU: maps the FMU variables to the SC-DC / APD-DC / PID-DC controller of
  * tapmp_model.c, as fmu_controller/TAPMP_Controller.py maps them to
- * tapmp.control.ControllerModel. On doStep(t, h) it samples its inputs, computes the
- * command and holds it. */
+ * tapmp.control.ControllerModel. On doStep(t, h) at a sample instant t0 + k T_s not sampled
+ * yet it samples its inputs, computes the command and holds it; at any other communication
+ * point the outputs hold (tapmp.control.ControllerModel.communication_point). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -48,6 +49,9 @@ int model_validate(const tapmp_instance *inst, char *msg, size_t size)
     if (!(isfinite(R(force_limit)) && R(force_limit) >= 0.0))
         return tapmp_invalid_text(msg, size, "force_limit", tapmp_repr(R(force_limit), v),
                                   "a finite number >= 0 (0 = no limit)", 0, 0);
+    if (!(isfinite(R(T_s)) && R(T_s) > 0.0))
+        return tapmp_invalid_text(msg, size, "T_s", tapmp_repr(R(T_s), v),
+                                  "a finite number > 0 (the controller's sample period [s])", 0, 0);
     return 1;
 }
 
@@ -72,12 +76,16 @@ static void build(tapmp_instance *inst)
     m->law = inst->ints[VR_law];
     m->velocity_source = inst->ints[VR_velocity_source];
     m->force_limit = R(force_limit);
+    m->T_s = R(T_s);
 }
 
 void model_setup(tapmp_instance *inst)
 {
     build(inst);
     memset(&inst->m.st, 0, sizeof inst->m.st);
+    inst->m.t0 = inst->time;
+    inst->m.k_last = 0.0;
+    inst->m.has_sample = inst->m.warned = 0;
 }
 
 static int sample(tapmp_instance *inst, double t, double h, int advance, double out[], char *msg,
@@ -105,10 +113,57 @@ int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size)
     return 1;
 }
 
+/* The warning logged once when the host's communication points skip sample instants
+ * (tapmp.control.skipped_samples_text). Passed on whatever loggingOn says, as the pythonfmu
+ * family's binary passes on every warning; doStep still returns OK. */
+static void warn_skipped(tapmp_instance *inst, double t, double steps)
+{
+    char text[TAPMP_MESSAGE_MAX];
+    double T_s = inst->m.T_s;
+    snprintf(text, sizeof text, "the host's communication points skip sample instants of T_s = %g s: the "
+             "controller sampled at t = %.9g s, %g s (%.0f T_s) after its previous sample, and uses that "
+             "interval for the velocity estimate and the integral (it samples only at communication points "
+             "on its grid t0 + k T_s)", T_s, t, steps * T_s, steps);
+    if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
+}
+
+/* tapmp.control.missed_sample_text */
+static void warn_missed(tapmp_instance *inst, double t, double due)
+{
+    char text[TAPMP_MESSAGE_MAX];
+    snprintf(text, sizeof text, "the host's communication points skip sample instants of T_s = %g s: none fell "
+             "on the sample instant t = %.9g s; at t = %.9g s the controller holds its command until a "
+             "communication point falls on its grid t0 + k T_s", inst->m.T_s, due, t);
+    if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
+}
+
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
 {
+    ModelData *m = &inst->m;
+    double k;
+    (void)h;  /* the host's step never enters the law: the time between samples does */
     build(inst);  /* new tunable values take effect at this sample; the loop state carries over */
-    if (sample(inst, t, h, 1, out, msg, size)) return 1;
+    int on_grid = tapmp_sample_index(t, m->t0, m->T_s, &k);
+    if (!on_grid || (m->has_sample && k <= m->k_last)) {
+        memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
+        if (!on_grid && m->has_sample && !m->warned &&
+            t > m->t0 + (m->k_last + 1.0 + TAPMP_SAMPLE_TOLERANCE) * m->T_s) {
+            m->warned = 1;  /* a due sample instant passed without a communication point on it */
+            warn_missed(inst, t, m->t0 + (m->k_last + 1.0) * m->T_s);
+        }
+        return 1;
+    }
+    /* the first sample integrates over one period, as every later one on an unbroken grid */
+    double steps = m->has_sample ? k - m->k_last : 1.0;
+    if (sample(inst, t, steps * m->T_s, 1, out, msg, size)) {
+        if (steps > 1.0 && !m->warned) {
+            m->warned = 1;
+            warn_skipped(inst, t, steps);
+        }
+        m->k_last = k;
+        m->has_sample = 1;
+        return 1;
+    }
     size_t n = strlen(msg);
     snprintf(msg + n, size - n, " (at t = %.6g s)", t);
     return 0;
@@ -122,6 +177,10 @@ void model_get_hidden(const tapmp_instance *inst, double hidden[])
         hidden[3 + i] = st->q_prev[i];
     }
     hidden[6] = st->has_q_prev;
+    hidden[7] = inst->m.t0;
+    hidden[8] = inst->m.k_last;
+    hidden[9] = inst->m.has_sample;
+    hidden[10] = inst->m.warned;
 }
 
 void model_set_hidden(tapmp_instance *inst, const double hidden[])
@@ -132,4 +191,8 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
         st->q_prev[i] = hidden[3 + i];
     }
     st->has_q_prev = hidden[6] != 0.0;
+    inst->m.t0 = hidden[7];
+    inst->m.k_last = hidden[8];
+    inst->m.has_sample = hidden[9] != 0.0;
+    inst->m.warned = hidden[10] != 0.0;
 }

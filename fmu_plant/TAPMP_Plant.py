@@ -39,19 +39,21 @@ class TAPMP_Plant(TapmpSlave):
                                       *m.joint_velocities(), *m.state))
 
     def check_hidden_state(self, hidden):
-        if hidden is not None and not (len(hidden) == 6 and all(
+        if hidden is not None and not (len(hidden) == 7 and all(
                 isinstance(v, (int, float)) and math.isfinite(v) for v in hidden)):
-            raise ValueError(f"FMU state: plant state {hidden!r} is invalid: allowed are 6 finite numbers")
+            raise ValueError(f"FMU state: plant state {hidden!r} is invalid: allowed are 7 finite numbers "
+                             "(X, Z, B, dX, dZ, dB and the sample count)")
 
     def hidden_state(self):
-        return None if self.model is None else list(self.model.state)
+        return None if self.model is None else [*self.model.state, self.model.sample]
 
     def restore_hidden_state(self, hidden):
         if hidden is None:
             self.model = None
             return
         self.setup_model()
-        self.model.state = [float(v) for v in hidden]
+        self.model.state = [float(v) for v in hidden[:6]]
+        self.model.sample = float(hidden[6])
         self.publish()
 
 

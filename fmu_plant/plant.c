@@ -12,7 +12,9 @@
 static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
 /* PlantConfig fields are the table's parameters VR_encoder_resolution .. VR_substeps - 1;
  * all finite and >= 0 except these (only finite), and these > 0 */
-static const int FINITE_VR[] = {VR_k_pull, VR_cogging_phase1, VR_cogging_phase2, VR_cogging_phase3};
+static const int FINITE_VR[] = {VR_k_pull, VR_cogging_phase1, VR_cogging_phase2, VR_cogging_phase3,
+                                VR_disturbance_force1, VR_disturbance_force2, VR_disturbance_force3};
+#define N_FINITE_VR ((int)(sizeof FINITE_VR / sizeof FINITE_VR[0]))
 static const int POSITIVE_VR[] = {VR_v_s, VR_attraction_gap, VR_cogging_pitch};
 static const int INITIAL_VR[] = {VR_X0, VR_Z0, VR_B0, VR_dX0, VR_dZ0, VR_dB0};
 
@@ -25,7 +27,7 @@ int model_validate(const tapmp_instance *inst, char *msg, size_t size)
     for (int vr = VR_encoder_resolution; vr < VR_substeps; vr++) {
         double x = inst->reals[vr];
         int finite_only = 0;
-        for (int k = 0; k < 4; k++) finite_only |= FINITE_VR[k] == vr;
+        for (int k = 0; k < N_FINITE_VR; k++) finite_only |= FINITE_VR[k] == vr;
         if (!(isfinite(x) && (finite_only || x >= 0.0)))
             return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(x, v),
                                       finite_only ? "a finite number" : "a finite number >= 0", 0, 0);
@@ -37,6 +39,10 @@ int model_validate(const tapmp_instance *inst, char *msg, size_t size)
     if (inst->ints[VR_substeps] < 1) {
         snprintf(v, sizeof v, "%d", inst->ints[VR_substeps]);
         return tapmp_invalid_text(msg, size, "substeps", v, "an integer >= 1", 0, 0);
+    }
+    if (inst->ints[VR_noise_seed] < 0) {  /* PlantConfig.validated; the int type caps it at 2147483647 */
+        snprintf(v, sizeof v, "%d", inst->ints[VR_noise_seed]);
+        return tapmp_invalid_text(msg, size, "noise_seed", v, "an integer in [0, 2147483647]", 0, 0);
     }
     for (int i = 0; i < 6; i++)
         if (!isfinite(inst->reals[INITIAL_VR[i]]))
@@ -60,7 +66,9 @@ void model_setup(tapmp_instance *inst)
                                  {R(F_c1), R(F_c2), R(F_c3)}, R(v_s), R(force_limit), R(k_pull),
                                  R(attraction_force), R(attraction_gap), R(cogging_amplitude),
                                  R(cogging_pitch), {R(cogging_phase1), R(cogging_phase2), R(cogging_phase3)},
-                                 inst->ints[VR_substeps]};
+                                 {R(disturbance_force1), R(disturbance_force2), R(disturbance_force3)},
+                                 R(disturbance_time), R(noise_rms), inst->ints[VR_substeps],
+                                 inst->ints[VR_noise_seed]};
     double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
     tapmp_plant_init(pl, pose0, rate0);
     publish(inst);
@@ -76,7 +84,7 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
 {
     double F[3] = {R(F1), R(F2), R(F3)}, s[6];
     tapmp_plant *pl = &inst->m.plant;
-    if (!tapmp_plant_step(pl, h, F, s)) {
+    if (!tapmp_plant_step(pl, t, h, F, s)) {
         char value[6 * 40 + 16] = "(", v[40];
         for (int i = 0; i < 6; i++) {
             snprintf(value + strlen(value), sizeof value - strlen(value), "%s%s", i ? ", " : "",
@@ -87,6 +95,7 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
                                   "finite values with |B| < pi/2 rad", 1, t + h);
     }
     for (int i = 0; i < 6; i++) pl->s[i] = s[i];
+    pl->sample += 1.0;
     tapmp_plant_outputs(pl, out);
     return 1;
 }
@@ -94,10 +103,12 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
 void model_get_hidden(const tapmp_instance *inst, double hidden[])
 {
     for (int i = 0; i < 6; i++) hidden[i] = inst->m.plant.s[i];
+    hidden[6] = inst->m.plant.sample;
 }
 
 void model_set_hidden(tapmp_instance *inst, const double hidden[])
 {
     for (int i = 0; i < 6; i++) inst->m.plant.s[i] = hidden[i];
+    inst->m.plant.sample = hidden[6];
     publish(inst);
 }

@@ -7,7 +7,7 @@ typedef struct {
     tapmp_plant plant;
 } ModelData;
 
-#define MODEL_N_HIDDEN 6            /* the state X, Z, B, dX, dZ, dB */
+#define MODEL_N_HIDDEN 7            /* the state X, Z, B, dX, dZ, dB and the sample count */
 #define MODEL_N_OUT 15              /* q1..q3, q1_true..q3_true, dq1..dq3, X, Z, B, dX, dZ, dB */
 #define MODEL_OUT_FIRST VR_q1
 #endif

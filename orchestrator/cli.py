@@ -205,7 +205,7 @@ def cmd_reproduce(args) -> int:
                               f"tapmp compare {out.parent.name}")
 
     reproduce(Path(args.scenarios), Path(args.results), Path(args.out), compare, command,
-              paper_gains_stop=args.paper_gains_stop_time, workers=args.workers)
+              paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args))
     print(f"wrote {args.out}")
     return 0
 

@@ -2,8 +2,9 @@
 
 It reproduces the orchestrator's master algorithm step for step, so the two can be
 compared to round-off: the trajectory's outputs after doStep(t, h) are the reference
-at t + h; the controller samples its inputs on doStep and holds its command; the
-plant integrates over the step with the command it was given.
+at t + h; the controller samples its inputs on doStep at its sample instants t0 + k T_s
+(ControllerModel.communication_point) and holds its command; the plant integrates over
+the step with the command it was given.
 
 Orderings (per macro step k, t = t0 + k h):
 * "gauss-seidel" (controller, plant, trajectory): the controller samples reference
@@ -44,7 +45,9 @@ def simulate(plant: PlantModel, controller: ControllerModel, traj: TrajectoryPar
     for k in range(n_steps):
         t = t0 + k * h
         F_held = F
-        F = controller.sample(t, h, ref, q, dq)[0]
+        sampled = controller.communication_point(t, h, ref, q, dq)[0]  # None: held
+        if sampled is not None:
+            F = sampled[0]
         plant.step(t, h, *(F if gauss_seidel else F_held))
         ref = reference(t + h, traj)
         q = plant.measured_positions()

@@ -20,6 +20,12 @@ PIDDC = 2  # law: PID on e with modal gains and dynamics compensation (pid_comma
 LAW_TEXT = "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)"
 VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
+# A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s.
+# Wide enough for a host that sums its steps (t += h drifts by 1e-7 T_s after 1e5 steps and by
+# 2e-5 T_s after 1e6 steps of 1e-4 s), narrow enough that every host step >= 1e-4 T_s (10 ns at
+# T_s = 0.1 ms) lands off the grid.
+SAMPLE_TOLERANCE = 1e-4
+T_S_TEXT = "a finite number > 0 (the controller's sample period [s])"
 _INPUT_NAMES = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d",
                 "q1", "q2", "q3", "dq1", "dq2", "dq3")
 
@@ -145,20 +151,32 @@ def pid_command(e, de, integral_e, u_d, m: ModalGains, K_T) -> tuple[float, floa
                  + _modal(m.ki_c, m.ki_d, integral_e, i, mi) for i in range(3))
 
 
+def sample_index(t: float, t0: float, T_s: float) -> int | None:
+    """Index k of the sample instant t0 + k T_s [s] that the communication point t [s] falls
+    on (within SAMPLE_TOLERANCE T_s), or None if t lies between sample instants."""
+    k = math.floor((t - t0) / T_s + 0.5)
+    return k if abs(t - (t0 + k * T_s)) <= SAMPLE_TOLERANCE * T_s else None
+
+
 class ControllerModel:
     """The discrete-time controller: samples, computes and holds the command.
 
+    It runs on its own clock: the sample instants t0 + k T_s. :meth:`communication_point`
+    (a host's doStep(t, h)) samples only at a communication point t that falls on a sample
+    instant not sampled yet, and holds the outputs otherwise; the time between two samples
+    is (k - k_prev) T_s, whatever the host's step h.
+
     On each sample it uses q_d = IK(x_d), dq_d = J(x_d) xd_d, e = q_d - q (Eq. 15),
     e_s (Eq. 18), c (Eq. 21). The integral (of c for SC-DC, Eq. 22; of e for PID-DC;
-    unused by APD-DC) is a right-rectangle sum I_k = I_{k-1} + h x_k, so it includes
-    the current sample. Joint velocity is the
-    backward difference (q_k - q_{k-1}) / h (velocity_source 0) or the dq inputs (1);
-    the very first sample, which has no predecessor, takes the dq inputs.
+    unused by APD-DC) is a right-rectangle sum I_k = I_{k-1} + dt x_k, so it includes
+    the current sample. Joint velocity is the backward difference (q_k - q_{k-1}) / dt
+    (velocity_source 0) or the dq inputs (1); the very first sample, which has no
+    predecessor, takes the dq inputs. dt is the time between the two samples.
     """
 
     def __init__(self, params: ModelParams, gains: Gains, law: int = SCDC,
                  velocity_source: int = VELOCITY_DIFFERENCE, force_limit: float = 0.0,
-                 modal: ModalGains = ModalGains()):
+                 modal: ModalGains = ModalGains(), T_s: float = 1e-4, t0: float = 0.0):
         self.p = params.validated()
         self.g = gains.validated()
         self.modal = modal.validated()
@@ -169,19 +187,57 @@ class ControllerModel:
                                   "0 (backward difference of q) or 1 (dq inputs)")
         if not (math.isfinite(force_limit) and force_limit >= 0.0):
             raise ModelInputError("force_limit", force_limit, "a finite number >= 0 (0 = no limit)")
+        if not (math.isfinite(T_s) and T_s > 0.0):
+            raise ModelInputError("T_s", T_s, T_S_TEXT)
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
+        self.T_s = T_s
+        self.t0 = t0
         self.integral = [0.0, 0.0, 0.0]
         self.q_prev = None
+        self.k_last = None    # index of the last sample instant, None before the first
+        self.warned = False   # the warning about skipped sample instants was given
+
+    def communication_point(self, t: float, h: float, ref, q, dq_in):
+        """A host's doStep(t, h) [s]: sample if t is a sample instant not sampled yet, else hold.
+
+        Returns (outputs, warning): the new (F, u, e, e_s) of :meth:`sample`, or None when
+        the outputs are held (t is no new sample instant); and, the first time the host's
+        communication points skip a sample instant, the warning text (else None): naming the
+        sample interval used when the next sample comes, or the instant missed when a
+        communication point off the grid lies past it (one warning per instance). A step h that is not a finite number > 0 raises
+        ModelInputError naming communicationStepSize.
+        """
+        if not (math.isfinite(h) and h > 0.0):
+            raise ModelInputError("communicationStepSize", h, "a finite number > 0", t)
+        k = sample_index(t, self.t0, self.T_s)
+        if k is None or (self.k_last is not None and k <= self.k_last):
+            warning = None
+            if (k is None and self.k_last is not None and not self.warned
+                    and t > self.t0 + (self.k_last + 1 + SAMPLE_TOLERANCE) * self.T_s):
+                self.warned = True  # a due sample instant passed without a communication point on it
+                warning = missed_sample_text(t, self.t0 + (self.k_last + 1) * self.T_s, self.T_s)
+            return None, warning
+        # the first sample integrates over one period, as every later one on an unbroken grid
+        steps = 1 if self.k_last is None else k - self.k_last
+        out = self.sample(t, steps * self.T_s, ref, q, dq_in)
+        warning = None
+        if steps > 1 and not self.warned:
+            self.warned = True
+            warning = skipped_samples_text(t, steps, self.T_s)
+        self.k_last = k
+        return out, warning
 
     def sample(self, t: float, h: float, ref, q, dq_in, advance: bool = True):
         """Compute the command from one sample of the inputs.
 
         ref: (X_d, Z_d, B_d, dX_d, dZ_d, dB_d, ddX_d, ddZ_d, ddB_d) [m, rad and rates];
-        q, dq_in: measured motor positions [m] and rates [m/s]; h: sample period [s].
+        q, dq_in: measured motor positions [m] and rates [m/s]; h: time since the previous
+        sample [s] ((k - k_prev) T_s when driven by :meth:`communication_point`).
         With advance=False (initialization) the state is left untouched and h unused.
-        Returns (F, u, e, e_s) as four 3-tuples: F [N], u [K_T N], e and e_s [m].
+        Returns (F, u, e, e_s) as four 3-tuples: F [N], u (command units, u = K_T F),
+        e and e_s [m].
         """
         if not math.isfinite(sum(ref) + sum(q) + sum(dq_in)):  # one check on the fast path
             for name, v in zip(_INPUT_NAMES, (*ref, *q, *dq_in)):
@@ -222,3 +278,18 @@ class ControllerModel:
         if lim > 0.0:
             F = [min(max(f, -lim), lim) for f in F]
         return tuple(F), tuple(u), e, e_s
+
+
+def missed_sample_text(t: float, due: float, T_s: float) -> str:
+    """The warning of a host whose communication points pass a sample instant off the grid."""
+    return (f"the host's communication points skip sample instants of T_s = {T_s:g} s: none fell on the "
+            f"sample instant t = {due:.9g} s; at t = {t:.9g} s the controller holds its command until a "
+            f"communication point falls on its grid t0 + k T_s")
+
+
+def skipped_samples_text(t: float, steps: int, T_s: float) -> str:
+    """The warning of a host whose communication points skip sample instants."""
+    return (f"the host's communication points skip sample instants of T_s = {T_s:g} s: the controller "
+            f"sampled at t = {t:.9g} s, {steps * T_s:g} s ({steps} T_s) after its previous sample, and "
+            f"uses that interval for the velocity estimate and the integral (it samples only at "
+            f"communication points on its grid t0 + k T_s)")

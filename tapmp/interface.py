@@ -40,7 +40,11 @@ UNITS = {
     "N": {"kg": 1, "m": 1, "s": -2}, "kg": {"kg": 1}, "kg.m2": {"kg": 1, "m": 2},
     "N.s/m": {"kg": 1, "s": -1}, "N/m": {"kg": 1, "s": -2}, "N/(m.s)": {"kg": 1, "s": -3},
     "1/s": {"s": -1},
-    "Hz": {"s": -1}, "1": {},
+    "Hz": {"s": -1}, "1": {}, "s": {"s": 1},
+    # The controller's command u is a number (command units) with K_T F = u: K_T in 1/N, the
+    # gains in command units per error unit, and gain / K_T the force gain in N/m, N s/m, N/(m s).
+    "1/N": {"kg": -1, "m": -1, "s": 2}, "1/m": {"m": -1}, "s/m": {"m": -1, "s": 1},
+    "1/(m.s)": {"m": -1, "s": -1},
 }
 
 _AXES = (("X", "m", "platform displacement along X"), ("Z", "m", "platform displacement along Z"),
@@ -69,7 +73,7 @@ def _pose(suffix: str, causality: str, what: str) -> list[Var]:
             prefix = ("", "d", "dd")[order]
             kind = ("", "rate of ", "acceleration of ")[order]
             out.append(Var(f"{prefix}{axis}{suffix}", causality, units[unit] if units else unit,
-                           f"{what} {kind}{desc}"))
+                           f"{what} {kind}{desc}" if what else f"{kind}{desc}"))
     return out
 
 
@@ -93,6 +97,11 @@ _PLANT_CFG_DOC = {
     "cogging_phase1": ("rad", "force ripple (cogging) phase of motor 1"),
     "cogging_phase2": ("rad", "force ripple (cogging) phase of motor 2"),
     "cogging_phase3": ("rad", "force ripple (cogging) phase of motor 3"),
+    **{f"disturbance_force{i}": ("N", f"external force step on mover {i} from disturbance_time on (not limited "
+                                      "by force_limit); 0 = off") for i in (1, 2, 3)},
+    "disturbance_time": ("s", "time at which the external force step starts"),
+    "noise_rms": ("m", "measurement noise: rms of the white Gaussian noise added to each measured position "
+                       "before quantization; 0 = off"),
 }
 
 PLANT_VARS: tuple[Var, ...] = tuple(
@@ -100,51 +109,64 @@ PLANT_VARS: tuple[Var, ...] = tuple(
     + [Var(f"q{i}", "output", "m", f"measured (encoder-quantized) position of motor {i}") for i in (1, 2, 3)]
     + [Var(f"q{i}_true", "output", "m", f"true position of motor {i}") for i in (1, 2, 3)]
     + [Var(f"dq{i}", "output", "m/s", f"velocity of motor {i}") for i in (1, 2, 3)]
-    + [v for v in _pose("", "output", "platform")[:6]]
+    + [v for v in _pose("", "output", "")[:6]]
     + _model_params("plant", "fixed")
     + [Var(f"{a}0", "parameter", u, f"initial {d}", variability="fixed") for a, u, d in _AXES]
     + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d}", variability="fixed") for a, u, d in _AXES]
     + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _PLANT_CFG_DOC.items()]
     + [Var("substeps", "parameter", "", "RK4 integration steps per communication step (>= 1)",
-           _CFG.substeps, type="Integer", variability="fixed")]
+           _CFG.substeps, type="Integer", variability="fixed"),
+       Var("noise_seed", "parameter", "", "seed of the measurement noise (the same seed gives the same noise "
+           "in every FMU family)", _CFG.noise_seed, type="Integer", variability="fixed")]
 )
 
+# Gains act on the command u (command units, K_T F = u); "{i}" is the motor number.
 _GAIN_DOC = {
-    "Lambda_p": ("N/m", "SC-DC Lambda_p on c (Eq. 25); APD-DC k_p on e (Eq. 38)"),
-    "Lambda_v": ("N.s/m", "SC-DC Lambda_v on n (Eq. 25); APD-DC k_v on de (Eq. 38)"),
-    "b": ("1/s", "coupling coefficient b of B = diag(b) (Eq. 22)"),
-    "D": ("1/s", "D of n = de_c + D e_c (Eq. 24)"),
-    "K_T": ("1", "feedforward gain; force command F = u / K_T"),
+    "Lambda_p": ("1/m", "SC-DC Lambda_p on c (Eq. 25), APD-DC k_p on e (Eq. 38) of motor {i}, in command "
+                 "units per m: the force gain is Lambda_p{i}/K_T{i} N/m"),
+    "Lambda_v": ("s/m", "SC-DC Lambda_v on n (Eq. 25), APD-DC k_v on de (Eq. 38) of motor {i}, in command "
+                 "units per m/s: the force gain (damping) is Lambda_v{i}/K_T{i} N.s/m"),
+    "b": ("1/s", "coupling coefficient b of B = diag(b) (Eq. 22), motor {i}"),
+    "D": ("1/s", "D of n = de_c + D e_c (Eq. 24), motor {i}"),
+    "K_T": ("1/N", "command per newton of motor {i}: K_T{i} F{i} = u{i} (Eq. 25/38), so F{i} = u{i}/K_T{i} "
+            "and every gain of motor {i} divided by K_T{i} is its force gain"),
 }
 _DEFAULT_GAINS = GAIN_PRESETS["default"]
 _MODE = {"c": "common mode (1,1,1)/sqrt(3)", "d": "differential modes (I - 1 1^T/3)"}
-_MODAL_DOC = {f"k{k}_{m}": (unit, f"PID-DC (law 2) {what} gain on the {_MODE[m]}")
-              for k, unit, what in (("p", "N/m", "proportional"), ("v", "N.s/m", "derivative"),
-                                    ("i", "N/(m.s)", "integral")) for m in "cd"}
+_MODAL_DOC = {f"k{k}_{m}": (unit, f"PID-DC (law 2) {what} gain on the {_MODE[m]}, in command units per "
+                                  f"{per}: the force gain is k{k}_{m}/K_T {force}")
+              for k, unit, what, per, force in (
+                  ("p", "1/m", "proportional", "m", "N/m"), ("v", "s/m", "derivative", "m/s", "N.s/m"),
+                  ("i", "1/(m.s)", "integral", "m.s", "N/(m.s)")) for m in "cd"}
 
 CONTROLLER_VARS: tuple[Var, ...] = tuple(
     _pose("_d", "input", "desired")
     + [Var(f"q{i}", "input", "m", f"measured position of motor {i}") for i in (1, 2, 3)]
     + [Var(f"dq{i}", "input", "m/s", f"measured velocity of motor {i} (used if velocity_source = 1)")
        for i in (1, 2, 3)]
-    + [Var(f"F{i}", "output", "N", f"force command of motor {i}, F = u / K_T, held over the step")
-       for i in (1, 2, 3)]
-    + [Var(f"u{i}", "output", "N", f"control command u of motor {i} (Eq. 25 or 38), K_T F = u")
-       for i in (1, 2, 3)]
+    + [Var(f"F{i}", "output", "N", f"force command of motor {i}, F{i} = u{i}/K_T{i} (limited to "
+           "force_limit), held between samples") for i in (1, 2, 3)]
+    + [Var(f"u{i}", "output", "1", f"control command u of motor {i} (Eq. 25, 38 or PID-DC) in command "
+           f"units, K_T{i} F{i} = u{i}") for i in (1, 2, 3)]
     + [Var(f"e{i}", "output", "m", f"tracking error e = q_d - q of motor {i} (Eq. 15)") for i in (1, 2, 3)]
     + [Var(f"es{i}", "output", "m", f"synchronization error of motor {i} (Eq. 18)") for i in (1, 2, 3)]
-    + [Var(f"{n}{i}", "parameter", _GAIN_DOC[n][0], f"{_GAIN_DOC[n][1]}, motor {i}",
+    + [Var(f"{n}{i}", "parameter", _GAIN_DOC[n][0], _GAIN_DOC[n][1].format(i=i),
            _DEFAULT_GAINS[n][i - 1], variability="tunable") for n in GAIN_NAMES for i in (1, 2, 3)]
     + [Var("law", "parameter", "", "control law: 0 = SC-DC (Eq. 25), 1 = APD-DC (Eq. 38), "
            "2 = PID-DC (modal PID on e)", 0, type="Integer", variability="tunable"),
        Var("velocity_source", "parameter", "",
-           "joint velocity: 0 = backward difference of q, 1 = dq inputs", 0,
+           "joint velocity: 0 = backward difference of q over the time between samples, 1 = dq inputs", 0,
            type="Integer", variability="tunable"),
        Var("force_limit", "parameter", "N", "force command limit |F_i| <= force_limit; 0 = no limit",
            0.0, variability="tunable")]
     + _model_params("controller nominal", "fixed")
     + [Var(n, "parameter", _MODAL_DOC[n][0], _MODAL_DOC[n][1], DEFAULT_MODAL_GAINS[n], variability="tunable")
        for n in MODAL_GAIN_NAMES]
+    + [Var("T_s", "parameter", "s", "sample period: the controller samples only at communication points on "
+           "its grid t0 + k T_s (within 1e-4 T_s; t0 = start time) and holds its outputs in between; the "
+           "velocity estimate and the integral use the time between samples, (k - k_prev) T_s, never the "
+           "host's step; a host whose steps skip sample instants gets one logged warning", 1e-4,
+           variability="fixed")]
 )
 
 _TP = TrajectoryParams()
@@ -180,12 +202,14 @@ RANGES: dict[str, tuple[float, float]] = {
     "attraction_force": (0.0, 1e6), "attraction_gap": (1e-6, 1.0),
     "cogging_amplitude": (0.0, 1e6), "cogging_pitch": (1e-6, 1.0),
     "cogging_phase1": (-1e6, 1e6), "cogging_phase2": (-1e6, 1e6), "cogging_phase3": (-1e6, 1e6),
+    "disturbance_force1": (-1e6, 1e6), "disturbance_force2": (-1e6, 1e6), "disturbance_force3": (-1e6, 1e6),
+    "disturbance_time": (0.0, 1e9), "noise_rms": (0.0, 1e-3), "noise_seed": (0, 2147483647),
     # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
     # stays below a millisecond of CPU per step or so
     "substeps": (1, 10000),
     **{f"{n}{i}": r for n, r in (("Lambda_p", (0.0, 1e12)), ("Lambda_v", (0.0, 1e12)), ("b", (0.0, 1e9)),
                                  ("D", (0.0, 1e9)), ("K_T", (1e-12, 1e12))) for i in (1, 2, 3)},
-    "law": (0, 2), "velocity_source": (0, 1),
+    "law": (0, 2), "velocity_source": (0, 1), "T_s": (1e-9, 1e3),
     **{f"k{k}_{m}": (0.0, 1e15) for k in "pvi" for m in "cd"},
     "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),
     "phase_xz": (-1e6, 1e6), "B_amplitude": (0.0, 1.5), "f_B": (0.0, 1e4), "phase_B": (-1e6, 1e6),
@@ -214,3 +238,103 @@ CONNECTIONS: tuple[tuple[str, str, str, str], ...] = tuple(
     + [(PLANT, f"dq{i}", CONTROLLER, f"dq{i}") for i in (1, 2, 3)]
     + [(CONTROLLER, f"F{i}", PLANT, f"F{i}") for i in (1, 2, 3)]
 )
+
+
+# --- Model structure: what every output depends on (FMI <ModelStructure>) ---------------
+# One definition for every family's modelDescription.xml and the container FMU's. Knowns are
+# named as variables; TIME is the independent variable, which the FMI 3.0 FMUs and the
+# container declare (FMI 2.0 FMUs declare none, so it is left out of theirs).
+TIME = "time"
+
+
+class Dependencies(NamedTuple):
+    """The knowns one output depends on, by name, in the order of the variable table."""
+
+    step: tuple[str, ...]     # at a communication point (<Outputs>/<Output>): inputs, time
+    initial: tuple[str, ...]  # in Initialization Mode (<InitialUnknowns>): inputs, parameters, time
+
+
+def _ordered(table, names) -> tuple[str, ...]:
+    wanted = set(names)
+    return tuple(v.name for v in table if v.name in wanted) + ((TIME,) if TIME in wanted else ())
+
+
+def _pose_inputs(motor: int, prefix: str = "", suffix: str = "_d") -> set:
+    """Pose variables that motor ``motor``'s position (Eq. 2) or rate (Eq. 3) reads: q2 = X
+    and dq2 = dX; motors 1 and 3 read X, Z and B (rates: dX, dZ, dB and B)."""
+    names = {f"{prefix}X{suffix}"} if motor == 2 else {f"{prefix}{a}{suffix}" for a in "XZB"}
+    return names | ({f"B{suffix}"} if prefix and motor != 2 else set())
+
+
+def _controller_dependencies(name: str) -> Dependencies:
+    """No output depends on an input at the same communication point: the outputs change only
+    in doStep (sampled at t, held after). In Initialization Mode the outputs are computed from
+    the inputs (advance = False: the dq inputs, no integral) and the parameters."""
+    table = CONTROLLER_VARS
+    i = int(name[-1])
+    if name[0] in "Fu":
+        # u_d (Eq. 26) reads the whole pose and every measured rate; the laws couple the motors
+        # through the errors (c, Eq. 21; the modal means of PID-DC) but each motor has its own
+        # gains and only its own block mass in its feedforward. The integral is zero initially,
+        # so the integral gains ki_c, ki_d do not enter.
+        initial = {v.name for v in table if v.causality == "input"}
+        initial |= {"m_p", f"m_{i}", "I_y", "L_1", "g", "law", "kp_c", "kv_c", "kp_d", "kv_d"}
+        initial |= {f"{n}{i}" for n in ("Lambda_p", "Lambda_v", "b", "D", "K_T")}
+        if name[0] == "F":
+            initial.add("force_limit")
+    elif name[1] == "s":  # es_i = e_i - e_(i+1) (Eq. 18), as computed: X_d cancels only to round-off
+        initial = {"X_d", "Z_d", "B_d", f"q{i}", f"q{i % 3 + 1}", "L_1"}
+    else:  # e_i = q_d,i - q_i (Eq. 15, q_d by Eq. 2)
+        initial = _pose_inputs(i) | {f"q{i}"} | ({"L_1"} if i != 2 else set())
+    return Dependencies((), _ordered(table, initial))
+
+
+def _plant_dependencies(name: str) -> Dependencies:
+    """Outputs come from the plant's state only (RK4 over doStep with the F of the step), so
+    none depends on an input at a communication point; initially they come from the initial
+    pose X0, Z0, B0 and rates dX0, dZ0, dB0 through the kinematics (Eq. 2-3)."""
+    i = "".join(c for c in name if c.isdigit())  # the motor of q, q_true and dq
+    if not i:  # the pose X, Z, B and its rates
+        initial = {f"{name}0"}
+    elif name.startswith("dq"):
+        initial = _pose_inputs(int(i), "d", "0") | ({"L_1"} if i != "2" else set())
+    else:  # q (measured: plus the noise of sample 0, quantized to encoder_resolution) and q_true
+        initial = _pose_inputs(int(i), "", "0") | ({"L_1"} if i != "2" else set())
+        if not name.endswith("_true"):
+            initial |= {"encoder_resolution", "noise_rms", "noise_seed"}
+    return Dependencies((), _ordered(PLANT_VARS, initial))
+
+
+def _trajectory_dependencies(name: str) -> Dependencies:
+    """The reference is a function of time: every output depends on time, at every
+    communication point and initially, and on the trajectory's parameters (the width L_1
+    only through the motor positions q_d)."""
+    params = {v.name for v in TRAJECTORY_VARS if v.causality == "parameter"}
+    if not (name.startswith("q") and name.endswith("_d")):
+        params.discard("L_1")
+    return Dependencies((TIME,), _ordered(TRAJECTORY_VARS, params | {TIME}))
+
+
+_DEPENDENCIES = {CONTROLLER: _controller_dependencies, PLANT: _plant_dependencies,
+                 TRAJECTORY: _trajectory_dependencies}
+
+
+def dependencies(model: str) -> dict[str, Dependencies]:
+    """{output name: Dependencies} of ``model``: what each output depends on at a communication
+    point and in Initialization Mode, as the FMUs of every family compute it."""
+    return {v.name: _DEPENDENCIES[model](v.name) for v in VARIABLES[model] if v.causality == "output"}
+
+
+def dependency_attributes(names, reference: dict, position: dict | None = None) -> dict:
+    """The XML attributes ``dependencies`` and ``dependenciesKind`` of one ModelStructure
+    unknown: the knowns among ``names`` that the modelDescription declares (``reference``:
+    name -> index (FMI 2.0) or value reference (FMI 3.0)), ordered by their place in
+    ModelVariables (``position``: name -> place; default the reference itself). An empty
+    list is written as dependencies="" (depends on no known); every listed known is
+    "dependent" (no particular structure, the only kind valid for initial unknowns too)."""
+    position = position or reference
+    known = sorted((n for n in names if n in reference), key=lambda n: position[n])
+    if not known:
+        return {"dependencies": ""}
+    return {"dependencies": " ".join(str(reference[n]) for n in known),
+            "dependenciesKind": " ".join("dependent" for _ in known)}

@@ -17,6 +17,12 @@ F1..F3 [N], held over a step. Non-idealities, each switched off by a zero:
   there is -2 attraction_force / attraction_gap (negative: it grows as g shrinks);
 * force ripple (cogging) of iron-core linear motors, periodic in the motor position:
   cogging_amplitude sin(2 pi q_i / cogging_pitch + cogging_phase_i) [N] on mover i;
+* an external force step on each mover, disturbance_force_i [N] from disturbance_time
+  [s] on (held over a step like the command, added after the saturation: it does not go
+  through the motor; 0 = off);
+* measurement noise: white Gaussian noise of noise_rms [m] added to each measured
+  position before quantization, seeded by noise_seed (the same seed gives the same
+  sequence in every FMU family; 0 rms = off);
 * encoder quantization of the measured positions to encoder_resolution [m]
   (grating ruler, 100 nm in the paper; 0 = off).
 
@@ -33,6 +39,9 @@ from .params import ModelParams
 
 HALF_PI = 0.5 * math.pi
 TWO_PI = 2.0 * math.pi
+NOISE_SEED_MAX = 2147483647
+_MASK64 = (1 << 64) - 1
+_SAMPLE_MAX = float(1 << 53)  # sample counts beyond this are not whole numbers in a double
 
 
 class PlantConfig(NamedTuple):
@@ -55,12 +64,18 @@ class PlantConfig(NamedTuple):
     cogging_phase1: float = 0.0       # force ripple phase, motor 1 [rad]
     cogging_phase2: float = 0.0       # force ripple phase, motor 2 [rad]
     cogging_phase3: float = 0.0       # force ripple phase, motor 3 [rad]
+    disturbance_force1: float = 0.0   # external force step on mover 1 [N], 0 = off
+    disturbance_force2: float = 0.0   # external force step on mover 2 [N], 0 = off
+    disturbance_force3: float = 0.0   # external force step on mover 3 [N], 0 = off
+    disturbance_time: float = 0.0     # when the force step starts [s]
+    noise_rms: float = 0.0            # measurement noise, rms per measured position [m], 0 = off
     substeps: int = 1                 # RK4 steps per communication step
+    noise_seed: int = 0               # seed of the measurement noise
 
     def validated(self) -> "PlantConfig":
         """Return self after checking the ranges (ModelInputError names the offender)."""
-        for name in self._fields[:-1]:
-            if name == "k_pull" or name.startswith("cogging_phase"):
+        for name in self._fields[:-2]:
+            if name == "k_pull" or name.startswith(("cogging_phase", "disturbance_force")):
                 require_finite(name, getattr(self, name))
             else:
                 require_nonnegative(name, getattr(self, name))
@@ -69,6 +84,8 @@ class PlantConfig(NamedTuple):
                 raise ModelInputError(name, getattr(self, name), "a finite number > 0")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ModelInputError("substeps", self.substeps, "an integer >= 1")
+        if not (isinstance(self.noise_seed, int) and 0 <= self.noise_seed <= NOISE_SEED_MAX):
+            raise ModelInputError("noise_seed", self.noise_seed, f"an integer in [0, {NOISE_SEED_MAX}]")
         return self
 
 
@@ -81,6 +98,26 @@ def quantize(q: float, resolution: float) -> float:
     if resolution == 0.0:
         return q
     return resolution * math.floor(q / resolution + 0.5)
+
+
+def _splitmix64(x: int) -> int:
+    """One SplitMix64 output for the 64-bit input x (Steele, Lea, Flood 2014)."""
+    x = (x + 0x9E3779B97F4A7C15) & _MASK64
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return x ^ (x >> 31)
+
+
+def noise_sample(seed: int, sample: float, motor: int) -> float:
+    """Standard normal number for (seed, sample index, motor 0..2): counter-based, so the
+    sequence depends on nothing but these three (Box-Muller on two SplitMix64 outputs; the C
+    model computes the same). A sample index outside [0, 2^53) counts as 0."""
+    k = int(sample) if 0.0 <= sample < _SAMPLE_MAX else 0
+    key = _splitmix64(seed)
+    n = (2 * (3 * k + motor)) & _MASK64
+    u1 = ((_splitmix64((key + n) & _MASK64) >> 11) + 1) * 2.0 ** -53   # (0, 1]
+    u2 = (_splitmix64((key + n + 1) & _MASK64) >> 11) * 2.0 ** -53     # [0, 1)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(TWO_PI * u2)
 
 
 def _attraction(force: float, gap: float, d12: float, d23: float) -> tuple[float, float]:
@@ -106,6 +143,7 @@ class PlantModel:
         if not abs(pose0[2]) < HALF_PI:
             raise KinematicDomainError("B0", pose0[2], "|B0| < pi/2 rad")
         self.state = [float(v) for v in (*pose0, *rate0)]
+        self.sample = 0.0  # completed steps: the index of the measurement noise
         q1, q2, q3 = inverse(pose0[0], pose0[1], pose0[2], self.p.L_1)
         self.gap12_0 = q2 - q1
         self.gap23_0 = q3 - q2
@@ -169,6 +207,11 @@ class PlantModel:
             F1 = min(max(F1, -lim), lim)
             F2 = min(max(F2, -lim), lim)
             F3 = min(max(F3, -lim), lim)
+        c = self.cfg
+        if (c.disturbance_force1 or c.disturbance_force2 or c.disturbance_force3) and t >= c.disturbance_time:
+            F1 += c.disturbance_force1  # an external force: not limited by the motor
+            F2 += c.disturbance_force2
+            F3 += c.disturbance_force3
         n = self.cfg.substeps
         dt = h / n
         hdt = 0.5 * dt
@@ -194,6 +237,7 @@ class PlantModel:
             raise KinematicDomainError("plant state (X, Z, B, dX, dZ, dB)", tuple(s),
                                        "finite values with |B| < pi/2 rad", t + h)
         self.state = s
+        self.sample += 1.0
 
     def _make_rhs(self):
         """The right-hand side of :meth:`derivatives` fused into one closure on scalars.
@@ -273,9 +317,13 @@ class PlantModel:
         return inverse(X, Z, B, self.p.L_1)
 
     def measured_positions(self) -> tuple[float, float, float]:
-        """Encoder readings of the motor positions [m], quantized to the resolution."""
-        r = self.cfg.encoder_resolution
-        return tuple(quantize(q, r) for q in self.joint_positions())
+        """Encoder readings of the motor positions [m]: plus the measurement noise of this
+        sample (if noise_rms > 0), quantized to the resolution."""
+        c = self.cfg
+        q = self.joint_positions()
+        if c.noise_rms > 0.0:
+            q = tuple(x + c.noise_rms * noise_sample(c.noise_seed, self.sample, i) for i, x in enumerate(q))
+        return tuple(quantize(x, c.encoder_resolution) for x in q)
 
     def joint_velocities(self) -> tuple[float, float, float]:
         """True motor velocities [m/s] (Eq. 3)."""

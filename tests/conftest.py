@@ -1,5 +1,14 @@
-"""Shared fixtures: the FMUs are built once per test session, for real, with pythonfmu."""
+"""Shared fixtures: the FMUs are built once per test session, for real, with pythonfmu.
 
+Tests that need something from ``../shared`` (relative to the repository root: the third-party
+FMI tools in ``../shared/tools``, the paper in ``../shared/paper``) carry the marker
+``@pytest.mark.needs_shared("tools/OMSimulator/bin/OMSimulator")``: without that file the test is
+skipped with a reason naming it ("needs ../shared/tools/OMSimulator/bin/OMSimulator"), and where
+the environment variable CI or TAPMP_REQUIRE_SHARED is set (``.ci/run`` sets it) a missing file
+fails the test instead.
+"""
+
+import os
 import tempfile
 from ctypes import byref
 from pathlib import Path
@@ -14,6 +23,39 @@ from fmpy.logging import addLoggerProxy
 from orchestrator.engine.build import build_all
 
 ROOT = Path(__file__).resolve().parent.parent
+SHARED = ROOT.parent / "shared"
+REQUIRE_SHARED = ("CI", "TAPMP_REQUIRE_SHARED")  # environment variables that make a missing file a failure
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "needs_shared(path, ...): the test needs ../shared/<path> (relative to the "
+                                       "repository root); skipped without it, failed without it in CI")
+
+
+def shared_required() -> bool:
+    """True where a missing ../shared file fails a test instead of skipping it (CI)."""
+    return any(os.environ.get(name) for name in REQUIRE_SHARED)
+
+
+def shared(relative: str) -> Path:
+    """``../shared/<relative>`` (relative to the repository root) if it exists; else the test is
+    skipped with a reason naming it, or fails where :func:`shared_required`."""
+    path = SHARED / relative
+    if not path.exists():
+        reason = f"needs ../shared/{relative}"
+        if shared_required():
+            pytest.fail(f"{reason} (relative to the repository root {ROOT}), which is missing; "
+                        f"{' or '.join(REQUIRE_SHARED)} is set, so it is required", pytrace=False)
+        pytest.skip(reason)
+    return path
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    """Checks every ``needs_shared`` path before any fixture of the test is set up."""
+    for marker in item.iter_markers("needs_shared"):
+        for relative in marker.args:
+            shared(relative)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -4,15 +4,19 @@
 # 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
 #    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), wine64 (runs the native
 #    FMUs' Windows binaries), qemu-user and libc6-arm64-cross (run their aarch64 Linux binaries
-#    under qemu-aarch64 with the arm64 C library as sysroot), and python3-dev if this Python has
-#    no C headers (Python.h, for the pythonfmu FMUs' binary). No C compiler: every binary is
-#    built by zig cc from PyPI's ziglang package. As root directly, else through sudo;
+#    under qemu-aarch64 with the arm64 C library as sysroot), libminizip1 and libxml2 (the
+#    third-party FMI tools in ../shared/tools: fmusim, OMSimulator), clang and libclang-rt-14-dev
+#    (libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer for the native FMUs' fuzz
+#    targets and sanitizer builds; TAPMP_FUZZ_SECONDS sets the seconds per fuzz target,
+#    default 60), and python3-dev if this Python has no C headers (Python.h, for the pythonfmu
+#    FMUs' binary). The FMUs' binaries need no system compiler: zig cc from PyPI's ziglang
+#    package builds them for every platform. As root directly, else through sudo;
 #    `apt-get update` only if installing fails (empty or stale package lists).
 # 2. Creates .venv with the package and its test extras and runs every test with pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
-PACKAGES=(libtbb12 wine64 qemu-user libc6-arm64-cross)
+PACKAGES=(libtbb12 wine64 qemu-user libc6-arm64-cross libminizip1 libxml2 clang libclang-rt-14-dev)
 
 missing=()
 for package in "${PACKAGES[@]}"; do

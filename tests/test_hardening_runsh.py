@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ["libtbb12", "wine64", "qemu-user", "libc6-arm64-cross"]
+FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev"]  # libFuzzer and the sanitizers
+PACKAGES = ["libtbb12", "wine64", "qemu-user", "libc6-arm64-cross", "libminizip1", "libxml2", *FUZZ_PACKAGES]
 TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod")  # the real programs the script and stand-ins use
 
 STANDINS = {
@@ -67,9 +68,10 @@ def test_with_every_package_present_it_installs_nothing_and_runs_pytest_with_the
 
 
 def test_as_root_it_installs_only_the_missing_packages_without_questions(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["wine64", "libc6-arm64-cross"])
+    code, err, log = run_sh(tmp_path, installed=["wine64", "libc6-arm64-cross", *FUZZ_PACKAGES])
     assert code == 7, err
-    assert log == ["apt-get install -y libtbb12 qemu-user [noninteractive]", *the_tests(tmp_path / "repo", "")]
+    assert log == ["apt-get install -y libtbb12 qemu-user libminizip1 libxml2 [noninteractive]",
+                   *the_tests(tmp_path / "repo", "")]
 
 
 def test_a_python_without_c_headers_gets_python3_dev(tmp_path):
@@ -81,23 +83,24 @@ def test_a_python_without_c_headers_gets_python3_dev(tmp_path):
 def test_the_package_lists_are_updated_only_if_installing_fails(tmp_path):
     code, err, log = run_sh(tmp_path, installed=[], apt_fails_once=True)
     assert code == 7, err
-    packages = "libtbb12 wine64 qemu-user libc6-arm64-cross"
-    assert log[:3] == [f"apt-get install -y {packages} [noninteractive]", "apt-get update [noninteractive]",
-                       f"apt-get install -y {packages} [noninteractive]"]
+    assert log[:3] == [f"apt-get install -y {' '.join(PACKAGES)} [noninteractive]",
+                       "apt-get update [noninteractive]",
+                       f"apt-get install -y {' '.join(PACKAGES)} [noninteractive]"]
 
 
 def test_a_user_installs_through_sudo(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["libtbb12", "qemu-user", "libc6-arm64-cross"], uid=1000, sudo=True)
+    code, err, log = run_sh(tmp_path, installed=[p for p in PACKAGES if p != "wine64"], uid=1000,
+                            sudo=True)
     assert code == 7, err
     assert log[:2] == ["sudo DEBIAN_FRONTEND=noninteractive apt-get install -y wine64",
                        "apt-get install -y wine64 [noninteractive]"]
 
 
 def test_a_user_without_sudo_gets_one_line_naming_the_packages_and_nothing_runs(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["qemu-user", "libc6-arm64-cross"], uid=1000)
+    code, err, log = run_sh(tmp_path, installed=["qemu-user", "libc6-arm64-cross", *FUZZ_PACKAGES], uid=1000)
     assert code == 1 and log == []
-    assert err == ("tests/run.sh: the Debian packages libtbb12 wine64 are missing and this user is not root and "
-                   "has no sudo: install them as root (apt-get install libtbb12 wine64) and run this again\n")
+    assert err == ("tests/run.sh: the Debian packages libtbb12 wine64 libminizip1 libxml2 are missing and this user is not root and "
+                   "has no sudo: install them as root (apt-get install libtbb12 wine64 libminizip1 libxml2) and run this again\n")
 
 
 @pytest.mark.parametrize("path", ["README.md", ".ci/run"])
@@ -105,7 +108,8 @@ def test_the_readme_and_ci_use_exactly_this_command(path):
     text = (ROOT / path).read_text()
     if path == ".ci/run":
         lines = [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
-        assert lines == ["set -euo pipefail", 'cd "$(dirname "$0")/.."', "bash tests/run.sh"]
+        assert lines == ["set -euo pipefail", 'cd "$(dirname "$0")/.."', "export TAPMP_REQUIRE_SHARED=1",
+                         "bash tests/run.sh"]
     else:
         quick = text[text.index("## Quick start"):text.index("## Layout")]
         assert "```bash\nbash tests/run.sh\n```" in quick and "python -m pytest" not in quick

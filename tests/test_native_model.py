@@ -65,12 +65,13 @@ class CPlantConfig(ctypes.Structure):
     _fields_ = [("encoder_resolution", c_double), ("c_v", c_double * 3), ("F_c", c_double * 3),
                 ("v_s", c_double), ("force_limit", c_double), ("k_pull", c_double),
                 ("attraction_force", c_double), ("attraction_gap", c_double), ("cogging_amplitude", c_double),
-                ("cogging_pitch", c_double), ("cogging_phase", c_double * 3), ("substeps", c_int)]
+                ("cogging_pitch", c_double), ("cogging_phase", c_double * 3), ("disturbance_force", c_double * 3),
+                ("disturbance_time", c_double), ("noise_rms", c_double), ("substeps", c_int), ("noise_seed", c_int)]
 
 
 class CPlant(ctypes.Structure):
     _fields_ = [("p", CParams), ("c", CPlantConfig), ("gap12_0", c_double), ("gap23_0", c_double),
-                ("s", c_double * 6)]
+                ("s", c_double * 6), ("sample", c_double)]
 
 
 class CGains(ctypes.Structure):
@@ -103,9 +104,10 @@ PROTOTYPES = {  # name: (restype, argtypes), as declared in tapmp_model.h
     "tapmp_task_acceleration": (None, [c_double, c_double, _dp, POINTER(CParams), _dp]),
     "tapmp_generalized_force": (None, [c_double, c_double, _dp, c_double, POINTER(CParams), _dp]),
     "tapmp_quantize": (c_double, [c_double, c_double]),
+    "tapmp_noise_sample": (c_double, [c_int, c_double, c_int]),
     "tapmp_plant_init": (None, [POINTER(CPlant), _dp, _dp]),
     "tapmp_plant_rhs": (None, [POINTER(CPlant), _dp, _dp, _dp]),
-    "tapmp_plant_step": (c_int, [POINTER(CPlant), c_double, _dp, _dp]),
+    "tapmp_plant_step": (c_int, [POINTER(CPlant), c_double, c_double, _dp, _dp]),
     "tapmp_plant_outputs": (None, [POINTER(CPlant), _dp]),
     "tapmp_feedforward": (c_int, [_dp, _dp, _dp, _dp, POINTER(CParams), _dp, _dp]),
     "tapmp_scdc_command": (None, [_dp, _dp, _dp, _dp, _dp, POINTER(CGains), _dp]),
@@ -115,6 +117,7 @@ PROTOTYPES = {  # name: (restype, argtypes), as declared in tapmp_model.h
                                         POINTER(CControllerState), c_double, _dp, _dp, _dp, c_int, _dp,
                                         POINTER(CControllerState), _dp]),
     "tapmp_reference": (None, [c_double, POINTER(CTrajectory), _dp]),
+    "tapmp_sample_index": (c_int, [c_double, c_double, c_double, _dp]),
 }
 
 
@@ -126,7 +129,9 @@ def c_config(cfg: PlantConfig) -> CPlantConfig:
     return CPlantConfig(cfg.encoder_resolution, D3(cfg.c_v1, cfg.c_v2, cfg.c_v3),
                         D3(cfg.F_c1, cfg.F_c2, cfg.F_c3), cfg.v_s, cfg.force_limit, cfg.k_pull,
                         cfg.attraction_force, cfg.attraction_gap, cfg.cogging_amplitude, cfg.cogging_pitch,
-                        D3(cfg.cogging_phase1, cfg.cogging_phase2, cfg.cogging_phase3), cfg.substeps)
+                        D3(cfg.cogging_phase1, cfg.cogging_phase2, cfg.cogging_phase3),
+                        D3(cfg.disturbance_force1, cfg.disturbance_force2, cfg.disturbance_force3),
+                        cfg.disturbance_time, cfg.noise_rms, cfg.substeps, cfg.noise_seed)
 
 
 def c_gains(g: Gains, m: ModalGains = ModalGains()) -> CGains:
@@ -202,10 +207,10 @@ class Native:
         self.lib.tapmp_plant_rhs(byref(pl), (c_double * 6)(*s), D3(*F), ds)
         return tuple(ds)
 
-    def plant_step(self, pl, h, F):
-        """(ok, new state)"""
+    def plant_step(self, pl, h, F, t=0.0):
+        """(ok, new state) of the step from t [s] over h [s]"""
         s_new = (c_double * 6)()
-        ok = self.lib.tapmp_plant_step(byref(pl), h, D3(*F), s_new)
+        ok = self.lib.tapmp_plant_step(byref(pl), t, h, D3(*F), s_new)
         return ok, tuple(s_new)
 
     def plant_outputs(self, pl):
@@ -404,6 +409,11 @@ def random_config(rng, variant: str, substeps: int = 1) -> PlantConfig:
         cogging_pitch=u(rng, 0.005, 0.05),
         cogging_phase1=u(rng, -math.pi, math.pi), cogging_phase2=u(rng, -math.pi, math.pi),
         cogging_phase3=u(rng, -math.pi, math.pi),
+        disturbance_force1=u(rng, -20.0, 20.0) if variant == "all" else 0.0,
+        disturbance_force2=u(rng, -20.0, 20.0) if variant == "all" else 0.0,
+        disturbance_force3=u(rng, -20.0, 20.0) if variant == "all" else 0.0,
+        noise_rms=u(rng, 1e-8, 1e-6) if variant == "all" else 0.0,
+        noise_seed=int(rng.integers(0, 2**31)),
         substeps=substeps)
 
 
@@ -445,7 +455,7 @@ def test_ctypes_structures_mirror_the_header_layout(tmp_path):
 
 
 def test_every_function_of_the_header_is_exported_and_has_a_prototype_here(native_lib):
-    declared = re.findall(r"^(?:void|int|double)\s+(tapmp_\w+)\(", MODEL_HEADER.read_text(), re.M)
+    declared = re.findall(r"^(?:TAPMP_LINKAGE\s+)?(?:void|int|double)\s+(tapmp_\w+)\(", MODEL_HEADER.read_text(), re.M)
     assert sorted(declared) == sorted(PROTOTYPES)
     for name in declared:
         assert getattr(native_lib, name)
@@ -675,9 +685,21 @@ def test_plant_outputs_match_python_measured_true_positions_velocities_and_state
         cfg = random_config(rng, "all")._replace(encoder_resolution=[0.0, 1e-7, 1e-7 * u(rng, 0.8, 1.2)][i % 3])
         plant, pl, s = random_plant_case(rng, native, "ideal")
         plant.cfg, pl.c = cfg, c_config(cfg)
+        plant.sample = pl.sample = float(rng.integers(0, 10**6))  # the noise of that sample
         py = (*plant.measured_positions(), *plant.joint_positions(), *plant.joint_velocities(), *plant.state)
         check.check(native.plant_outputs(pl), py, (plant.p, cfg, s))
     check.done()
+
+
+def test_noise_samples_are_the_same_numbers_in_c_and_python(native):
+    """Bit for bit, including sample indices a deserialized state could hold (negative, huge)."""
+    from tapmp.plant import noise_sample
+    rng = np.random.default_rng(353)
+    cases = [(int(rng.integers(0, 2**31)), float(rng.integers(0, 2**40)), int(rng.integers(0, 3)))
+             for _ in range(2000)]
+    cases += [(0, 0.0, 0), (2147483647, 0.0, 2), (5, -1.0, 1), (5, 2.0**53, 1), (5, 1e300, 0), (5, 2.5, 0)]
+    for seed, k, motor in cases:
+        assert native.lib.tapmp_noise_sample(seed, k, motor) == noise_sample(seed, k, motor), (seed, k, motor)
 
 
 # --- control ----------------------------------------------------------------------------------

@@ -7,11 +7,17 @@
 
 #include "instance.h"
 
-#define FMI2_FUNCTION_PREFIX_UNUSED
 #include "fmi2Functions.h"
 
+/* The callbacks used, copied member by member: the standard's fmi2CallbackFunctions has
+ * const members, so the struct itself cannot be assigned. */
 typedef struct {
-    fmi2CallbackFunctions cb;
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2_callbacks;
+
+typedef struct {
+    fmi2_callbacks cb;
 } fmi2_env;
 
 static void logger(void *instance, int status, const char *category, const char *message)
@@ -35,7 +41,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)fmuResourceLocation, (void)visible;
     fmi2_env *env = calloc(1, sizeof *env);
     if (!env) return NULL;
-    if (functions) env->cb = *functions;
+    if (functions) {
+        env->cb.logger = functions->logger;
+        env->cb.componentEnvironment = functions->componentEnvironment;
+    }
     if (fmuType != fmi2CoSimulation) {
         if (env->cb.logger)
             env->cb.logger(env->cb.componentEnvironment, instanceName, fmi2Error, "logStatusError",
@@ -82,25 +91,25 @@ fmi2Status fmi2Reset(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_re
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[])
 {
     INSTANCE(c);
-    return (fmi2Status)tapmp_get_real(inst, vr, n, value);
+    return (fmi2Status)tapmp_get_real(inst, vr, n, value, n);
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[])
 {
     INSTANCE(c);
-    return (fmi2Status)tapmp_get_integer(inst, vr, n, value);
+    return (fmi2Status)tapmp_get_integer(inst, vr, n, value, n);
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[])
 {
     INSTANCE(c);
-    return (fmi2Status)tapmp_set_real(inst, vr, n, value);
+    return (fmi2Status)tapmp_set_real(inst, vr, n, value, n);
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[])
 {
     INSTANCE(c);
-    return (fmi2Status)tapmp_set_integer(inst, vr, n, value);
+    return (fmi2Status)tapmp_set_integer(inst, vr, n, value, n);
 }
 
 static fmi2Status unsupported(tapmp_instance *inst, const char *call, const char *why)
@@ -158,10 +167,8 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    (void)state;
     INSTANCE(c);
-    *size = tapmp_serialized_size();
-    return fmi2OK;
+    return (fmi2Status)tapmp_serialized_size(inst, (const tapmp_state *)state, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
@@ -224,6 +231,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
     INSTANCE(c);
+    if (tapmp_require_pointer(inst, value, "GetRealStatus", "value") != ST_OK) return fmi2Error;
     if (s == fmi2LastSuccessfulTime) {
         *value = inst->time;
         return fmi2OK;
@@ -241,6 +249,7 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
     INSTANCE(c);
+    if (tapmp_require_pointer(inst, value, "GetBooleanStatus", "value") != ST_OK) return fmi2Error;
     if (s == fmi2Terminated) {
         *value = fmi2False;
         return fmi2OK;

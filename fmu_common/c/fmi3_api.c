@@ -120,30 +120,26 @@ fmi3Status fmi3Reset(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_res
 
 fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv)
 {
-    (void)nv;
     INSTANCE(c);
-    return (fmi3Status)tapmp_get_real(inst, vr, n, v);
+    return (fmi3Status)tapmp_get_real(inst, vr, n, v, nv);
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv)
 {
-    (void)nv;
     INSTANCE(c);
-    return (fmi3Status)tapmp_set_real(inst, vr, n, v);
+    return (fmi3Status)tapmp_set_real(inst, vr, n, v, nv);
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Int32 v[], size_t nv)
 {
-    (void)nv;
     INSTANCE(c);
-    return (fmi3Status)tapmp_get_integer(inst, vr, n, (int *)v);
+    return (fmi3Status)tapmp_get_integer(inst, vr, n, (int *)v, nv);
 }
 
 fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Int32 v[], size_t nv)
 {
-    (void)nv;
     INSTANCE(c);
-    return (fmi3Status)tapmp_set_integer(inst, vr, n, (const int *)v);
+    return (fmi3Status)tapmp_set_integer(inst, vr, n, (const int *)v, nv);
 }
 
 /* Getters and setters of types this FMU has no variables of: fine for n = 0. */
@@ -236,10 +232,8 @@ fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *state)
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState state, size_t *size)
 {
-    (void)state;
     INSTANCE(c);
-    *size = tapmp_serialized_size();
-    return fmi3OK;
+    return (fmi3Status)tapmp_serialized_size(inst, (const tapmp_state *)state, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState state, fmi3Byte bytes[], size_t size)
@@ -268,9 +262,10 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     return (fmi3Status)status;
 }
 
-/* Everything below belongs to interfaces this FMU does not provide. */
-#define NOT_PROVIDED(name, why, ...)                                                                 \
-    fmi3Status fmi3##name(fmi3Instance c, __VA_ARGS__) { return unsupported(c, #name, why); }
+/* Everything below belongs to interfaces this FMU does not provide. PARAMS is the
+ * parenthesized parameter list, the rest marks the parameters other than c as unused. */
+#define NOT_PROVIDED(name, why, params, ...)                                                         \
+    fmi3Status fmi3##name params { __VA_ARGS__; return unsupported(c, #name, why); }
 #define NOT_PROVIDED0(name, why)                                                                     \
     fmi3Status fmi3##name(fmi3Instance c) { return unsupported(c, #name, why); }
 #define NO_ME "Model Exchange is not provided"
@@ -280,38 +275,55 @@ NOT_PROVIDED0(EnterEventMode, "hasEventMode is false")
 NOT_PROVIDED0(EnterStepMode, "hasEventMode is false")
 NOT_PROVIDED0(EnterConfigurationMode, "this FMU has no structural parameters")
 NOT_PROVIDED0(ExitConfigurationMode, "this FMU has no structural parameters")
-NOT_PROVIDED(GetDirectionalDerivative, NO_DERIVATIVES, const fmi3ValueReference u[], size_t nu,
-             const fmi3ValueReference k[], size_t nk, const fmi3Float64 seed[], size_t ns,
-             fmi3Float64 sens[], size_t nsens)
-NOT_PROVIDED(GetAdjointDerivative, NO_DERIVATIVES, const fmi3ValueReference u[], size_t nu,
-             const fmi3ValueReference k[], size_t nk, const fmi3Float64 seed[], size_t ns,
-             fmi3Float64 sens[], size_t nsens)
-NOT_PROVIDED(GetIntervalDecimal, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, fmi3Float64 i[],
-             fmi3IntervalQualifier q[])
-NOT_PROVIDED(GetIntervalFraction, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c_[],
-             fmi3UInt64 r[], fmi3IntervalQualifier q[])
-NOT_PROVIDED(GetShiftDecimal, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, fmi3Float64 s[])
-NOT_PROVIDED(GetShiftFraction, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c_[],
-             fmi3UInt64 r[])
-NOT_PROVIDED(SetIntervalDecimal, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, const fmi3Float64 i[])
-NOT_PROVIDED(SetIntervalFraction, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[],
-             const fmi3UInt64 r[])
-NOT_PROVIDED(SetShiftDecimal, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, const fmi3Float64 s[])
-NOT_PROVIDED(SetShiftFraction, NO_CLOCKS, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[],
-             const fmi3UInt64 r[])
+NOT_PROVIDED(GetDirectionalDerivative, NO_DERIVATIVES,
+             (fmi3Instance c, const fmi3ValueReference u[], size_t nu, const fmi3ValueReference k[], size_t nk,
+              const fmi3Float64 seed[], size_t ns, fmi3Float64 sens[], size_t nsens),
+             (void)u, (void)nu, (void)k, (void)nk, (void)seed, (void)ns, (void)sens, (void)nsens)
+NOT_PROVIDED(GetAdjointDerivative, NO_DERIVATIVES,
+             (fmi3Instance c, const fmi3ValueReference u[], size_t nu, const fmi3ValueReference k[], size_t nk,
+              const fmi3Float64 seed[], size_t ns, fmi3Float64 sens[], size_t nsens),
+             (void)u, (void)nu, (void)k, (void)nk, (void)seed, (void)ns, (void)sens, (void)nsens)
+NOT_PROVIDED(GetIntervalDecimal, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 i[], fmi3IntervalQualifier q[]),
+             (void)vr, (void)n, (void)i, (void)q)
+NOT_PROVIDED(GetIntervalFraction, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c_[], fmi3UInt64 r[],
+              fmi3IntervalQualifier q[]),
+             (void)vr, (void)n, (void)c_, (void)r, (void)q)
+NOT_PROVIDED(GetShiftDecimal, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 s[]), (void)vr, (void)n, (void)s)
+NOT_PROVIDED(GetShiftFraction, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c_[], fmi3UInt64 r[]),
+             (void)vr, (void)n, (void)c_, (void)r)
+NOT_PROVIDED(SetIntervalDecimal, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 i[]),
+             (void)vr, (void)n, (void)i)
+NOT_PROVIDED(SetIntervalFraction, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[], const fmi3UInt64 r[]),
+             (void)vr, (void)n, (void)c_, (void)r)
+NOT_PROVIDED(SetShiftDecimal, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 s[]), (void)vr, (void)n, (void)s)
+NOT_PROVIDED(SetShiftFraction, NO_CLOCKS,
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[], const fmi3UInt64 r[]),
+             (void)vr, (void)n, (void)c_, (void)r)
 NOT_PROVIDED0(EvaluateDiscreteStates, NO_ME)
-NOT_PROVIDED(UpdateDiscreteStates, "hasEventMode is false", fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *d,
-             fmi3Boolean *e, fmi3Boolean *f, fmi3Float64 *g)
+NOT_PROVIDED(UpdateDiscreteStates, "hasEventMode is false",
+             (fmi3Instance c, fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *d, fmi3Boolean *e, fmi3Boolean *f,
+              fmi3Float64 *g),
+             (void)a, (void)b, (void)d, (void)e, (void)f, (void)g)
 NOT_PROVIDED0(EnterContinuousTimeMode, NO_ME)
-NOT_PROVIDED(CompletedIntegratorStep, NO_ME, fmi3Boolean a, fmi3Boolean *b, fmi3Boolean *d)
-NOT_PROVIDED(SetTime, NO_ME, fmi3Float64 t)
-NOT_PROVIDED(SetContinuousStates, NO_ME, const fmi3Float64 x[], size_t n)
-NOT_PROVIDED(GetContinuousStateDerivatives, NO_ME, fmi3Float64 x[], size_t n)
-NOT_PROVIDED(GetEventIndicators, NO_ME, fmi3Float64 x[], size_t n)
-NOT_PROVIDED(GetContinuousStates, NO_ME, fmi3Float64 x[], size_t n)
-NOT_PROVIDED(GetNominalsOfContinuousStates, NO_ME, fmi3Float64 x[], size_t n)
-NOT_PROVIDED(GetNumberOfEventIndicators, NO_ME, size_t *n)
-NOT_PROVIDED(GetNumberOfContinuousStates, NO_ME, size_t *n)
-NOT_PROVIDED(GetOutputDerivatives, "maxOutputDerivativeOrder is 0", const fmi3ValueReference vr[], size_t n,
-             const fmi3Int32 o[], fmi3Float64 v[], size_t nv)
-NOT_PROVIDED(ActivateModelPartition, NO_CLOCKS, fmi3ValueReference clock, fmi3Float64 t)
+NOT_PROVIDED(CompletedIntegratorStep, NO_ME, (fmi3Instance c, fmi3Boolean a, fmi3Boolean *b, fmi3Boolean *d),
+             (void)a, (void)b, (void)d)
+NOT_PROVIDED(SetTime, NO_ME, (fmi3Instance c, fmi3Float64 t), (void)t)
+NOT_PROVIDED(SetContinuousStates, NO_ME, (fmi3Instance c, const fmi3Float64 x[], size_t n), (void)x, (void)n)
+NOT_PROVIDED(GetContinuousStateDerivatives, NO_ME, (fmi3Instance c, fmi3Float64 x[], size_t n), (void)x, (void)n)
+NOT_PROVIDED(GetEventIndicators, NO_ME, (fmi3Instance c, fmi3Float64 x[], size_t n), (void)x, (void)n)
+NOT_PROVIDED(GetContinuousStates, NO_ME, (fmi3Instance c, fmi3Float64 x[], size_t n), (void)x, (void)n)
+NOT_PROVIDED(GetNominalsOfContinuousStates, NO_ME, (fmi3Instance c, fmi3Float64 x[], size_t n), (void)x, (void)n)
+NOT_PROVIDED(GetNumberOfEventIndicators, NO_ME, (fmi3Instance c, size_t *n), (void)n)
+NOT_PROVIDED(GetNumberOfContinuousStates, NO_ME, (fmi3Instance c, size_t *n), (void)n)
+NOT_PROVIDED(GetOutputDerivatives, "maxOutputDerivativeOrder is 0",
+             (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Int32 o[], fmi3Float64 v[], size_t nv),
+             (void)vr, (void)n, (void)o, (void)v, (void)nv)
+NOT_PROVIDED(ActivateModelPartition, NO_CLOCKS, (fmi3Instance c, fmi3ValueReference clock, fmi3Float64 t),
+             (void)clock, (void)t)

@@ -18,7 +18,7 @@
 #define INSTANCE_MAGIC 0x7A3D9C51u
 #define TIME_TOLERANCE 1e-9
 
-const tapmp_var VARS[N_VARS] = MODEL_VARS_INIT;
+TAPMP_DEFINITION const tapmp_var VARS[N_VARS] = MODEL_VARS_INIT;
 
 static const char *MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
 
@@ -128,6 +128,8 @@ void tapmp_free(tapmp_instance *inst)
             live[i] = live[--n_live];
             break;
         }
+    for (size_t i = 0; i < inst->n_states; i++) free(inst->states[i]);  /* states the master did not free */
+    free(inst->states);
     inst->magic = 0;
     free(inst->name);
     free(inst);
@@ -298,6 +300,9 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     if (!(isfinite(h) && h > 0.0))
         return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a finite number > 0 "
                           "(at t = %.6g s)", tapmp_repr(h, v), t);
+    if (!isfinite(t + h))
+        return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a step whose end t + h is "
+                          "finite (at t = %.6g s)", tapmp_repr(h, v), t);
     if (fabs(t - inst->time) > TIME_TOLERANCE * fmax(1.0, fabs(inst->time))) {
         snprintf(allowed, sizeof allowed, "the end of the previous step, %s s (within %g s)",
                  tapmp_repr(inst->time, w), TIME_TOLERANCE * fmax(1.0, fabs(inst->time)));
@@ -348,11 +353,41 @@ int tapmp_reset(tapmp_instance *inst)
     return ST_OK;
 }
 
+/* The names of the get and set calls in messages, per FMI version. */
+static const char *call_name(const tapmp_instance *inst, int set, char type)
+{
+    int fmi3 = inst->fmi[3] == '3';
+    if (type == 'R') return set ? (fmi3 ? "SetFloat64" : "SetReal") : (fmi3 ? "GetFloat64" : "GetReal");
+    return set ? (fmi3 ? "SetInt32" : "SetInteger") : (fmi3 ? "GetInt32" : "GetInteger");
+}
+
 static int bad_vr(tapmp_instance *inst, const char *call, unsigned vr, char type)
 {
     return tapmp_fail(inst, "%s%s: value reference %u is invalid: allowed are the %s variables of %s "
-                      "(see modelDescription.xml)", inst->fmi, call, vr, type == 'R' ? "Real" : "Integer",
+                      "(see modelDescription.xml)", inst->fmi, call, vr,
+                      type == 'R' ? (inst->fmi[3] == '3' ? "Float64" : "Real") : (inst->fmi[3] == '3' ? "Int32" : "Integer"),
                       MODEL_IDENTIFIER_STRING);
+}
+
+/* The arrays of a get or set: n value references and nv values, both readable (or, for
+ * a get, writable) over their whole length before anything is touched. */
+static int check_arrays(tapmp_instance *inst, const char *call, const unsigned vr[], size_t n, const void *v,
+                        size_t nv)
+{
+    if (nv != n)
+        return tapmp_fail(inst, "%s%s: nValues = %zu is invalid: allowed is %zu, the number of value references "
+                          "(every variable of %s is a scalar)", inst->fmi, call, nv, n, MODEL_IDENTIFIER_STRING);
+    if (n && (!vr || !v))
+        return tapmp_fail(inst, "%s%s: %s = NULL is invalid: allowed is an array of %zu elements", inst->fmi, call,
+                          !vr ? "valueReferences" : "values", n);
+    return ST_OK;
+}
+
+int tapmp_require_pointer(tapmp_instance *inst, const void *p, const char *call, const char *what)
+{
+    if (p) return ST_OK;
+    return tapmp_fail(inst, "%s%s: %s = NULL is invalid: allowed is a pointer to write the result to", inst->fmi,
+                      call, what);
 }
 
 /* FMI lets a master set parameters and inputs in Initialization Mode and read the
@@ -374,25 +409,31 @@ static void update_initial_unknowns(tapmp_instance *inst)
     else memcpy(inst->reals + MODEL_OUT_FIRST, saved, sizeof saved);
 }
 
-int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[])
+int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[], size_t nv)
 {
+    const char *call = call_name(inst, 0, 'R');
+    int status = check_arrays(inst, call, vr, n, v, nv);
+    if (status != ST_OK) return status;
     if (inst->dirty && inst->mode == MODE_INITIALIZATION) update_initial_unknowns(inst);
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] == N_VARS) {  /* FMI 3.0's independent variable `time` */
+        if (vr[i] == N_VARS && inst->fmi[3] == '3') {  /* FMI 3.0's independent variable `time` */
             v[i] = inst->time;
             continue;
         }
-        if (vr[i] > N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, "GetReal", vr[i], 'R');
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, call, vr[i], 'R');
         v[i] = inst->reals[vr[i]];
     }
     return ST_OK;
 }
 
-int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v[])
+int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v[], size_t nv)
 {
+    const char *call = call_name(inst, 0, 'I');
+    int status = check_arrays(inst, call, vr, n, v, nv);
+    if (status != ST_OK) return status;
     if (inst->dirty && inst->mode == MODE_INITIALIZATION) update_initial_unknowns(inst);
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, "GetInteger", vr[i], 'I');
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, call, vr[i], 'I');
         v[i] = inst->ints[vr[i]];
     }
     return ST_OK;
@@ -430,12 +471,15 @@ static int check_tunable(tapmp_instance *inst, unsigned vr, double old_real, int
     return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
 }
 
-int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[])
+int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[], size_t nv)
 {
     char text[40];
+    const char *call = call_name(inst, 1, 'R');
+    int status = check_arrays(inst, call, vr, n, v, nv);
+    if (status != ST_OK) return status;
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, "SetReal", vr[i], 'R');
-        int status = settable(inst, vr[i], v[i], "SetReal");
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, call, vr[i], 'R');
+        status = settable(inst, vr[i], v[i], call);
         if (status != ST_OK) return status;
         if (!isfinite(v[i])) return tapmp_invalid(inst, VARS[vr[i]].name, tapmp_repr(v[i], text), "a finite number", 1);
         double old = inst->reals[vr[i]];
@@ -446,11 +490,14 @@ int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const do
     return ST_OK;
 }
 
-int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[])
+int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[], size_t nv)
 {
+    const char *call = call_name(inst, 1, 'I');
+    int status = check_arrays(inst, call, vr, n, v, nv);
+    if (status != ST_OK) return status;
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, "SetInteger", vr[i], 'I');
-        int status = settable(inst, vr[i], (double)v[i], "SetInteger");
+        if (vr[i] >= N_VARS || VARS[vr[i]].type != 'I') return bad_vr(inst, call, vr[i], 'I');
+        status = settable(inst, vr[i], (double)v[i], call);
         if (status != ST_OK) return status;
         int old = inst->ints[vr[i]];
         inst->ints[vr[i]] = v[i];
@@ -481,13 +528,71 @@ typedef struct {
     char error[TAPMP_MESSAGE_MAX];
 } serial_layout;
 
+/* Is s a state this instance holds? Compares pointers only: s is never read. */
+static int held(const tapmp_instance *inst, const tapmp_state *s)
+{
+    for (size_t i = 0; s && i < inst->n_states; i++)
+        if (inst->states[i] == s) return 1;
+    return 0;
+}
+
+/* Record a new state as held; 0 if out of memory (the state is then freed). */
+static int hold(tapmp_instance *inst, tapmp_state *s)
+{
+    if (inst->n_states == inst->max_states) {
+        size_t max = inst->max_states ? 2 * inst->max_states : 4;
+        tapmp_state **grown = realloc(inst->states, max * sizeof *grown);
+        if (!grown) {
+            free(s);
+            return 0;
+        }
+        inst->states = grown;
+        inst->max_states = max;
+    }
+    inst->states[inst->n_states++] = s;
+    return 1;
+}
+
+static void release(tapmp_instance *inst, tapmp_state *s)
+{
+    for (size_t i = 0; i < inst->n_states; i++)
+        if (inst->states[i] == s) {
+            inst->states[i] = inst->states[--inst->n_states];
+            break;
+        }
+    free(s);
+}
+
+/* The FMU state calls, as each FMI version spells them. */
+enum { GET_STATE, SET_STATE, FREE_STATE, STATE_SIZE, SERIALIZE, DESERIALIZE };
+static const char *state_call(const tapmp_instance *inst, int call)
+{
+    static const char *const fmi2[] = {"fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
+                                       "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate"};
+    static const char *const fmi3[] = {"fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState",
+                                       "fmi3SerializedFMUStateSize", "fmi3SerializeFMUState", "fmi3DeserializeFMUState"};
+    return inst->fmi[3] == '3' ? fmi3[call] : fmi2[call];
+}
+
+/* The error for a state argument this instance does not hold. */
+static int foreign_state(tapmp_instance *inst, int call)
+{
+    return tapmp_fail(inst, "%s: FMUstate is invalid: allowed is a state from %s or %s of this instance that was "
+                      "not freed", state_call(inst, call), state_call(inst, GET_STATE), state_call(inst, DESERIALIZE));
+}
+
 int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
 {
-    if (!state) return tapmp_fail(inst, "%sGetFMUstate: FMUstate pointer is NULL", inst->fmi);
+    if (!state) return tapmp_fail(inst, "%s: FMUstate pointer is NULL", state_call(inst, GET_STATE));
     tapmp_state *s = *state;
-    if (!s || s->magic != STATE_MAGIC) {
+    if (s && !held(inst, s))  /* FMI: NULL for a new state, or one of this instance's to overwrite */
+        return tapmp_fail(inst, "%s: *FMUstate is invalid: allowed is NULL (a new state) or a state from %s or %s "
+                          "of this instance that was not freed", state_call(inst, GET_STATE),
+                          state_call(inst, GET_STATE), state_call(inst, DESERIALIZE));
+    if (!s) {
         s = calloc(1, sizeof *s);
-        if (!s) return tapmp_fail(inst, "%sGetFMUstate: out of memory", inst->fmi);
+        if (!s || !hold(inst, s))  /* hold frees s if it cannot record it */
+            return tapmp_fail(inst, "%s: out of memory", state_call(inst, GET_STATE));
         s->magic = STATE_MAGIC;
     }
     s->copy = *inst;
@@ -541,38 +646,40 @@ static void apply_state(tapmp_instance *inst, const tapmp_instance *c)
 int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state)
 {
     char msg[TAPMP_MESSAGE_MAX];
-    if (!state || state->magic != STATE_MAGIC)
-        return tapmp_fail(inst, "%sSetFMUstate: FMUstate is invalid: allowed is a state from %sGetFMUstate "
-                          "or %sDeSerializeFMUstate of this FMU", inst->fmi, inst->fmi, inst->fmi);
+    if (!held(inst, state)) return foreign_state(inst, SET_STATE);
     if (!validate_state(&state->copy, msg, sizeof msg))
-        return tapmp_fail(inst, "%sSetFMUstate: %s; nothing was changed", inst->fmi, msg);
+        return tapmp_fail(inst, "%s: %s; nothing was changed", state_call(inst, SET_STATE), msg);
     apply_state(inst, &state->copy);
     return ST_OK;
 }
 
 int tapmp_free_state(tapmp_instance *inst, tapmp_state **state)
 {
-    (void)inst;
-    if (state && *state) {
-        (*state)->magic = 0;
-        free(*state);
-        *state = NULL;
-    }
+    if (!state || !*state) return ST_OK;  /* FMI: a NULL state is ignored */
+    if (!held(inst, *state)) return foreign_state(inst, FREE_STATE);
+    release(inst, *state);
+    *state = NULL;
     return ST_OK;
 }
 
-size_t tapmp_serialized_size(void) { return sizeof(serial_layout); }
+int tapmp_serialized_size(tapmp_instance *inst, const tapmp_state *state, size_t *size)
+{
+    if (!held(inst, state)) return foreign_state(inst, STATE_SIZE);
+    int status = tapmp_require_pointer(inst, size, state_call(inst, STATE_SIZE) + 4, "size");
+    if (status == ST_OK) *size = sizeof(serial_layout);
+    return status;
+}
 
 int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes, size_t size)
 {
-    if (!state || state->magic != STATE_MAGIC)
-        return tapmp_fail(inst, "%sSerializeFMUstate: FMUstate is invalid: allowed is a state from "
-                          "%sGetFMUstate", inst->fmi, inst->fmi);
+    if (!held(inst, state)) return foreign_state(inst, SERIALIZE);
     if (size < sizeof(serial_layout))
-        return tapmp_fail(inst, "%sSerializeFMUstate: size = %zu is invalid: allowed is >= %zu (from "
-                          "%sSerializedFMUstateSize)", inst->fmi, size, sizeof(serial_layout), inst->fmi);
+        return tapmp_fail(inst, "%s: size = %zu is invalid: allowed is >= %zu (from %s)", state_call(inst, SERIALIZE),
+                          size, sizeof(serial_layout), state_call(inst, STATE_SIZE));
+    if (!bytes) return tapmp_fail(inst, "%s: serializedState = NULL is invalid: allowed is an array of size bytes",
+                                  state_call(inst, SERIALIZE));
     serial_layout *s = calloc(1, sizeof *s);
-    if (!s) return tapmp_fail(inst, "%sSerializeFMUstate: out of memory", inst->fmi);
+    if (!s) return tapmp_fail(inst, "%s: out of memory", state_call(inst, SERIALIZE));
     const tapmp_instance *c = &state->copy;
     memcpy(s->magic, SERIAL_MAGIC, sizeof s->magic);
     snprintf(s->model, sizeof s->model, "%s", MODEL_IDENTIFIER_STRING);
@@ -595,16 +702,17 @@ int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes,
 int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapmp_state **state)
 {
     char msg[TAPMP_MESSAGE_MAX];
-    if (!state) return tapmp_fail(inst, "%sDeSerializeFMUstate: FMUstate pointer is NULL", inst->fmi);
+    const char *call = state_call(inst, DESERIALIZE);
+    if (!state) return tapmp_fail(inst, "%s: FMUstate pointer is NULL", call);
     if (!bytes || size != sizeof(serial_layout))
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: size = %zu is invalid: allowed is %zu (a state "
-                          "serialized by this FMU)", inst->fmi, size, sizeof(serial_layout));
+        return tapmp_fail(inst, "%s: size = %zu is invalid: allowed is %zu (a state serialized by this FMU)", call,
+                          size, sizeof(serial_layout));
     serial_layout *s = malloc(sizeof *s);
     tapmp_state *st = calloc(1, sizeof *st);
     if (!s || !st) {
         free(s);
         free(st);
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: out of memory", inst->fmi);
+        return tapmp_fail(inst, "%s: out of memory", call);
     }
     memcpy(s, bytes, sizeof *s);
     int ok = 1;
@@ -618,30 +726,41 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
     tapmp_instance *c = &st->copy;
     if (ok) {
         *c = *inst;
-        c->mode = (tapmp_mode)s->mode;
+        c->mode = s->mode >= MODE_INSTANTIATED && s->mode <= MODE_TERMINATED ? (tapmp_mode)s->mode : MODE_INSTANTIATED;
         c->failed = s->failed != 0;
         c->retune = s->retune != 0;
-        c->has_model = s->has_model != 0;
+        c->has_model = 0;  /* validated without the model first: the model is built from valid parameters only */
         c->time = s->time;
         memcpy(c->reals, s->reals, sizeof c->reals);
         memcpy(c->ints, s->ints, sizeof c->ints);
         s->error[sizeof s->error - 1] = 0;
         memcpy(c->error, s->error, sizeof c->error);
         memset(&c->m, 0, sizeof c->m);
-        if (c->has_model) {  /* rebuilt from the parameters; validate_state checks it all below */
+        if (s->mode != (int)c->mode) {
+            snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to 3", s->mode);
+            ok = 0;
+        } else if ((ok = validate_state(c, msg, sizeof msg)) && s->has_model &&
+                   (ok = model_validate(c, msg, sizeof msg) && check_ranges(c, msg, sizeof msg))) {
+            c->has_model = 1;  /* rebuilt from the parameters; validate_state checks the hidden state */
             model_setup(c);
             model_set_hidden(c, s->hidden);
             memcpy(c->reals, s->reals, sizeof c->reals);  /* the serialized outputs stand */
+            ok = validate_state(c, msg, sizeof msg);
         }
-        ok = validate_state(c, msg, sizeof msg);
     }
     free(s);
     if (!ok) {
         free(st);
-        return tapmp_fail(inst, "%sDeSerializeFMUstate: %s; nothing was changed", inst->fmi, msg);
+        return tapmp_fail(inst, "%s: %s; nothing was changed", call, msg);
     }
+    if (*state && !held(inst, *state)) {  /* FMI: NULL for a new state, or one of this instance's to replace */
+        free(st);
+        return tapmp_fail(inst, "%s: *FMUstate is invalid: allowed is NULL (a new state) or a state of this instance "
+                          "that was not freed", call);
+    }
+    if (!hold(inst, st)) return tapmp_fail(inst, "%s: out of memory", call);
     st->magic = STATE_MAGIC;
-    if (*state && (*state)->magic == STATE_MAGIC) tapmp_free_state(inst, state);
+    if (*state) release(inst, *state);
     *state = st;
     return ST_OK;
 }

@@ -42,6 +42,8 @@ typedef struct tapmp_instance {
     void *env;              /* the FMI layer's callback data */
     int logging_on;
     unsigned magic;         /* INSTANCE_MAGIC while alive (double free detection) */
+    struct tapmp_state **states;  /* the FMU states this instance handed out and has not freed */
+    size_t n_states, max_states;
     /* everything below is the FMU state */
     tapmp_mode mode;
     double time;            /* current communication point [s] */
@@ -55,66 +57,73 @@ typedef struct tapmp_instance {
     char error[TAPMP_MESSAGE_MAX];  /* the first error */
 } tapmp_instance;
 
-extern const tapmp_var VARS[N_VARS];
+TAPMP_LINKAGE const tapmp_var VARS[N_VARS];
 
 /* Python's repr() of a float ("0.1", "1e-05", "inf") into buf (>= 32 bytes); returns buf. */
-char *tapmp_repr(double x, char *buf);
+TAPMP_LINKAGE char *tapmp_repr(double x, char *buf);
 
 /* Life cycle */
-tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, void *env,
+TAPMP_LINKAGE tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, void *env,
                           int logging_on, const char *token);
-void tapmp_free(tapmp_instance *inst);
-int tapmp_alive(const tapmp_instance *inst);
+TAPMP_LINKAGE void tapmp_free(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_alive(const tapmp_instance *inst);
 
 /* Logging: an error is always passed on and recorded (the first one) in inst->error. */
-void tapmp_log(tapmp_instance *inst, int status, const char *category, const char *fmt, ...);
-int tapmp_fail(tapmp_instance *inst, const char *fmt, ...);
+TAPMP_LINKAGE void tapmp_log(tapmp_instance *inst, int status, const char *category, const char *fmt, ...);
+TAPMP_LINKAGE int tapmp_fail(tapmp_instance *inst, const char *fmt, ...);
 /* "NAME = VALUE[ at t = T s] is invalid: allowed is ALLOWED[ (at t = T s)]" as
  * tapmp.errors.ModelInputError and fmu_common/slave.py write it; returns ST_ERROR. */
-int tapmp_invalid(tapmp_instance *inst, const char *name, const char *value, const char *allowed,
+TAPMP_LINKAGE int tapmp_invalid(tapmp_instance *inst, const char *name, const char *value, const char *allowed,
                   int time_in_value);
 /* The same with the message only written to buf (no logging); returns 0. */
-int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
+TAPMP_LINKAGE int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
                        const char *allowed, int has_time, double time);
 /* errors.require_positive on the Real parameters vrs[0..n-1], in that order; 0 + msg on the first failure. */
-int tapmp_require_positive(const tapmp_instance *inst, const int vrs[], int n, char *msg, size_t size);
-int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);
+TAPMP_LINKAGE int tapmp_require_positive(const tapmp_instance *inst, const int vrs[], int n, char *msg, size_t size);
+TAPMP_LINKAGE int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);
 
 /* FMI operations, version neutral; each returns a status. */
-int tapmp_setup_experiment(tapmp_instance *inst, double start_time);
-int tapmp_enter_initialization(tapmp_instance *inst);
-int tapmp_exit_initialization(tapmp_instance *inst);
-int tapmp_do_step(tapmp_instance *inst, double t, double h);
-int tapmp_terminate(tapmp_instance *inst);
-int tapmp_reset(tapmp_instance *inst);
-int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[]);
-int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v[]);
-int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[]);
-int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[]);
+TAPMP_LINKAGE int tapmp_setup_experiment(tapmp_instance *inst, double start_time);
+TAPMP_LINKAGE int tapmp_enter_initialization(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_exit_initialization(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_do_step(tapmp_instance *inst, double t, double h);
+TAPMP_LINKAGE int tapmp_terminate(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_reset(tapmp_instance *inst);
+/* Get and set: `nv` is the number of values in v (FMI 3.0's nValues; FMI 2.0 passes n).
+ * Every variable is a scalar, so nv must equal n; vr and v may be NULL only for n = 0. */
+TAPMP_LINKAGE int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[], size_t nv);
+TAPMP_LINKAGE int tapmp_get_integer(tapmp_instance *inst, const unsigned vr[], size_t n, int v[], size_t nv);
+TAPMP_LINKAGE int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[], size_t nv);
+TAPMP_LINKAGE int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[], size_t nv);
+/* An output pointer argument (size, value) of `call` that must not be NULL; ST_OK or the error. */
+TAPMP_LINKAGE int tapmp_require_pointer(tapmp_instance *inst, const void *p, const char *call, const char *what);
 
-/* FMU state: a copy of the instance from `mode` on. */
+/* FMU state: a copy of the instance from `mode` on. A state belongs to the instance that
+ * made it (GetFMUstate, DeSerializeFMUstate): every call with a state checks that it is one
+ * this instance holds, without reading it, so a state of another instance, a freed state or
+ * a stray pointer is refused; FreeInstance frees the states still held. */
 typedef struct tapmp_state tapmp_state;
-int tapmp_get_state(tapmp_instance *inst, tapmp_state **state);
-int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state);
-int tapmp_free_state(tapmp_instance *inst, tapmp_state **state);
-size_t tapmp_serialized_size(void);
-int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes, size_t size);
-int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapmp_state **state);
+TAPMP_LINKAGE int tapmp_get_state(tapmp_instance *inst, tapmp_state **state);
+TAPMP_LINKAGE int tapmp_set_state(tapmp_instance *inst, const tapmp_state *state);
+TAPMP_LINKAGE int tapmp_free_state(tapmp_instance *inst, tapmp_state **state);
+TAPMP_LINKAGE int tapmp_serialized_size(tapmp_instance *inst, const tapmp_state *state, size_t *size);
+TAPMP_LINKAGE int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes, size_t size);
+TAPMP_LINKAGE int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapmp_state **state);
 
 /* --- hooks of the model file ------------------------------------------------------ */
 /* Check the parameters as the Python model's validated() does, in the same order; on
  * failure write the message (tapmp_invalid_text) to msg and return 0. */
-int model_validate(const tapmp_instance *inst, char *msg, size_t size);
+TAPMP_LINKAGE int model_validate(const tapmp_instance *inst, char *msg, size_t size);
 /* Build the model from the parameters (after model_validate) and publish the outputs
  * that do not depend on inputs. */
-void model_setup(tapmp_instance *inst);
+TAPMP_LINKAGE void model_setup(tapmp_instance *inst);
 /* Outputs that depend on inputs at the end of initialization (controller); 0 + msg on error. */
-int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size);
+TAPMP_LINKAGE int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size);
 /* Advance from t to t + h [s]; compute the outputs into out (MODEL_N_OUT values, in the
  * order of the output block) without publishing; 0 + msg on error. */
-int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
+TAPMP_LINKAGE int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
 /* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. */
-void model_get_hidden(const tapmp_instance *inst, double hidden[]);
-void model_set_hidden(tapmp_instance *inst, const double hidden[]);
+TAPMP_LINKAGE void model_get_hidden(const tapmp_instance *inst, double hidden[]);
+TAPMP_LINKAGE void model_set_hidden(tapmp_instance *inst, const double hidden[]);
 
 #endif

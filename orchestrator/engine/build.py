@@ -21,7 +21,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, UNITS, VARIABLES
+from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, UNITS, VARIABLES, dependencies, dependency_attributes
 
 from . import toolchain
 from .families import default_build_dir
@@ -46,9 +46,11 @@ SSP_NAME = "TAPMP.ssp"
 def complete_model_description(xml: bytes, model: str) -> bytes:
     """Add unit definitions, units and the model structure to a pythonfmu modelDescription.
 
-    Outputs change only in doStep (no direct feedthrough), so ModelStructure/Outputs
-    lists them with no dependencies; all outputs are initial unknowns computed from
-    the parameters (and, for the controller, the inputs) during initialization.
+    pythonfmu writes every output with no dependency attribute (an importer must then
+    assume each depends on every input: an algebraic loop that is not there). The model
+    structure is rewritten from ``tapmp.interface.dependencies``: outputs change only in
+    doStep (no direct feedthrough), and the initial unknowns list the inputs and
+    parameters they are computed from in Initialization Mode.
     """
     root = ET.fromstring(xml)
     table = {v.name: v for v in VARIABLES[model]}
@@ -59,23 +61,26 @@ def complete_model_description(xml: bytes, model: str) -> bytes:
         ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
     pos = list(root).index(root.find("CoSimulation")) + 1
     root.insert(pos, units)
-    outputs = []
-    for index, sv in enumerate(root.find("ModelVariables"), start=1):
+    outputs, index = [], {}
+    for i, sv in enumerate(root.find("ModelVariables"), start=1):
         var = table[sv.get("name")]
+        index[var.name] = i
         real = sv.find("Real")
         if real is not None and var.unit:
             real.set("unit", var.unit)
         if var.causality == "output":
-            outputs.append(index)
+            outputs.append((i, var.name))
     structure = root.find("ModelStructure")
     for child in list(structure):
         structure.remove(child)
     if outputs:
+        deps = dependencies(model)
         out = ET.SubElement(structure, "Outputs")
         init = ET.SubElement(structure, "InitialUnknowns")
-        for index in outputs:
-            ET.SubElement(out, "Unknown", index=str(index), dependencies="")
-            ET.SubElement(init, "Unknown", index=str(index))
+        for i, name in outputs:
+            ET.SubElement(out, "Unknown", {"index": str(i), **dependency_attributes(deps[name].step, index)})
+        for i, name in outputs:
+            ET.SubElement(init, "Unknown", {"index": str(i), **dependency_attributes(deps[name].initial, index)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
@@ -187,9 +192,11 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
         fmu = Path(fmu)
         front, binding = binaries
         where = f"binaries/{PLATFORM}/"
+        with zipfile.ZipFile(fmu) as z:  # the binding checks the host's fmuGUID against resources/guid.txt
+            guid = ET.fromstring(z.read("modelDescription.xml")).get("guid", "")
         _rewrite_fmu(fmu, {"modelDescription.xml": lambda b: complete_model_description(b, model)},
                      {f"{where}{script.stem}.so": front.read_bytes(), f"{where}{BINDING}": binding.read_bytes(),
-                      f"{where}{PYTHON_ENV}": python_env().encode()})
+                      f"{where}{PYTHON_ENV}": python_env().encode(), "resources/guid.txt": guid.encode()})
     return fmu
 
 

@@ -34,7 +34,8 @@ from xml.etree import ElementTree as ET
 
 from fmpy import read_model_description
 
-from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, UNITS, VARIABLES
+from tapmp.interface import (CONNECTIONS, ELEMENT, FMU_NAMES, TIME, UNITS, VARIABLES, Dependencies,
+                             dependencies, dependency_attributes)
 
 CONTAINER = "TAPMP_ClosedLoop"
 RUNTIME_ID = "container_fmu"         # model identifier = the runtime library's name
@@ -76,6 +77,32 @@ def _container_variables(fmus: dict) -> list[dict]:
     return out
 
 
+def container_dependencies() -> dict[str, Dependencies]:
+    """{"element.output": Dependencies} of the container's outputs, from the nested FMUs'
+    (tapmp.interface.dependencies) followed through the connections: the container has no
+    inputs, so its outputs depend on time and, in Initialization Mode, on the parameters
+    that reach them (the runtime copies every connection once in Initialization Mode, so the
+    controller's initial F follows the plant's initial q and the trajectory's q_d)."""
+    nested = {m: dependencies(m) for m in FMU_NAMES}
+    source = {(dst, dst_var): (src, src_var) for src, src_var, dst, dst_var in CONNECTIONS}
+
+    def reach(model: str, output: str, kind: str, seen: frozenset) -> set:
+        found = set()
+        for known in getattr(nested[model][output], kind):
+            if known == TIME:
+                found.add(TIME)
+            elif (model, known) in source:
+                if (model, known) not in seen:
+                    found |= reach(*source[model, known], kind, seen | {(model, known)})
+            else:
+                found.add(f"{ELEMENT[model]}.{known}")
+        return found
+
+    return {f"{ELEMENT[m]}.{name}": Dependencies(tuple(reach(m, name, "step", frozenset())),
+                                                 tuple(reach(m, name, "initial", frozenset())))
+            for m in FMU_NAMES for name in nested[m]}
+
+
 def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
     """The container's modelDescription.xml (FMI 2.0 co-simulation)."""
     mds = [read_model_description(str(fmus[m])) for m in FMU_NAMES]
@@ -109,8 +136,9 @@ def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
     sv = ET.SubElement(mvs, "ScalarVariable", name="time", valueReference="0", causality="independent",
                        variability="continuous", description="simulation time")
     ET.SubElement(sv, "Real", unit="s")
-    outputs = []
+    outputs, index = [], {TIME: 1}
     for vr, v in enumerate(variables, start=1):
+        index[v["name"]] = vr + 1
         mv = v["mv"]
         attrs = {"name": v["name"], "valueReference": str(vr), "causality": mv.causality,
                  "variability": mv.variability, "description": v["description"]}
@@ -124,12 +152,15 @@ def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
             typed["start"] = str(mv.start)
         ET.SubElement(sv, mv.type, typed)
         if mv.causality == "output":
-            outputs.append(vr + 1)  # 1-based index in ModelVariables; time is index 1
+            outputs.append(v["name"])  # index: 1-based in ModelVariables; time is index 1
+    deps = container_dependencies()
     structure = ET.SubElement(root, "ModelStructure")
     out_el, init_el = ET.SubElement(structure, "Outputs"), ET.SubElement(structure, "InitialUnknowns")
-    for index in outputs:
-        ET.SubElement(out_el, "Unknown", index=str(index), dependencies="")
-        ET.SubElement(init_el, "Unknown", index=str(index))
+    for name in outputs:
+        ET.SubElement(out_el, "Unknown", {"index": str(index[name]), **dependency_attributes(deps[name].step, index)})
+    for name in outputs:
+        ET.SubElement(init_el, "Unknown", {"index": str(index[name]),
+                                           **dependency_attributes(deps[name].initial, index)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 

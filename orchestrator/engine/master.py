@@ -623,30 +623,39 @@ class CoSimulation:
     def step(self) -> None:
         """One macro step from t_k to t_{k+1} (t0 + k h to t0 + (k + 1) h on the default clock).
 
-        The hot path: 10,000 calls per simulated second. Each FMI call is a direct
-        ctypes call that returns its fmi2Status; statuses are or-ed and checked once
-        per unit, and the log is only scanned when it grew.
+        The hot path: 10,000 calls per simulated second. Each FMI call is a direct ctypes
+        call that returns its fmi2Status; like the Reference FMUs' CALL pattern, the worst
+        status so far is kept call by call and the step stops at the first call above
+        fmi2Warning (a failed fmi2SetReal means no doStep on stale inputs); the log is only
+        scanned when it grew.
         """
         t, h = self.clock.at(self.k), self.clock.step(self.k)
         n_log = len(self.log)
         if self.ordering == "gauss-seidel":
             for unit in self._step_units:
-                status = unit.apply_inputs() | unit.do_step(t, h) | unit.read_outputs()
+                status = unit.apply_inputs()
+                if status > 1 or len(self.log) != n_log:
+                    self._step_failed(unit, t, n_log, status)
+                status = max(status, unit.do_step(t, h))
+                if status > 1 or len(self.log) != n_log:
+                    self._step_failed(unit, t, n_log, status)
+                status = max(status, unit.read_outputs())
                 if status > 1 or len(self.log) != n_log:
                     self._step_failed(unit, t, n_log, status)
         else:
             units = self._step_units
-            for unit in units:
-                status = unit.apply_inputs()
-                if status > 1:
-                    self._step_failed(unit, t, n_log, status)
-            for unit in units:
-                status = unit.do_step(t, h)
+            worst = [0] * len(units)  # per unit, the worst status of its calls in this step
+            for i, unit in enumerate(units):
+                status = worst[i] = unit.apply_inputs()
                 if status > 1 or len(self.log) != n_log:
                     self._step_failed(unit, t, n_log, status)
-            for unit in units:
-                status = unit.read_outputs()
-                if status > 1:
+            for i, unit in enumerate(units):
+                status = worst[i] = max(worst[i], unit.do_step(t, h))
+                if status > 1 or len(self.log) != n_log:
+                    self._step_failed(unit, t, n_log, status)
+            for i, unit in enumerate(units):
+                status = max(worst[i], unit.read_outputs())
+                if status > 1 or len(self.log) != n_log:
                     self._step_failed(unit, t, n_log, status)
         self.k += 1
         self._check_outputs(self.clock.at(self.k))
@@ -669,7 +678,7 @@ class CoSimulation:
                                       value, list(self.log))
 
     def _step_failed(self, unit: _Unit, t: float, n_log: int, status: int) -> None:
-        """Raise for a failed step of ``unit``: ``status`` (the or-ed status of its calls) above
+        """Raise for a failed step of ``unit``: ``status`` (the worst status of its calls so far) above
         fmi2Warning or an error logged since ``n_log``; return if it only logged non-errors."""
         errors = any(m.startswith(("[ERROR]", "[FATAL]")) for m in self.log[n_log:])
         if errors:

@@ -13,8 +13,15 @@ from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, UNITS, VARIABLES
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
+OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 ET.register_namespace("ssd", SSD)
 ET.register_namespace("ssc", SSC)
+ET.register_namespace("osp", OSP)  # libcosim matches the literal prefix "osp:"
+ET.register_namespace("oms", OMS)  # OMSimulator matches the literal prefix "oms:"
+OSP_ANNOTATION = "com.opensimulationplatform"
+OMS_ANNOTATION = "org.openmodelica"
+SERVO_STEP = 1e-4     # [s] the communication step of the built SSPs, the FMUs' DefaultExperiment stepSize
 
 
 # Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address.
@@ -70,8 +77,51 @@ def _q(ns: str, tag: str) -> str:
     return f"{{{ns}}}{tag}"
 
 
-def system_structure(stop_time: float = 2.5) -> bytes:
-    """The SystemStructure.ssd document of the three-FMU closed loop."""
+def _oms_annotation(parent: ET.Element) -> ET.Element:
+    """An ``ssc:Annotation`` of OMSimulator (type org.openmodelica) under ``parent``; its
+    ``oms:Annotations`` element is returned."""
+    annotation = ET.SubElement(parent, _q(SSC, "Annotation"), type=OMS_ANNOTATION)
+    return ET.SubElement(annotation, _q(OMS, "Annotations"))
+
+
+def default_experiment(start_time: float, stop_time: float, step: float, result_file: str) -> ET.Element:
+    """``ssd:DefaultExperiment`` with the start and stop time [s] and the fixed step [s] in the
+    vendor annotations SSP 1.0 leaves it to: OMSimulator's ``oms:SimulationInformation`` (its
+    result file, every step recorded) and libcosim's ``osp:FixedStepAlgorithm``.
+
+    OMSimulator reads only the first ``ssc:Annotation`` here, so its own comes first.
+    """
+    exp = ET.Element(_q(SSD, "DefaultExperiment"), startTime=repr(float(start_time)), stopTime=repr(float(stop_time)))
+    annotations = ET.SubElement(exp, _q(SSD, "Annotations"))
+    ET.SubElement(_oms_annotation(annotations), _q(OMS, "SimulationInformation"), resultFile=result_file,
+                  loggingInterval="0", bufferSize="1")
+    osp = ET.SubElement(annotations, _q(SSC, "Annotation"), type=OSP_ANNOTATION)
+    algorithm = ET.SubElement(osp, _q(OSP, "Algorithm"))
+    ET.SubElement(algorithm, _q(OSP, "FixedStepAlgorithm"), baseStepSize=repr(float(step)))
+    return exp
+
+
+def set_system_step(system: ET.Element, step: float) -> None:
+    """Give the ``ssd:System`` OMSimulator's fixed-step master with ``step`` [s] in its vendor
+    annotation (OMSimulator derives the system's kind from it and refuses a system without it),
+    replacing an earlier one; the annotations go last in the System (SSD schema sequence)."""
+    for old in system.findall(_q(SSD, "Annotations")):
+        for annotation in old.findall(_q(SSC, "Annotation")):
+            if annotation.get("type") == OMS_ANNOTATION:
+                old.remove(annotation)
+        if not len(old):
+            system.remove(old)
+    annotations = system.find(_q(SSD, "Annotations"))
+    if annotations is None:
+        annotations = ET.SubElement(system, _q(SSD, "Annotations"))
+    info = ET.SubElement(_oms_annotation(annotations), _q(OMS, "SimulationInformation"))
+    ET.SubElement(info, _q(OMS, "FixedStepMaster"), description="oms-ma", stepSize=repr(float(step)))
+
+
+def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP) -> bytes:
+    """The SystemStructure.ssd document of the three-FMU closed loop, run from 0 to
+    ``stop_time`` [s] at the fixed communication step ``step`` [s] (given for OMSimulator and
+    libcosim in their vendor annotations)."""
     root = ET.Element(_q(SSD, "SystemStructureDescription"), version="1.0", name="TAPMP")
     system = ET.SubElement(root, _q(SSD, "System"), name="TAPMP",
                            description="TAPMP closed loop: trajectory -> controller -> plant -> controller")
@@ -95,7 +145,8 @@ def system_structure(stop_time: float = 2.5) -> bytes:
     for name in sorted(used_units):
         u = ET.SubElement(units, _q(SSC, "Unit"), name=name)
         ET.SubElement(u, _q(SSC, "BaseUnit"), {k: str(e) for k, e in UNITS[name].items()})
-    ET.SubElement(root, _q(SSD, "DefaultExperiment"), startTime="0", stopTime=repr(stop_time))
+    set_system_step(system, step)
+    root.append(default_experiment(0.0, stop_time, step, f"{root.get('name')}_res.csv"))
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 

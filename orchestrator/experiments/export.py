@@ -14,10 +14,12 @@ with the scenario's parameter set added the way SSP 1.0 defines it:
   ignores system-level ones) and every SSP 1.0 reader understands them;
 * every parameter set is named after the scenario, so a tool that selects sets by name
   (libcosim, Ecos ``--parameterSet``) finds the whole scenario under one name;
-* ``ssd:DefaultExperiment`` gets the scenario's start and stop time [s] and two
-  annotations: the fixed step size for libcosim (``com.opensimulationplatform``:
+* ``ssd:DefaultExperiment`` gets the scenario's start and stop time [s] and three
+  annotations: OMSimulator's (``org.openmodelica``: ``oms:SimulationInformation``, the result
+  file ``<scenario>_res.csv``), the fixed step size for libcosim (``com.opensimulationplatform``:
   ``osp:FixedStepAlgorithm baseStepSize``) and the scenario's name, step, ordering, clock
-  and connection start (``org.tapmp.scenario``), which SSP has no element for.
+  and connection start (``org.tapmp.scenario``), which SSP has no element for; the system's
+  own OMSimulator annotation (``oms:FixedStepMaster stepSize``) gets the scenario's step.
 
 ``start_values`` gives the same values as ``--start-values`` arguments of ``fmpy simulate``
 for the container FMU TAPMP_ClosedLoop.fmu, whose parameters are named ``element.variable``.
@@ -29,18 +31,16 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..engine.ssp import SSC, SSD, ParameterAddressError, resolve_parameters
+from ..engine.ssp import (OSP, SSC, SSD, ParameterAddressError, default_experiment,  # noqa: F401 (OSP for readers)
+                          resolve_parameters, set_system_step)
 from .scenario import Scenario
 
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
-OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
 TAPMP_NS = "https://github.com/tapmp-cosim/ssp-annotations"
 ET.register_namespace("ssv", SSV)
-ET.register_namespace("osp", OSP)  # libcosim matches the literal prefix "osp:"
 ET.register_namespace("tapmp", TAPMP_NS)
 SSD_MEMBER = "SystemStructure.ssd"
 SCENARIO_ANNOTATION = "org.tapmp.scenario"
-OSP_ANNOTATION = "com.opensimulationplatform"
 # FMI 2.0 and FMI 3.0 variable types -> SSV parameter types
 _SSV_TYPES = {"Real": "Real", "Float64": "Real", "Float32": "Real", "Integer": "Integer", "Int32": "Integer",
               "Int16": "Integer", "Int8": "Integer", "UInt32": "Integer", "UInt16": "Integer",
@@ -115,15 +115,13 @@ def parameter_set(name: str, values: dict, declared: dict, units: dict, element:
 
 
 def _default_experiment(root: ET.Element, scenario: Scenario) -> None:
-    """Replace the SSD's DefaultExperiment with the scenario's times and step annotations."""
+    """Replace the SSD's DefaultExperiment with the scenario's times and step annotations and
+    give the system OMSimulator's fixed-step master at the scenario's step."""
     for old in root.findall(_q(SSD, "DefaultExperiment")):
         root.remove(old)
-    exp = ET.Element(_q(SSD, "DefaultExperiment"), startTime=repr(scenario.start_time),
-                     stopTime=repr(scenario.stop_time))
-    annotations = ET.SubElement(exp, _q(SSD, "Annotations"))
-    osp = ET.SubElement(annotations, _q(SSC, "Annotation"), type=OSP_ANNOTATION)
-    algorithm = ET.SubElement(osp, _q(OSP, "Algorithm"))
-    ET.SubElement(algorithm, _q(OSP, "FixedStepAlgorithm"), baseStepSize=repr(scenario.step))
+    set_system_step(root.find(_q(SSD, "System")), scenario.step)
+    exp = default_experiment(scenario.start_time, scenario.stop_time, scenario.step, f"{scenario.name}_res.csv")
+    annotations = exp.find(_q(SSD, "Annotations"))
     own = ET.SubElement(annotations, _q(SSC, "Annotation"), type=SCENARIO_ANNOTATION)
     ET.SubElement(own, _q(TAPMP_NS, "Scenario"), name=scenario.name, step=repr(scenario.step),
                   ordering=scenario.ordering, clock=scenario.clock, connectionStart=scenario.connection_start,

@@ -99,7 +99,30 @@ def comparison_tables(scenario_name: str, results: dict) -> str:
                                        "paper: reduction (%), as printed")):
                 lines.append(f"| {label} | " + " | ".join(printed(paper[n], r)) + " |")
         lines.append("")
+    lines += force_step_table(results, order)
     return "\n".join(lines)
+
+
+def force_step_table(results: dict, order: list) -> list[str]:
+    """Markdown lines: each run's response to the plant's force step (metrics.json force_step),
+    nothing if no run has one. Changes of the mean tracking error e = q_d - q [um] from the window
+    before the step to the last window of the run, and the peak change after the step."""
+    runs = [r for r in order if "force_step" in results[r]]
+    if not runs:
+        return []
+    fs = results[runs[0]]["force_step"]
+    lines = [f"### Response to the force step at {fs['disturbance_time_s']:g} s [um]", "",
+             f"Change of the mean tracking error from the {fs['window_s']:g} s before the step to the last "
+             f"{fs['window_s']:g} s of the run (a steady error the law leaves), its mean over the motors (the "
+             "common mode) and the largest change after the step.", "",
+             "| Control strategy | change e1 | change e2 | change e3 | common mode | peak e1 | peak e2 | peak e3 |",
+             "|---" * 8 + "|"]
+    for run in runs:
+        f = results[run]["force_step"]
+        lines.append(f"| ours: {_label(run)} | " + " | ".join(
+            f"{v:.3f}" for v in (*f["error_change_um"], f["common_mode_change_um"], *f["peak_error_change_um"]))
+            + " |")
+    return lines + [""]
 
 
 def _mean(values) -> float:

@@ -15,6 +15,7 @@ from tapmp.modal import modal_table
 
 from .baselines import scdc_modal
 from .paper_gains import paper_gains_table, run_paper_gains
+from .predictors import prediction_lines, run_extra
 from .report import PAPER, comparison_tables, modal_note, printed, reduction, runs_table, summary_table
 from .scenario import load
 
@@ -207,12 +208,14 @@ def _section(title: str, name: str, sc, runs, results, checks, command: str, fol
 
 
 def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, command: str,
-              paper_gains_stop: float = PAPER_GAINS_STOP, workers: int = 2) -> str:
+              paper_gains_stop: float = PAPER_GAINS_STOP, workers: int = 2, ssp: Path | None = None) -> str:
     """Run everything and write the page to ``out``; returns its text.
 
     compare(scenario, folder) runs `tapmp compare` on a scenario into folder and returns
     (runs, results, checks, text) as orchestrator.cli.run_comparison. paper_gains_stop [s]:
     horizon of the paper-gain runs (PAPER_GAIN_STEPS each), run in ``workers`` processes.
+    ssp: the FMUs of the extra runs that score the calibrated prediction (predictors.run_extra;
+    None: no such section).
     """
     comparisons, calibrated, folders = {}, {}, {}
     for name in SCENARIOS:
@@ -296,6 +299,10 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, comman
                               f"tapmp compare scenarios/{name}.toml --overwrite", folders[name])
         parts += ["## Closing note: predicted against paper reductions, Tables 1-6", "",
                   *_reduction_note(calibrated, "SC-DC predicted on the calibrated plants"), ""]
+        if ssp is not None and len(calibrated) == len(SCENARIOS):
+            extra = run_extra(scenarios_dir, Path(results_dir) / "predictors", ssp)
+            parts += ["## What the prediction is worth: null models, no calibration, the experiment's gains", "",
+                      *prediction_lines({k: v[2] for k, v in calibrated.items()}, extra), ""]
     else:
         parts += [f"No calibrated scenario (`{Path(scenarios_dir) / 'paper_simulation_calibrated.toml'}`, "
                   f"`{Path(scenarios_dir) / 'paper_experiment_calibrated.toml'}`) was present in this run, so no "

@@ -409,7 +409,8 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
     n, every = scenario.n_steps, scenario.record_every
     writer = (_CsvBlocks if fmt == "csv" else _MatBlocks)(out, sim.columns)
     try:
-        stats = metrics.ErrorStatistics(sim.columns, metrics.saturation_limit(sim.parameters))
+        stats = metrics.ErrorStatistics(sim.columns, metrics.saturation_limit(sim.parameters),
+                                        metrics.force_step(sim.parameters, scenario.start_time, scenario.stop_time))
         rows, first = [sim.row()], 0  # rows of steps first, first + 1, ... not yet written
         for k in range(1, n + 1):
             if stop.signal is not None:

@@ -66,8 +66,10 @@ _SECTION_PARAMS = {
     "trajectory": {v.name: v for v in VARIABLES[TRAJECTORY] if v.causality == "parameter"},
     "plant": {v.name: v for v in VARIABLES[PLANT] if v.causality == "parameter"},
     "controller": {v.name: v for v in VARIABLES[CONTROLLER] if v.causality == "parameter"
-                   and not v.name[:-1] in GAIN_NAMES and v.name != "law"},
+                   and not v.name[:-1] in GAIN_NAMES and v.name not in ("law", "T_s")},
 }
+# Set from the scenario's own keys, never in [controller]: the controller samples once per step.
+_FROM_SCENARIO = {"law": "law", "T_s": "step"}
 
 
 def model_tuple(kind, table: dict):
@@ -190,6 +192,7 @@ class Scenario:
         ctrl = dict(self.controller)
         ctrl.update(self.mismatched_params())
         ctrl["law"] = LAWS[self.law]
+        ctrl["T_s"] = self.step  # the controller's sample period: one sample per macro step
         for name, values in zip(GAIN_NAMES, self.gain_values()):
             for i, v in enumerate(values, start=1):
                 ctrl[f"{name}{i}"] = v
@@ -210,7 +213,7 @@ class Scenario:
                            tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
         ctrl = ControllerModel(model_tuple(ModelParams, ct), self.gain_values(), ct["law"],
                                ct.get("velocity_source", 0), ct.get("force_limit", 0.0),
-                               model_tuple(ModalGains, ct))
+                               model_tuple(ModalGains, ct), ct["T_s"], self.start_time)
         return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
     def mismatched_params(self) -> dict:
@@ -285,6 +288,16 @@ def _check_mismatch(s: Scenario) -> None:
                                 "allowed is one of them (the factor sets the controller's value)")
 
 
+def _check_disturbance(s: Scenario) -> None:
+    """A force step (any plant.disturbance_force_i != 0) starts within the run."""
+    if any(s.plant.get(f"disturbance_force{i}", 0.0) for i in (1, 2, 3)):
+        t = s.plant.get("disturbance_time", 0.0)
+        if not (s.start_time <= t < s.stop_time):
+            raise ScenarioError(f"plant.disturbance_time = {t!r} is invalid: allowed is a time in [start_time, "
+                                f"stop_time) = [{s.start_time:g}, {s.stop_time:g}) s (the force step must start "
+                                "within the run)")
+
+
 def _check_addressing(s: Scenario) -> None:
     """``order`` is a list of distinct element names, for Gauss-Seidel only (whether it names
     every element of the SSP exactly once is checked by the master); every [ELEMENT] table is
@@ -344,10 +357,14 @@ def validate(s: Scenario) -> Scenario:
         table = getattr(s, section)
         allowed = _SECTION_PARAMS[section]
         for k, v in table.items():
+            if section == "controller" and k in _FROM_SCENARIO:
+                raise ScenarioError(f"controller.{k} is set by the scenario's {_FROM_SCENARIO[k]} = "
+                                    f"{getattr(s, _FROM_SCENARIO[k])!r}: allowed is to set {_FROM_SCENARIO[k]}")
             if k not in allowed:
                 raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
     _check_mismatch(s)
+    _check_disturbance(s)
     checks = (("gain_overrides", lambda: s.gain_values().validated()),
               ("controller", lambda: model_tuple(ModalGains, s.controller).validated()),
               ("controller", lambda: model_tuple(ModelParams, {**s.controller,

@@ -123,11 +123,12 @@ def loop_models(scenario: Scenario, linear: bool = False):
     """(plant, controller, trajectory params) of a scenario, as the FMUs would build them.
 
     With linear=True the nonlinear parts (quantization, Coulomb friction, both force
-    saturations) are switched off, as the linearization treats them (module doc).
+    saturations) are switched off, as the linearization treats them (module doc). The
+    measurement noise is always off: the check is of the loop without it.
     """
     par = scenario.parameters()
     pl, ct, tr = par["plant"], par["controller"], par["trajectory"]
-    config = model_tuple(PlantConfig, pl)
+    config = model_tuple(PlantConfig, pl)._replace(noise_rms=0.0)
     force_limit = ct.get("force_limit", 0.0)
     if linear:
         config = config._replace(encoder_resolution=0.0, F_c1=0.0, F_c2=0.0, F_c3=0.0, force_limit=0.0)
@@ -137,7 +138,7 @@ def loop_models(scenario: Scenario, linear: bool = False):
                        tuple(pl.get(k, 0.0) for k in ("dX0", "dZ0", "dB0")))
     ctrl = ControllerModel(model_tuple(ModelParams, ct), scenario.gain_values(), ct["law"],
                            ct.get("velocity_source", VELOCITY_DIFFERENCE), force_limit,
-                           model_tuple(ModalGains, ct))
+                           model_tuple(ModalGains, ct), ct["T_s"], scenario.start_time)
     return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
 

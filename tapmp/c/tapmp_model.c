@@ -3,8 +3,17 @@
  * that both give the same doubles. Compile without -ffast-math and with
  * -ffp-contract=off (no fused multiply-add), as build_native.py does. */
 #include <math.h>
+#include <stdint.h>
 
 #include "tapmp_model.h"
+
+/* No fused multiply-add: a*b + c must round twice, as in Python. gcc in a standard mode
+ * (-std=c99) and MSVC do not contract by default; clang does unless told here. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#elif defined(_MSC_VER)
+#pragma fp_contract(off)
+#endif
 
 #define S3 TAPMP_S3
 #define SQRT3 TAPMP_SQRT3
@@ -150,6 +159,26 @@ double tapmp_quantize(double q, double resolution)
     return resolution * floor(q / resolution + 0.5);
 }
 
+/* plant._splitmix64 */
+static uint64_t splitmix64(uint64_t x)
+{
+    x += 0x9E3779B97F4A7C15ULL;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+    return x ^ (x >> 31);
+}
+
+/* plant.noise_sample: Box-Muller on two SplitMix64 outputs; a sample outside [0, 2^53) counts as 0 */
+double tapmp_noise_sample(int seed, double sample, int motor)
+{
+    uint64_t k = sample >= 0.0 && sample < 9007199254740992.0 ? (uint64_t)sample : 0;
+    uint64_t key = splitmix64((uint64_t)seed);
+    uint64_t n = 2 * (3 * k + (uint64_t)motor);
+    double u1 = (double)((splitmix64(key + n) >> 11) + 1) * 0x1p-53;
+    double u2 = (double)(splitmix64(key + n + 1) >> 11) * 0x1p-53;
+    return sqrt(-2.0 * log(u1)) * cos(TWO_PI * u2);
+}
+
 /* plant.PlantModel.__init__ (state and reference gaps; ranges are checked by the caller) */
 void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3])
 {
@@ -161,6 +190,7 @@ void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0
     tapmp_inverse(pose0[0], pose0[1], pose0[2], pl->p.L_1, q);
     pl->gap12_0 = q[1] - q[0];
     pl->gap23_0 = q[2] - q[1];
+    pl->sample = 0.0;
 }
 
 /* plant._attraction: force (gap / g)^2 per pair, g = gap + d; NaN once g <= 0 */
@@ -250,12 +280,15 @@ static double saturate(double F, double lim)
 }
 
 /* plant.PlantModel.step: classic RK4 with `substeps` steps */
-int tapmp_plant_step(const tapmp_plant *pl, double h, const double F_in[3], double s_new[6])
+int tapmp_plant_step(const tapmp_plant *pl, double t0, double h, const double F_in[3], double s_new[6])
 {
     double F[3] = {F_in[0], F_in[1], F_in[2]};
     double lim = pl->c.force_limit;
+    const double *d = pl->c.disturbance_force;
     if (lim > 0.0)
         for (int i = 0; i < 3; i++) F[i] = saturate(F[i], lim);
+    if ((d[0] != 0.0 || d[1] != 0.0 || d[2] != 0.0) && t0 >= pl->c.disturbance_time)
+        for (int i = 0; i < 3; i++) F[i] += d[i];  /* an external force: not limited by the motor */
     int n = pl->c.substeps;
     double dt = h / n, hdt = 0.5 * dt, dt6 = dt / 6.0;
     double s[6], k1[6], k2[6], k3[6], k4[6], t[6];
@@ -280,7 +313,11 @@ void tapmp_plant_outputs(const tapmp_plant *pl, double out[15])
     const double *s = pl->s;
     double L1 = pl->p.L_1;
     tapmp_inverse(s[0], s[1], s[2], L1, out + 3);
-    for (int i = 0; i < 3; i++) out[i] = tapmp_quantize(out[3 + i], pl->c.encoder_resolution);
+    for (int i = 0; i < 3; i++) {
+        double q = out[3 + i];
+        if (pl->c.noise_rms > 0.0) q = q + pl->c.noise_rms * tapmp_noise_sample(pl->c.noise_seed, pl->sample, i);
+        out[i] = tapmp_quantize(q, pl->c.encoder_resolution);
+    }
     tapmp_joint_velocity(s[2], s[3], s[4], s[5], L1, out + 6);
     for (int i = 0; i < 6; i++) out[9 + i] = s[i];
 }
@@ -389,6 +426,13 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
         *next = *st;
     }
     return 1;
+}
+
+/* control.sample_index */
+int tapmp_sample_index(double t, double t0, double T_s, double *k)
+{
+    *k = floor((t - t0) / T_s + 0.5);
+    return fabs(t - (t0 + *k * T_s)) <= TAPMP_SAMPLE_TOLERANCE * T_s;
 }
 
 /* trajectory.reference */

@@ -9,6 +9,19 @@
 #ifndef TAPMP_MODEL_H
 #define TAPMP_MODEL_H
 
+/* Linkage of everything that is not an FMI function. Compiled file by file these are
+ * ordinary external declarations. The FMU's sources/all.c compiles the whole FMU as one
+ * translation unit and defines TAPMP_LINKAGE as static (and TAPMP_DEFINITION, for object
+ * definitions, as static), so that only the fmi2 / fmi3 functions have external linkage:
+ * several TAPMP source FMUs link into one program without a clash. A static prototype gives
+ * the plain function definition that follows internal linkage (C99 6.2.2). */
+#ifndef TAPMP_LINKAGE
+#define TAPMP_LINKAGE extern
+#endif
+#ifndef TAPMP_DEFINITION
+#define TAPMP_DEFINITION
+#endif
+
 #define TAPMP_S3 0.5773502691896257      /* sqrt(3)/3, the slope of the outer links */
 #define TAPMP_SQRT3 1.7320508075688772   /* sqrt(3) */
 
@@ -30,7 +43,11 @@ typedef struct {
     double cogging_amplitude;   /* force ripple amplitude [N] */
     double cogging_pitch;       /* force ripple period in the motor position [m] */
     double cogging_phase[3];    /* force ripple phase per motor [rad] */
+    double disturbance_force[3];  /* external force step per mover [N] */
+    double disturbance_time;    /* when the force step starts [s] */
+    double noise_rms;           /* measurement noise rms per measured position [m] */
     int substeps;               /* RK4 steps per communication step */
+    int noise_seed;             /* seed of the measurement noise */
 } tapmp_plant_config;
 
 /* The plant: parameters, settings, reference gaps and the state (X, Z, B, dX, dZ, dB). */
@@ -39,6 +56,7 @@ typedef struct {
     tapmp_plant_config c;
     double gap12_0, gap23_0;
     double s[6];
+    double sample;              /* completed steps: the index of the measurement noise */
 } tapmp_plant;
 
 /* Controller gains per motor (tapmp.control.Gains) and the PID-DC modal gains
@@ -55,56 +73,60 @@ typedef struct {
 
 /* --- kinematics (tapmp/kinematics.py) --- */
 /* Eq. 2: pose (X [m], Z [m], B [rad]) -> motor positions q [m]. */
-void tapmp_inverse(double X, double Z, double B, double L1, double q[3]);
+TAPMP_LINKAGE void tapmp_inverse(double X, double Z, double B, double L1, double q[3]);
 /* Eq. 1: q [m] -> pose; returns 0 and the arcsine argument in *arg outside |arg| < 1. */
-int tapmp_forward(const double q[3], double L1, double x[3], double *arg);
+TAPMP_LINKAGE int tapmp_forward(const double q[3], double L1, double x[3], double *arg);
 /* Third column of J (Eq. 4), rows 1 and 3 [m/rad]. */
-void tapmp_rotation_column(double B, double L1, double *a1, double *a3);
+TAPMP_LINKAGE void tapmp_rotation_column(double B, double L1, double *a1, double *a3);
 /* Eq. 3: qdot = J(x) xdot [m/s]. */
-void tapmp_joint_velocity(double B, double dX, double dZ, double dB, double L1, double dq[3]);
+TAPMP_LINKAGE void tapmp_joint_velocity(double B, double dX, double dZ, double dB, double L1, double dq[3]);
 /* xdot = J^-1 qdot. */
-void tapmp_task_velocity(double B, const double dq[3], double L1, double dx[3]);
+TAPMP_LINKAGE void tapmp_task_velocity(double B, const double dq[3], double L1, double dx[3]);
 /* Eq. 14: w = J^-T v, generalized forces [N, N, N m] -> motor forces [N]. */
-void tapmp_solve_transpose(double B, const double v[3], double L1, double w[3]);
+TAPMP_LINKAGE void tapmp_solve_transpose(double B, const double v[3], double L1, double w[3]);
 
 /* --- dynamics (tapmp/dynamics.py) --- */
 /* Exact mass matrix M(x) (Eq. 12, general m_1, m_3), row-major 3x3. */
-void tapmp_mass_matrix(double B, const tapmp_params *p, double M[9]);
+TAPMP_LINKAGE void tapmp_mass_matrix(double B, const tapmp_params *p, double M[9]);
 /* Forward dynamics (Eq. 11): xdd for the generalized force u = J^T F. */
-void tapmp_task_acceleration(double B, double dB, const double u[3], const tapmp_params *p,
+TAPMP_LINKAGE void tapmp_task_acceleration(double B, double dB, const double u[3], const tapmp_params *p,
                              double xdd[3]);
 /* Inverse dynamics M xdd + C(x, xd) v + G; dB the B rate, dBv the B component of v. */
-void tapmp_generalized_force(double B, double dB, const double xdd[3], double dBv,
+TAPMP_LINKAGE void tapmp_generalized_force(double B, double dB, const double xdd[3], double dBv,
                              const tapmp_params *p, double out[3]);
 
 /* --- plant (tapmp/plant.py) --- */
 /* Round q [m] to the nearest encoder count of `resolution` [m] (0 = exact). */
-double tapmp_quantize(double q, double resolution);
-/* Set the initial state and the reference gaps of the pulling law. */
-void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
+TAPMP_LINKAGE double tapmp_quantize(double q, double resolution);
+/* Standard normal number for (seed, sample index, motor 0..2), counter-based (plant.noise_sample). */
+TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
+/* Set the initial state, the reference gaps of the pulling law and the sample count. */
+TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
-void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6]);
-/* Advance over h [s] with RK4 and `substeps`; F [N] is saturated here. The new state is
- * written to s_new; returns 1 if it is finite with |B| < pi/2, else 0 (state untouched). */
-int tapmp_plant_step(const tapmp_plant *pl, double h, const double F[3], double s_new[6]);
-/* Outputs in the FMU's order: q1..q3 (measured), q_true, dq, X, Z, B, dX, dZ, dB (15). */
-void tapmp_plant_outputs(const tapmp_plant *pl, double out[15]);
+TAPMP_LINKAGE void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6]);
+/* Advance from t over h [s] with RK4 and `substeps`; F [N] is saturated here, then the force
+ * step is added from disturbance_time on. The new state is written to s_new; returns 1 if it is
+ * finite with |B| < pi/2, else 0 (state untouched). */
+TAPMP_LINKAGE int tapmp_plant_step(const tapmp_plant *pl, double t, double h, const double F[3], double s_new[6]);
+/* Outputs in the FMU's order: q1..q3 (measured: true + noise of this sample, quantized), q_true,
+ * dq, X, Z, B, dX, dZ, dB (15). */
+TAPMP_LINKAGE void tapmp_plant_outputs(const tapmp_plant *pl, double out[15]);
 
 /* --- control (tapmp/control.py) --- */
 enum { TAPMP_SCDC = 0, TAPMP_APDDC = 1, TAPMP_PIDDC = 2 };
 /* Dynamics compensation u_d of Eq. 26 / 39 [N]; returns 0 (and *arg) if q leaves Eq. 1's domain. */
-int tapmp_feedforward(const double q[3], const double dq[3], const double dx_d[3],
+TAPMP_LINKAGE int tapmp_feedforward(const double q[3], const double dq[3], const double dx_d[3],
                       const double ddx_d[3], const tapmp_params *p, double u_d[3], double *arg);
 /* SC-DC command u of Eq. 22-25. */
-void tapmp_scdc_command(const double e[3], const double de[3], const double c[3],
+TAPMP_LINKAGE void tapmp_scdc_command(const double e[3], const double de[3], const double c[3],
                         const double integral_c[3], const double u_d[3], const tapmp_gains *g,
                         double u[3]);
 /* APD-DC command of Eq. 38 (k_p = Lambda_p, k_v = Lambda_v, K_T1 = K_T, Eq. 41). */
-void tapmp_apd_command(const double e[3], const double de[3], const double u_d[3],
+TAPMP_LINKAGE void tapmp_apd_command(const double e[3], const double de[3], const double u_d[3],
                        const tapmp_gains *g, double u[3]);
 
 /* PID-DC command u = K_T u_d + K_P e + K_V de + K_I int(e), K = k_c Pi_c + k_d Pi_d. */
-void tapmp_pid_command(const double e[3], const double de[3], const double integral_e[3],
+TAPMP_LINKAGE void tapmp_pid_command(const double e[3], const double de[3], const double integral_e[3],
                        const double u_d[3], const tapmp_gains *g, double u[3]);
 
 /* The discrete controller's state between samples. */
@@ -117,14 +139,22 @@ typedef struct {
 /* One sample of tapmp.control.ControllerModel.sample: ref (9 values), q, dq_in -> F, u, e,
  * e_s (12 outputs, in that order). `advance` = 0 leaves the state untouched (initialization).
  * The new state goes to *next (may equal *st). Returns 0 (and *arg) on a domain error. */
-int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
+TAPMP_LINKAGE int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
                             int velocity_source, double force_limit,
                             const tapmp_controller_state *st, double h, const double ref[9],
                             const double q[3], const double dq_in[3], int advance,
                             double out[12], tapmp_controller_state *next, double *arg);
 
+/* tapmp.control.SAMPLE_TOLERANCE: a communication point within this x T_s of a sample
+ * instant t0 + k T_s is that instant. */
+#define TAPMP_SAMPLE_TOLERANCE 1e-4
+
+/* tapmp.control.sample_index: 1 and *k if the communication point t [s] falls on the sample
+ * instant t0 + k T_s (within TAPMP_SAMPLE_TOLERANCE T_s), else 0 (between instants). */
+TAPMP_LINKAGE int tapmp_sample_index(double t, double t0, double T_s, double *k);
+
 /* --- trajectory (tapmp/trajectory.py) --- */
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
-void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
+TAPMP_LINKAGE void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
 
 #endif
