@@ -110,10 +110,11 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path, every_output: bool = Fals
     import zipfile
 
     from orchestrator.engine.build_native import fmi_headers_dir
+    from orchestrator.engine.toolchain import compile_c
     exe = tmp / "c_master"
     if not exe.exists():
-        subprocess.run(["gcc", "-O2", f"-I{fmi_headers_dir()}", "-o", str(exe), str(ROOT / "benchmarks" / "c_master.c"),
-                        "-ldl"], check=True)
+        compile_c([ROOT / "benchmarks" / "c_master.c"], exe, shared=False, flags=["-O2"],
+                  includes=[fmi_headers_dir()], libs=["dl"])
         with zipfile.ZipFile(fmi2_ssp) as z:
             for model in FMU_NAMES:
                 z.extract(f"resources/{model}.fmu", tmp / "cm")

@@ -10,8 +10,10 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from .engine import build as build_mod
+from .engine.toolchain import PLATFORMS
 from .engine.master import CoSimulationError, remove_stale_folders
-from .engine.families import DEFAULT_FAMILY, FAMILIES, resolve_ssp
+from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
+                               resolve_ssp)
 from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
                       one_line, output_lock, prepare_output, run_scenario, write_comparison_status)
 from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
@@ -22,7 +24,17 @@ from .studies.study import StudyError
 def _ssp(args, scenario=None) -> Path:
     """--ssp, else the SSP of --fmus, else of the scenario's ``fmus`` (default native)."""
     fmus = args.fmus or (scenario.fmus if scenario is not None else DEFAULT_FAMILY)
-    return resolve_ssp(args.ssp, fmus)
+    return resolve_ssp(args.ssp, fmus, getattr(args, "fmus_dir", None))
+
+
+def scenario_file(name: str) -> str:
+    """A scenario argument: a file path, or the name of a scenario shipped with the package
+    (e.g. ``paper_simulation``, found in its scenarios folder) if no such file exists."""
+    path = Path(name)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return name
+    shipped = SCENARIOS_DIR / f"{name}.toml"
+    return str(shipped) if shipped.is_file() else name
 
 
 def _progress_bar(desc: str, enabled: bool):
@@ -49,7 +61,7 @@ def _run_one(scenario, ssp, out, overwrite, progress, label):
 
 def _load(args):
     """The scenario of a run/compare command: the file, its --set overrides and --format."""
-    scenario = load(args.scenario, args.set)
+    scenario = load(scenario_file(args.scenario), args.set)
     if getattr(args, "format", None):
         scenario = scenario.with_changes(format=args.format)
     return scenario
@@ -91,7 +103,16 @@ def warn_if_implausible(scenario) -> None:
 
 
 def cmd_build(args) -> int:
-    build_mod.build_all(Path(args.out))
+    from .engine.build_native import NativeBuildError, build_native
+    out = Path(args.out or default_build_dir())
+    for p in args.platform or ():  # before building anything
+        if p not in PLATFORMS:
+            raise ValueError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
+    try:
+        build_mod.build_all(out)
+        build_native(out / "native", platforms=args.platform)
+    except (build_mod.BuildError, NativeBuildError) as err:
+        raise ValueError(one_line(err)) from None
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")
@@ -110,7 +131,7 @@ def warn_if_unstable(scenario) -> None:
 
 def cmd_check(args) -> int:
     from .experiments.stability import check
-    scenario = load(args.scenario, args.set)
+    scenario = load(scenario_file(args.scenario), args.set)
     report = check(scenario)
     print(f"{scenario.name}: {report.summary()}")
     if args.eigenvalues:
@@ -264,7 +285,7 @@ def cmd_study(args) -> int:
 def cmd_export(args) -> int:
     """`tapmp export`: the scenario's SSP with its parameter set, and the container's start values."""
     from .experiments.export import export
-    scenario = load(args.scenario, args.set)
+    scenario = load(scenario_file(args.scenario), args.set)
     source = _ssp(args, scenario)
     ssp, values = export(scenario, source, Path(args.out), args.overwrite)
     pairs = values.read_text().split()
@@ -284,9 +305,14 @@ def cmd_plot(args) -> int:
 
 
 RELATIVE = "a relative path is relative to the current directory"
-PATHS_HELP = ("Paths: scenario files, --out, --ssp and a scenario's 'output' are relative to the current "
-              "directory; a scenario's gains_file is relative to the scenario file; the default SSP of --fmus is "
-              "found in the repository's build/ folder, wherever tapmp runs from.")
+PLATFORM_NAMES = tuple(PLATFORMS)
+PATHS_HELP = ("Paths: scenario files, --out, --ssp, --fmus-dir and a scenario's 'output' are relative to the "
+              "current directory; a scenario may also be named (paper_simulation: the scenario shipped with the "
+              "package); a scenario's gains_file is relative to the scenario file; the SSP of --fmus is found in "
+              f"--fmus-dir, else ${FMUS_DIR_ENV}, else the repository's build/ (in a checkout) or ./build "
+              "(installed as a wheel).")
+FMUS_DIR_HELP = (f"folder of the built FMUs, as `tapmp build --out DIR` writes it (default: ${FMUS_DIR_ENV}, else "
+                 "the repository's build/ in a checkout, else ./build)")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -296,10 +322,17 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
-    b = sub.add_parser("build", help="build the three FMUs, TAPMP.ssp and the container FMU",
-                       description="Build TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu, "
-                       "TAPMP.ssp and the closed-loop container FMU TAPMP_ClosedLoop.fmu.")
-    b.add_argument("--out", default=str(build_mod.DEFAULT_BUILD_DIR), help="output folder (default: build/)")
+    b = sub.add_parser("build", help="build every FMU family and its SSP",
+                       description="Build the pythonfmu family (TAPMP_Plant.fmu, TAPMP_Controller.fmu, "
+                       "TAPMP_Trajectory.fmu, TAPMP.ssp and the closed-loop container FMU TAPMP_ClosedLoop.fmu) "
+                       "into OUT and the native FMI 2.0 and 3.0 families into OUT/native/fmi2 and OUT/native/fmi3, "
+                       "with binaries for Linux, Windows and macOS on x86-64 and ARM, compiled by zig cc from the "
+                       "ziglang package ($CC for x86_64-linux if set). No system compiler needed.")
+    b.add_argument("--out", help=f"output folder (default: ${FMUS_DIR_ENV}, else the repository's build/ in a "
+                   "checkout, else ./build)")
+    b.add_argument("--platform", action="append", metavar="P",
+                   help="build the native FMUs' binaries for these platforms only (repeatable): "
+                   f"{', '.join(PLATFORM_NAMES)} (default: all)")
     b.set_defaults(func=cmd_build)
 
     def source_args(sp):
@@ -311,7 +344,8 @@ def parser() -> argparse.ArgumentParser:
         sp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, "
                         "build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, build/native/fmi3/TAPMP.ssp) or "
                         "python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the scenario's fmus; paths "
-                        "relative to the repository root")
+                        "relative to --fmus-dir")
+        sp.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
 
     def scenario_args(sp):
         source_args(sp)
@@ -377,13 +411,15 @@ def parser() -> argparse.ArgumentParser:
                         "paper-reproduction page: the paper's Tables 1-6 as printed beside ours, the modal table, "
                         "the baselines, the paper-gain runs and which of the paper's claims hold.")
     rp.add_argument("--out", default="docs/paper-reproduction.md", help="page to write")
-    rp.add_argument("--scenarios", default="scenarios", help="folder with paper_simulation.toml, paper_experiment.toml")
+    rp.add_argument("--scenarios", default=str(SCENARIOS_DIR), help="folder with paper_simulation.toml, "
+                    "paper_experiment.toml (default: the scenarios shipped with the package)")
     rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
                     f"overwritten; {RELATIVE}")
     rp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
     rp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
                     "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
-                    "scenario's fmus; paths relative to the repository root")
+                    "scenario's fmus; paths relative to --fmus-dir")
+    rp.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
     rp.add_argument("--paper-gains-stop-time", type=float, default=0.2, metavar="S",
                     help="horizon [s] of each run of the paper's gains at 1 us, 10 us and 0.1 ms (default 0.2)")
     rp.add_argument("--workers", type=int, default=2, help="processes for the paper-gain runs (default 2)")
@@ -402,7 +438,8 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
     st.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
                     "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
-                    "scenario's fmus; paths relative to the repository root")
+                    "scenario's fmus; paths relative to --fmus-dir")
+    st.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -413,8 +450,7 @@ def parser() -> argparse.ArgumentParser:
                         "state included) and its start time, stop time and step in the DefaultExperiment, so that "
                         "libcosim, Ecos or FMPy run the scenario; and FILE.start-values.txt, the same values as "
                         "--start-values for `fmpy simulate` on TAPMP_ClosedLoop.fmu (also printed). Relative "
-                        "paths are relative to the current directory; the default SSP of --fmus is found in the "
-                        "repository's build/.")
+                        "paths are relative to the current directory; the SSP of --fmus is found in --fmus-dir.")
     source_args(ex)
     ex.add_argument("--out", required=True, help="SSP file to write, ending in .ssp, e.g. export/paper.ssp")
     ex.add_argument("--overwrite", action="store_true", help="replace an existing FILE.ssp and its start values")

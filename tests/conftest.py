@@ -87,8 +87,8 @@ def built(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def native_built(tmp_path_factory):
-    """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real (gcc and
-    mingw-w64) into a temporary folder laid out as build/native/."""
+    """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real for every
+    platform (zig cc) into a temporary folder laid out as build/native/."""
     from orchestrator.engine.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=True)
 

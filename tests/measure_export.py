@@ -26,7 +26,7 @@ from conftest import COMMANDS, MOTOR_POSITIONS, ROOT, orchestrator_rows, paper_s
 from test_export import (run_container, run_ecos_executable, run_ecos_exported,  # noqa: E402
                          run_fmpy_ssp_exported, run_libcosim_exported)
 
-from orchestrator.engine.families import FAMILIES  # noqa: E402
+from orchestrator.engine.families import family_ssp  # noqa: E402
 
 NAMES = MOTOR_POSITIONS + COMMANDS
 
@@ -49,7 +49,7 @@ def main() -> int:
     ap.add_argument("--fmus", choices=["python", "native"], default="python")
     ap.add_argument("--stop-time", type=float, default=0.2)
     args = ap.parse_args()
-    source = FAMILIES[args.fmus]
+    source = family_ssp(args.fmus)
     scenario = paper_scenario(args.stop_time)
     with tempfile.TemporaryDirectory(prefix="tapmp_measure_") as tmp:
         ssp = Path(tmp) / "paper.ssp"

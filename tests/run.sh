@@ -2,23 +2,28 @@
 # The test command of the README, on a fresh Debian machine: bash tests/run.sh [PYTEST ARGS...]
 #
 # 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
-#    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), gcc-mingw-w64-x86-64 and
-#    wine64 (build the native FMUs' Windows binaries and run them), libminizip1 and libxml2 (the
+#    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), wine64 (runs the native
+#    FMUs' Windows binaries), qemu-user and libc6-arm64-cross (run their aarch64 Linux binaries
+#    under qemu-aarch64 with the arm64 C library as sysroot), libminizip1 and libxml2 (the
 #    third-party FMI tools in ../shared/tools: fmusim, OMSimulator), clang and libclang-rt-14-dev
 #    (libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer for the native FMUs' fuzz
 #    targets and sanitizer builds; TAPMP_FUZZ_SECONDS sets the seconds per fuzz target,
-#    default 60). As root directly, else
-#    through sudo; `apt-get update` only if installing fails (empty or stale package lists).
+#    default 60), and python3-dev if this Python has no C headers (Python.h, for the pythonfmu
+#    FMUs' binary). The FMUs' binaries need no system compiler: zig cc from PyPI's ziglang
+#    package builds them for every platform. As root directly, else through sudo;
+#    `apt-get update` only if installing fails (empty or stale package lists).
 # 2. Creates .venv with the package and its test extras and runs every test with pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
-PACKAGES=(libtbb12 gcc-mingw-w64-x86-64 wine64 libminizip1 libxml2 clang libclang-rt-14-dev)
+PACKAGES=(libtbb12 wine64 qemu-user libc6-arm64-cross libminizip1 libxml2 clang libclang-rt-14-dev)
 
 missing=()
 for package in "${PACKAGES[@]}"; do
     dpkg -s "$package" >/dev/null 2>&1 || missing+=("$package")
 done
+headers=$(python3 -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+[ -f "$headers/Python.h" ] || missing+=(python3-dev)
 
 as_root() {
     if [ "$(id -u)" -eq 0 ]; then

@@ -1,5 +1,5 @@
 """The FMUs in a host process without Python: a small C program (tests/c_host/fmi2_host.c),
-compiled here with gcc, loads the FMU binary, steps it and must match FMPy exactly."""
+compiled here by the project's toolchain (zig cc), loads the FMU binary, steps it and must match FMPy exactly."""
 
 import os
 import subprocess
@@ -9,6 +9,7 @@ from pathlib import Path
 import fmpy
 import pytest
 
+from orchestrator.engine.toolchain import compile_c
 from tapmp.interface import CONTROLLER, PLANT
 
 HOST_SOURCE = Path(__file__).parent / "c_host" / "fmi2_host.c"
@@ -19,9 +20,7 @@ RUNS = 20  # an exit-time crash showed up in about half of the runs with pythonf
 def host(tmp_path_factory):
     exe = tmp_path_factory.mktemp("c_host") / "fmi2_host"
     headers = Path(fmpy.__file__).parent / "c-code"
-    subprocess.run(["gcc", "-O1", "-Wall", f"-I{headers}", "-o", str(exe), str(HOST_SOURCE), "-ldl"],
-                   check=True)
-    return exe
+    return compile_c([HOST_SOURCE], exe, shared=False, flags=["-O1", "-Wall"], includes=[headers], libs=["dl"])
 
 
 def unzip(fmu: Path, dest: Path) -> Path:

@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev"]  # libFuzzer and the sanitizers
-PACKAGES = ["libtbb12", "gcc-mingw-w64-x86-64", "wine64", "libminizip1", "libxml2", *FUZZ_PACKAGES]
+PACKAGES = ["libtbb12", "wine64", "qemu-user", "libc6-arm64-cross", "libminizip1", "libxml2", *FUZZ_PACKAGES]
 TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod")  # the real programs the script and stand-ins use
 
 STANDINS = {
@@ -23,16 +23,22 @@ STANDINS = {
                '    : > "$LOG.failed"; exit 100\nfi\n',
     "id": 'echo "$STANDIN_UID"\n',
     "sudo": 'echo "sudo $*" >> "$LOG"\nexec env "$@"\n',
-    "python3": 'echo "python3 $* in $PWD" >> "$LOG"\nmkdir -p .venv/bin\n'
+    "python3": 'if [ "$1" = -c ]; then echo "$PYTHON_INCLUDE"; exit 0; fi\n'  # where Python.h would be
+               'echo "python3 $* in $PWD" >> "$LOG"\nmkdir -p .venv/bin\n'
                'printf \'#!/bin/bash\\necho "pip $*" >> "$LOG"\\n\' > .venv/bin/pip\n'
                'printf \'#!/bin/bash\\necho "python $*" >> "$LOG"\\nexit 7\\n\' > .venv/bin/python\n'
                'chmod +x .venv/bin/pip .venv/bin/python\n',
 }
 
 
-def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once=False, args=()):
-    """Run a copy of tests/run.sh; returns (exit code, stderr, lines of the command log)."""
+def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once=False, args=(), headers=True):
+    """Run a copy of tests/run.sh; returns (exit code, stderr, lines of the command log).
+    ``headers``: whether the stand-in python3's include folder holds Python.h."""
     repo, bin_dir, log = tmp_path / "repo", tmp_path / "bin", tmp_path / "log"
+    include = tmp_path / "include"
+    include.mkdir()
+    if headers:
+        (include / "Python.h").write_text("/* stand-in */\n")
     (repo / "tests").mkdir(parents=True)
     shutil.copy(ROOT / "tests" / "run.sh", repo / "tests" / "run.sh")
     bin_dir.mkdir()
@@ -45,7 +51,7 @@ def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once
         (bin_dir / name).chmod(0o755)
     log.write_text("")
     env = {"PATH": str(bin_dir), "LOG": str(log), "INSTALLED": " ".join(installed), "STANDIN_UID": str(uid),
-           "APT_FAILS_ONCE": "1" if apt_fails_once else "", "HOME": str(tmp_path)}
+           "APT_FAILS_ONCE": "1" if apt_fails_once else "", "HOME": str(tmp_path), "PYTHON_INCLUDE": str(include)}
     res = subprocess.run([str(bin_dir / "bash"), str(repo / "tests" / "run.sh"), *args], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=60)
     return res.returncode, res.stderr, log.read_text().splitlines()
@@ -62,9 +68,16 @@ def test_with_every_package_present_it_installs_nothing_and_runs_pytest_with_the
 
 
 def test_as_root_it_installs_only_the_missing_packages_without_questions(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["gcc-mingw-w64-x86-64", *FUZZ_PACKAGES])
+    code, err, log = run_sh(tmp_path, installed=["wine64", "libc6-arm64-cross", *FUZZ_PACKAGES])
     assert code == 7, err
-    assert log == ["apt-get install -y libtbb12 wine64 libminizip1 libxml2 [noninteractive]", *the_tests(tmp_path / "repo", "")]
+    assert log == ["apt-get install -y libtbb12 qemu-user libminizip1 libxml2 [noninteractive]",
+                   *the_tests(tmp_path / "repo", "")]
+
+
+def test_a_python_without_c_headers_gets_python3_dev(tmp_path):
+    code, err, log = run_sh(tmp_path, headers=False)
+    assert code == 7, err
+    assert log == ["apt-get install -y python3-dev [noninteractive]", *the_tests(tmp_path / "repo", "")]
 
 
 def test_the_package_lists_are_updated_only_if_installing_fails(tmp_path):
@@ -84,7 +97,7 @@ def test_a_user_installs_through_sudo(tmp_path):
 
 
 def test_a_user_without_sudo_gets_one_line_naming_the_packages_and_nothing_runs(tmp_path):
-    code, err, log = run_sh(tmp_path, installed=["gcc-mingw-w64-x86-64", *FUZZ_PACKAGES], uid=1000)
+    code, err, log = run_sh(tmp_path, installed=["qemu-user", "libc6-arm64-cross", *FUZZ_PACKAGES], uid=1000)
     assert code == 1 and log == []
     assert err == ("tests/run.sh: the Debian packages libtbb12 wine64 libminizip1 libxml2 are missing and this user is not root and "
                    "has no sudo: install them as root (apt-get install libtbb12 wine64 libminizip1 libxml2) and run this again\n")

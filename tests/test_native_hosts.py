@@ -1,9 +1,10 @@
 """The native FMUs (C, no Python at run time) in real hosts other than the orchestrator.
 
-* Linux: small C hosts (tests/c_host/fmi2_host.c, fmi3_host.c), compiled here with gcc and
+* Linux: small C hosts (tests/c_host/fmi2_host.c, fmi3_host.c), compiled here by the
+  project's toolchain (zig cc, orchestrator/engine/toolchain.py) and
   started with an empty environment (`env -i`), load the shipped .so files and must give
   FMPy's results exactly; the .so files need nothing but the C runtime.
-* Windows: the same hosts, cross-compiled with mingw-w64 (-static), run the shipped DLLs
+* Windows: the same hosts, cross-compiled by the same toolchain (-static), run the shipped DLLs
   under wine and must give the Linux binaries' results; the DLLs import only Windows' own
   DLLs.
 * Source FMU: sources/ alone, compiled from the file list the FMU declares, steps bit for
@@ -22,6 +23,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import fmpy
+import lief
 import numpy as np
 import pytest
 from fmpy import read_model_description
@@ -29,6 +31,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
+from orchestrator.engine.toolchain import compile_c
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 
 C_HOST = Path(__file__).parent / "c_host"
@@ -38,7 +41,6 @@ HEADERS = Path(fmpy.__file__).parent / "c-code"
 FAMILIES = ("fmi2", "fmi3")
 BINARIES = {"fmi2": {"linux": "linux64", "windows": "win64"},
             "fmi3": {"linux": "x86_64-linux", "windows": "x86_64-windows"}}
-MINGW_GCC, MINGW_OBJDUMP = "x86_64-w64-mingw32-gcc", "x86_64-w64-mingw32-objdump"
 RUNS = 20
 STEP = 1e-4
 # Fixed, non-trivial inputs: constant motor forces that move the platform (about 6 ... 20 cm
@@ -66,18 +68,15 @@ def unzip(fmu: Path, dest: Path) -> Path:
     return dest
 
 
-def compile_host(family: str, out_dir: Path, windows: bool = False) -> Path:
-    """tests/c_host/<family>_host.c compiled for Linux (gcc) or Windows (mingw-w64, static)."""
+def compile_host(family: str, out_dir: Path, windows: bool = False, platform: str | None = None) -> Path:
+    """tests/c_host/<family>_host.c compiled by the project's toolchain for ``platform``
+    (default x86_64-linux, or x86_64-windows if ``windows``; Windows executables static)."""
+    platform = platform or ("x86_64-windows" if windows else "x86_64-linux")
     source = C_HOST / f"{family}_host.c"
-    if windows:
-        exe = out_dir / f"{family}_host.exe"
-        args = [MINGW_GCC, "-O1", "-Wall", "-Wextra", "-Werror", "-static", "-D__USE_MINGW_ANSI_STDIO=1",
-                f"-I{HEADERS}", "-o", str(exe), str(source)]
-    else:
-        exe = out_dir / f"{family}_host"
-        args = ["gcc", "-O1", "-Wall", "-Wextra", "-Werror", f"-I{HEADERS}", "-o", str(exe), str(source), "-ldl"]
-    subprocess.run(args, check=True, capture_output=True, text=True)
-    return exe
+    exe = out_dir / f"{family}_host_{platform}{'.exe' if 'windows' in platform else ''}"
+    extra = ["-D__USE_MINGW_ANSI_STDIO=1"] if "windows" in platform else []
+    return compile_c([source], exe, platform, shared=False, flags=["-O1", "-Wall", "-Wextra", "-Werror"],
+                     extra=extra, includes=[HEADERS], libs=["dl"])
 
 
 def host_args(model: str, steps: int) -> list[str]:
@@ -218,9 +217,9 @@ def test_windows_dlls_import_only_windows_system_dlls(native_built, family, tmp_
     for model in FMU_NAMES:
         dll = unzip(native_built[family][model], tmp_path / model) / "binaries" / BINARIES[family]["windows"] / \
             f"{model}.dll"
-        dump = subprocess.run([MINGW_OBJDUMP, "-p", str(dll)], check=True, capture_output=True, text=True).stdout
-        assert "pei-x86-64" in dump
-        imports[model] = {n.lower() for n in re.findall(r"DLL Name: (\S+)", dump)}
+        pe = lief.PE.parse(str(dll))
+        assert pe.header.machine == lief.PE.Header.MACHINE_TYPES.AMD64
+        imports[model] = {i.name.lower() for i in pe.imports}
     for model, names in imports.items():
         assert "kernel32.dll" in names, imports
         assert all(n in {"kernel32.dll", "msvcrt.dll", "ucrtbase.dll"} or n.startswith("api-ms-win-")
@@ -263,11 +262,9 @@ def test_sources_alone_compile_from_the_declared_file_list_and_step_bit_for_bit_
     sources = src / "sources"
     assert {p.name for p in sources.iterdir()} >= set(files)
     lib = tmp_path / f"{model}.so"
-    proc = subprocess.run(["gcc", "-shared", "-fPIC", "-ffp-contract=off", *options, f"-I{sources}",
-                           f"-I{HEADERS}", "-o", str(lib),  # the importer's FMI headers
-                           *(str(sources / f) for f in files), *(f"-l{x}" for x in libraries), "-lm"],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
+    # only what the FMU declares, and the importer's FMI headers: no -O2, default visibility
+    compile_c([sources / f for f in files], lib, flags=["-ffp-contract=off", *options], includes=[sources, HEADERS],
+              libs=[*libraries, "m"])
     shipped_dir = unzip(fmu, tmp_path / "shipped")
     rebuilt_dir = unzip(fmu, tmp_path / "rebuilt")
     target = rebuilt_dir / "binaries" / BINARIES[family]["linux"] / f"{model}.so"

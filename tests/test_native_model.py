@@ -17,7 +17,6 @@ import ctypes
 import itertools
 import math
 import re
-import subprocess
 import sys
 from ctypes import POINTER, byref, c_double, c_int
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.build_native import CFLAGS
+from orchestrator.engine.toolchain import compile_c
 from orchestrator.experiments.scenario import load
 from tapmp import dynamics, kinematics
 from tapmp.closed_loop import simulate
@@ -255,14 +255,11 @@ class Native:
 
 
 def compile_shared(sources, output: Path) -> ctypes.CDLL:
-    """gcc -shared -fPIC with the native FMUs' CFLAGS (build_native.CFLAGS) and -lm. Only
+    """A shared library by the project's toolchain with the native FMUs' CFLAGS and -lm. Only
     -fvisibility=hidden is left out: it is what keeps an FMU's model functions private, and
     these tests must call them; it does not change a single double."""
     flags = [f for f in CFLAGS if not f.startswith("-fvisibility")]
-    args = ["gcc", "-shared", "-fPIC", *flags, f"-I{MODEL_HEADER.parent}", "-o", str(output),
-            *map(str, sources), "-lm"]
-    proc = subprocess.run(args, capture_output=True, text=True)
-    assert proc.returncode == 0, f"{' '.join(args)}\n{proc.stderr}"
+    compile_c(sources, output, flags=flags, includes=[MODEL_HEADER.parent], libs=["m"])
     return ctypes.CDLL(str(output))
 
 
@@ -440,7 +437,7 @@ def test_native_model_is_compiled_like_the_fmus_without_fast_math_or_fused_multi
 
 
 def test_ctypes_structures_mirror_the_header_layout(tmp_path):
-    """sizeof and every field offset of the header's structs, as gcc sees them, equal the ctypes ones."""
+    """sizeof and every field offset of the header's structs, as the C compiler sees them, equal the ctypes ones."""
     probe = tmp_path / "layout_probe.c"
     entries = []
     for cname, cls in STRUCTS.items():

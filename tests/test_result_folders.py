@@ -148,4 +148,5 @@ def test_help_says_what_relative_paths_are_relative_to():
                              env=dict(os.environ, COLUMNS="200", PYTHONPATH=str(ROOT)))
         text = " ".join(res.stdout.split())
         assert "relative to the current directory" in text, cmd
-        assert "found in the repository's build/ folder, wherever tapmp runs from" in text, cmd
+        assert ("the SSP of --fmus is found in --fmus-dir, else $TAPMP_FMUS_DIR, else the repository's build/ "
+                "(in a checkout) or ./build (installed as a wheel)") in text, cmd

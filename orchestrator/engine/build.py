@@ -8,13 +8,12 @@ adds them from the variable tables in ``tapmp.interface`` (one source of truth).
 pythonfmu 0.7's binary cannot return fmi2Error (a Python exception becomes fmi2Fatal and
 corrupts the host interpreter), needs libpython already in the host process, and costs
 a Python call per getReal/setReal. So the FMUs ship the binary in ``fmu_common/native``
-instead, compiled here with the C compiler ($CC, default gcc): see :func:`compile_binaries`.
+instead, compiled here by the project's C compiler (zig cc from the ziglang package, or $CC;
+orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
 """
 
-import os
 import shutil
 import site
-import subprocess
 import sys
 import sysconfig
 import tempfile
@@ -24,6 +23,11 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, UNITS, VARIABLES, dependencies, dependency_attributes
 
+from . import toolchain
+from .families import default_build_dir
+
+# The package's root: the repository in a checkout, site-packages in an installed wheel
+# (the adapters and the C sources are package data there).
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = {
     PLANT: ROOT / "fmu_plant" / "TAPMP_Plant.py",
@@ -35,7 +39,7 @@ NATIVE = ROOT / "fmu_common" / "native"
 PLATFORM = "linux64"
 BINDING = "tapmp_fmi2_python.so"     # name the front binary loads (fmi2_front.c BACKEND)
 PYTHON_ENV = "python-env.txt"        # read by both binaries (python_env.h)
-DEFAULT_BUILD_DIR = ROOT / "build"
+DEFAULT_BUILD_DIR = default_build_dir()
 SSP_NAME = "TAPMP.ssp"
 
 
@@ -107,14 +111,21 @@ def python_env() -> str:
     return "\n".join(lines) + "\n"
 
 
-def _compile(cc: str, args: list[str]) -> None:
+def _compile(sources, output: Path, **kw) -> None:
     try:
-        proc = subprocess.run([cc, *args], capture_output=True, text=True)
-    except FileNotFoundError:
-        raise BuildError(f"C compiler {cc!r} not found: the FMU binaries are compiled at build "
-                         "time; install gcc or set CC") from None
-    if proc.returncode != 0:
-        raise BuildError(f"compiling the FMU binary failed ({cc} {' '.join(args)}):\n{proc.stderr}")
+        toolchain.compile_c(sources, output, toolchain.HOST, **kw)
+    except toolchain.ToolchainError as err:
+        raise BuildError(str(err)) from None
+
+
+def python_headers() -> Path:
+    """The folder of this interpreter's Python.h; BuildError names the Debian package if it
+    is missing (a Debian Python without python3-dev)."""
+    include = Path(sysconfig.get_paths()["include"])
+    if not (include / "Python.h").is_file():
+        raise BuildError(f"Python's C headers are missing ({include / 'Python.h'} does not exist), needed for "
+                         "the pythonfmu FMUs' binary: install Debian's python3-dev (apt-get install python3-dev)")
+    return include
 
 
 def compile_binaries(dest: Path) -> tuple[Path, Path]:
@@ -126,15 +137,15 @@ def compile_binaries(dest: Path) -> tuple[Path, Path]:
     """
     import fmpy
 
-    cc = os.environ.get("CC", "gcc")
+    include = python_headers()
     fmi_headers = Path(fmpy.__file__).parent / "c-code"
-    common = ["-shared", "-fPIC", "-O2", "-Wall", "-fvisibility=hidden", f"-I{fmi_headers}",
-              f"-I{NATIVE}"]
+    flags = ["-O2", "-Wall", "-fvisibility=hidden", "-g0"]
     front, binding = dest / "front.so", dest / BINDING
     # The front's fmi2 functions are its only exports (default visibility in fmi2Functions.h).
-    _compile(cc, [*common, "-o", str(front), str(NATIVE / "fmi2_front.c"), "-ldl", "-lpthread"])
-    _compile(cc, [*common, f"-I{sysconfig.get_paths()['include']}", "-Wl,-z,nodelete",
-                  "-o", str(binding), str(NATIVE / "fmi2_python.c"), "-lpthread"])
+    _compile([NATIVE / "fmi2_front.c"], front, flags=flags, includes=[fmi_headers, NATIVE],
+             libs=["dl", "pthread"], what="the pythonfmu FMUs' front binary")
+    _compile([NATIVE / "fmi2_python.c"], binding, flags=flags, extra=["-Wl,-z,nodelete", "-Wl,-z,lazy"],
+             includes=[fmi_headers, NATIVE, include], libs=["pthread"], what="the pythonfmu FMUs' Python binding")
     return front, binding
 
 

@@ -1,6 +1,6 @@
 """Build the self-contained native FMUs: FMI 2.0 and FMI 3.0, C sources inside, binaries
-for Linux (gcc) and Windows (mingw-w64, statically linked to its runtime), no Python at
-run time. One C model (tapmp/c/tapmp_model.c) and one instance layer
+for Linux, Windows and macOS on x86-64 and ARM (compiled by Zig's C compiler from PyPI,
+orchestrator/engine/toolchain.py), no Python at run time. One C model (tapmp/c/tapmp_model.c) and one instance layer
 (fmu_common/c/instance.c) feed both FMI versions; the model files (fmu_plant/plant.c,
 fmu_controller/controller.c, fmu_controller/trajectory.c) map variables to the model.
 
@@ -15,26 +15,34 @@ TAPMP_Trajectory.fmu and TAPMP.ssp. Inside each FMU: modelDescription.xml, sourc
 C file and header of the FMU, but not the standard's FMI headers, which the importer brings;
 one file to compile, all.c, which includes the others, so that only the fmi* functions have
 external linkage; FMI 2.0 lists it in <SourceFiles>, both versions in
-sources/buildDescription.xml with libm), binaries/linux64 + win64 (FMI 2.0) or x86_64-linux +
-x86_64-windows (FMI 3.0).
+sources/buildDescription.xml with libm), and binaries/ for every platform of PLATFORM_DIRS:
+FMI 2.0 linux64, aarch64-linux, win64, win32 and darwin64 (one universal x86_64 + arm64 dylib);
+FMI 3.0 x86_64-linux, aarch64-linux, x86_64-windows, x86-windows, x86_64-darwin and aarch64-darwin.
 """
 
 import hashlib
 import os
 import shutil
-import subprocess
 import tempfile
 import uuid
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from concurrent.futures import ThreadPoolExecutor
+
 from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, UNITS, VARIABLES, Var,
                              dependencies, dependency_attributes)
 
+from . import toolchain
+from .families import default_build_dir
+from .toolchain import CFLAGS, PLATFORMS, ToolchainError
+
+# The package's root: the repository in a checkout, site-packages in an installed wheel
+# (the C sources are package data there).
 ROOT = Path(__file__).resolve().parents[2]
 FAMILIES = ("fmi2", "fmi3")
-NATIVE_BUILD_DIR = ROOT / "build" / "native"
+NATIVE_BUILD_DIR = default_build_dir() / "native"
 MODEL_FILES = {  # (model source, model header)
     PLANT: (ROOT / "fmu_plant" / "plant.c", ROOT / "fmu_plant" / "plant.h"),
     CONTROLLER: (ROOT / "fmu_controller" / "controller.c", ROOT / "fmu_controller" / "controller.h"),
@@ -44,13 +52,15 @@ COMMON_SOURCES = (ROOT / "tapmp" / "c" / "tapmp_model.c", ROOT / "fmu_common" / 
 COMMON_HEADERS = (ROOT / "tapmp" / "c" / "tapmp_model.h", ROOT / "fmu_common" / "c" / "instance.h")
 API = {"fmi2": ROOT / "fmu_common" / "c" / "fmi2_api.c", "fmi3": ROOT / "fmu_common" / "c" / "fmi3_api.c"}
 UNITY = "all.c"  # the one file to compile: the whole FMU as one translation unit
-# binaries folder per family and platform
-PLATFORM_DIRS = {"fmi2": {"linux": "linux64", "windows": "win64"},
-                 "fmi3": {"linux": "x86_64-linux", "windows": "x86_64-windows"}}
-SUFFIX = {"linux": ".so", "windows": ".dll"}
-# No -ffast-math and no fused multiply-add: the C model must give the Python model's doubles.
-CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fvisibility=hidden", "-Wall"]
-MINGW = "x86_64-w64-mingw32-gcc"
+# binaries/ folder per family and platform (toolchain.PLATFORMS). FMI 2.0 names six platforms
+# (win32/64, linux32/64, darwin32/64); for the others FMI 2.0.4 takes FMI 3.0's platform tuple,
+# so ARM Linux is aarch64-linux in both versions. FMI 2.0's darwin64 is one universal dylib
+# (x86_64 + arm64) so that a host on either Mac finds its code there.
+PLATFORM_DIRS = {"fmi2": {"x86_64-linux": "linux64", "aarch64-linux": "aarch64-linux", "x86_64-windows": "win64",
+                          "x86-windows": "win32", "x86_64-darwin": "darwin64", "aarch64-darwin": "darwin64"},
+                 "fmi3": {p: p for p in PLATFORMS}}
+ALL_PLATFORMS = tuple(PLATFORMS)
+SUFFIX = toolchain.SUFFIX
 STEP, STOP = 1e-4, 2.5
 DESCRIPTIONS = {
     PLANT: "Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
@@ -300,28 +310,18 @@ def build_description(model: str) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def compile_sources(sources_dir: Path, model: str, family: str, output: Path, platform: str = "linux",
-                    cc: str | None = None) -> Path:
-    """Compile the C files the FMU declares in ``sources_dir`` into ``output``."""
-    files = [str(sources_dir / name) for name in c_sources(model, family)]
-    include = [f"-I{sources_dir}", f"-I{fmi_headers_dir()}"]  # the FMI headers come from the importer
-    if platform == "linux":
-        cc = cc or os.environ.get("CC", "gcc")
-        args = [cc, "-shared", "-fPIC", *CFLAGS, *include, "-o", str(output), *files, "-lm"]
-    else:
-        cc = cc or MINGW
-        # Static runtime: the DLL needs nothing but Windows' own DLLs (KERNEL32, msvcrt).
-        args = [cc, "-shared", *CFLAGS, "-D__USE_MINGW_ANSI_STDIO=1", *include, "-static",
-                "-static-libgcc", "-o", str(output), *files, "-lm"]
+def compile_sources(sources_dir: Path, model: str, family: str, output: Path,
+                    platform: str = toolchain.HOST) -> Path:
+    """Compile the C files the FMU declares in ``sources_dir`` into the shared library
+    ``output`` for ``platform`` (a name of toolchain.PLATFORMS), with the FMI headers an
+    importer brings (FMPy's); NativeBuildError (one line: the FMU, the platform and the
+    compiler's first error) if it fails."""
+    files = [sources_dir / name for name in c_sources(model, family)]
     try:
-        proc = subprocess.run(args, capture_output=True, text=True)
-    except FileNotFoundError:
-        hint = ("install gcc" if platform == "linux" else
-                "install Debian's gcc-mingw-w64-x86-64 (apt-get install gcc-mingw-w64-x86-64)")
-        raise NativeBuildError(f"C compiler {cc!r} for {platform} not found: {hint}") from None
-    if proc.returncode != 0:
-        raise NativeBuildError(f"compiling {model} ({family}, {platform}) failed:\n{' '.join(args)}\n{proc.stderr}")
-    return output
+        return toolchain.compile_c(files, output, platform, includes=[sources_dir, fmi_headers_dir()], libs=["m"],
+                                   what=f"{family}/{model}.fmu")
+    except ToolchainError as err:
+        raise NativeBuildError(str(err)) from None
 
 
 def _zip_write(z: zipfile.ZipFile, name: str, data: bytes) -> None:
@@ -331,59 +331,101 @@ def _zip_write(z: zipfile.ZipFile, name: str, data: bytes) -> None:
     z.writestr(info, data)
 
 
-def have_mingw() -> bool:
-    """True if the mingw-w64 cross compiler is on PATH."""
-    return shutil.which(MINGW) is not None
+def staged_sources(files: dict[str, bytes], model: str, family: str) -> Path:
+    """The FMU's sources/ written to a folder named by a hash of their content, under the
+    system's temporary folder, and reused: zig cc's cache knows a C file by its path, so the
+    same sources from the same path make a rebuild take about 0.1 s per binary instead of 1 s."""
+    h = hashlib.sha256()
+    for name, data in sorted(files.items()):
+        h.update(name.encode() + b"\0" + hashlib.sha256(data).digest())
+    folder = Path(tempfile.gettempdir()) / "tapmp-native-sources" / f"{model}-{family}-{h.hexdigest()[:20]}"
+    if not folder.is_dir():
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        partial = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+        for name, data in files.items():
+            (partial / name).write_bytes(data)
+        try:
+            partial.rename(folder)  # complete or absent, even with two builds at once
+        except OSError:
+            shutil.rmtree(partial, ignore_errors=True)
+    return folder
+
+
+def check_platforms(platforms) -> tuple[str, ...]:
+    """The platforms as a tuple in PLATFORMS order; ValueError names an unknown one."""
+    for p in platforms:
+        toolchain.check_platform(p)
+    return tuple(p for p in ALL_PLATFORMS if p in set(platforms))
+
+
+def _binaries(tmp: Path, src: Path, model: str, family: str, platforms) -> dict[str, bytes]:
+    """Compile every platform (in parallel: each is its own compiler process) and return
+    {member name in the FMU: bytes}; FMI 2.0's darwin64 is the universal file of both Macs."""
+    def one(platform):
+        (tmp / platform).mkdir()
+        lib = tmp / platform / f"{model}{SUFFIX[toolchain.os_of(platform)]}"  # the name a dylib records
+        return platform, compile_sources(src, model, family, lib, platform).read_bytes()
+
+    with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1)) as pool:
+        built = dict(pool.map(one, platforms))
+    members = {}
+    for platform, data in built.items():
+        folder = PLATFORM_DIRS[family][platform]
+        name = f"binaries/{folder}/{model}{SUFFIX[toolchain.os_of(platform)]}"
+        if folder == "darwin64":
+            members[name] = toolchain.universal_macho([built[p] for p in ("x86_64-darwin", "aarch64-darwin")
+                                                       if p in built])
+        else:
+            members[name] = data
+    return members
 
 
 def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = True,
-                     model_source: Path | None = None) -> Path:
-    """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic.
+                     model_source: Path | None = None, platforms=None) -> Path:
+    """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic (a build that
+    fails leaves no FMU of that name half written). ``platforms`` (names of
+    toolchain.PLATFORMS) default to all, or the host's (x86_64-linux) alone if not ``windows``;
     ``model_source`` replaces the model's C file (benchmarks/floor_model.c)."""
     out_dir = Path(out_dir)
     fmu = out_dir / f"{model}.fmu"
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
-        src = Path(tmp) / "sources"
-        src.mkdir()
         files = source_files(model, family, model_source)
-        for name, data in files.items():
-            (src / name).write_bytes(data)
-        binaries = {}
-        for platform in ("linux", "windows") if windows else ("linux",):
-            lib = Path(tmp) / f"{model}_{platform}{SUFFIX[platform]}"
-            compile_sources(src, model, family, lib, platform)
-            binaries[f"binaries/{PLATFORM_DIRS[family][platform]}/{model}{SUFFIX[platform]}"] = lib.read_bytes()
+        src = staged_sources(files, model, family)
+        if platforms is None:
+            platforms = ALL_PLATFORMS if windows else (toolchain.HOST,)
+        binaries = _binaries(Path(tmp), src, model, family, check_platforms(platforms))
         md = model_description_fmi2(model) if family == "fmi2" else model_description_fmi3(model)
         partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
-        with zipfile.ZipFile(partial, "w") as z:
-            _zip_write(z, "modelDescription.xml", md)
-            for name, data in sorted(files.items()):
-                _zip_write(z, f"sources/{name}", data)
-            for name, data in binaries.items():
-                _zip_write(z, name, data)
-        partial.replace(fmu)
+        try:
+            with zipfile.ZipFile(partial, "w") as z:
+                _zip_write(z, "modelDescription.xml", md)
+                for name, data in sorted(files.items()):
+                    _zip_write(z, f"sources/{name}", data)
+                for name, data in binaries.items():
+                    _zip_write(z, name, data)
+            partial.replace(fmu)
+        finally:
+            partial.unlink(missing_ok=True)
     return fmu
 
 
 def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
-                 windows: bool | None = None) -> dict[str, dict[str, Path]]:
+                 windows: bool | None = None, platforms=None) -> dict[str, dict[str, Path]]:
     """Build the native FMUs and a TAPMP.ssp per family into ``out_dir/<family>/``.
 
-    Windows binaries need the mingw-w64 cross compiler; with ``windows=None`` they are
-    built if it is installed, else skipped with a note. Returns {family: {model or "ssp": path}}.
+    Binaries for every platform of toolchain.PLATFORMS (``platforms`` to choose; ``windows=False``
+    keeps the host's x86_64-linux alone). Returns {family: {model or "ssp": path}}.
     """
     from .ssp import write_ssp
 
-    if windows is None:
-        windows = have_mingw()
-        if not windows:
-            log(f"note: {MINGW} not found: native FMUs get Linux binaries only "
-                "(install Debian's gcc-mingw-w64-x86-64 for the Windows ones)")
+    if platforms is None:
+        platforms = ALL_PLATFORMS if windows is not False else (toolchain.HOST,)
+    platforms = check_platforms(platforms)
     out = {}
     for family in families:
         folder = Path(out_dir) / family
         folder.mkdir(parents=True, exist_ok=True)
-        paths = {model: build_native_fmu(model, family, folder, windows) for model in FMU_NAMES}
+        paths = {model: build_native_fmu(model, family, folder, platforms=platforms) for model in FMU_NAMES}
         for model in FMU_NAMES:
             log(f"built {paths[model]}")
         paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths)
@@ -393,20 +435,27 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
 
 
 def main(argv=None) -> int:
-    """``python -m orchestrator.engine.build_native [--out DIR] [--no-windows]``."""
+    """``python -m orchestrator.engine.build_native [--out DIR] [--platform P ...]``."""
     import argparse
     import sys
 
     p = argparse.ArgumentParser(prog="python -m orchestrator.engine.build_native",
                                 description="Build the native FMI 2.0 and 3.0 FMUs and their TAPMP.ssp "
-                                "into DIR/fmi2 and DIR/fmi3 (default: build/native, relative to the "
-                                "current directory).")
-    p.add_argument("--out", default=str(NATIVE_BUILD_DIR), help="output folder (default: build/native)")
-    p.add_argument("--no-windows", action="store_true", help="Linux binaries only (no mingw-w64 needed)")
+                                "into DIR/fmi2 and DIR/fmi3, with binaries for every platform (zig cc "
+                                "from the ziglang package; $CC for x86_64-linux if set).")
+    p.add_argument("--out", default=str(NATIVE_BUILD_DIR), help=f"output folder (default: {NATIVE_BUILD_DIR})")
+    p.add_argument("--platform", action="append", metavar="P",
+                   help=f"build only these platforms (repeatable): {', '.join(ALL_PLATFORMS)} (default: all)")
+    p.add_argument("--no-windows", action="store_true", help="the host's x86_64-linux binaries only")
     args = p.parse_args(argv)
+    for platform in args.platform or ():  # before building anything
+        if platform not in PLATFORMS:
+            print(f"error: --platform = {platform!r} is invalid: allowed are {', '.join(PLATFORMS)}", file=sys.stderr)
+            return 2
     try:
-        build_native(Path(args.out), windows=False if args.no_windows else None)
-    except NativeBuildError as err:
+        platforms = args.platform or (None if not args.no_windows else (toolchain.HOST,))
+        build_native(Path(args.out), platforms=platforms)
+    except (NativeBuildError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     return 0

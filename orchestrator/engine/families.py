@@ -1,5 +1,8 @@
 """The three FMU families and where `bash build_fmus.sh` puts their SSP systems.
 
+The FMU folder is --fmus-dir, else $TAPMP_FMUS_DIR, else the repository's build/ (in a
+checkout) or ./build (installed as a wheel); the families' SSPs inside it:
+
 * ``native`` (the default): the self-contained C FMUs, FMI 2.0 (build/native/fmi2/).
   Bit-identical to the pythonfmu FMUs in every test, about three times faster per macro
   step, and the FMUs users hand to other tools, so they are what a run exercises.
@@ -7,33 +10,70 @@
 * ``python``: the pythonfmu FMUs (build/), the Python-native reference.
 """
 
+import os
 from pathlib import Path
 
+# The package's root: the repository in a checkout, site-packages in an installed wheel.
 ROOT = Path(__file__).resolve().parents[2]
-BUILD = ROOT / "build"
-FAMILIES = {"python": BUILD / "TAPMP.ssp", "native": BUILD / "native" / "fmi2" / "TAPMP.ssp",
-            "fmi3": BUILD / "native" / "fmi3" / "TAPMP.ssp"}
+ENV = "TAPMP_FMUS_DIR"
+# SSP of each family, relative to the FMU folder (an absolute path is taken as it is)
+FAMILIES = {"python": Path("TAPMP.ssp"), "native": Path("native") / "fmi2" / "TAPMP.ssp",
+            "fmi3": Path("native") / "fmi3" / "TAPMP.ssp"}
 DEFAULT_FAMILY = "native"
+
+
+def in_checkout() -> bool:
+    """True if the package runs from the repository (an editable install or PYTHONPATH), not
+    from an installed wheel."""
+    return (ROOT / "build_fmus.sh").is_file() and (ROOT / "pyproject.toml").is_file()
+
+
+def default_build_dir() -> Path:
+    """Where `tapmp build` writes and `tapmp run` looks by default: $TAPMP_FMUS_DIR if set,
+    else the repository's build/ in a checkout, else build/ in the current directory (never
+    inside the installed package)."""
+    if os.environ.get(ENV):
+        return Path(os.environ[ENV])
+    return ROOT / "build" if in_checkout() else Path("build")
+
+
+def fmus_dir(explicit: str | Path | None = None) -> Path:
+    """The folder of the built FMU families: ``explicit`` (--fmus-dir) if given, else
+    :func:`default_build_dir`."""
+    return Path(explicit) if explicit else default_build_dir()
+
+
+def data_dir(name: str) -> Path:
+    """A folder of files shipped with the package, ``name`` "scenarios" or "studies": the
+    repository's folder in a checkout, the package data folder tapmp_data/<name> in a wheel."""
+    return ROOT / name if in_checkout() else ROOT / "tapmp_data" / name
+
+
+BUILD = default_build_dir()
+SCENARIOS_DIR = data_dir("scenarios")
 
 
 class FamilyNotBuilt(FileNotFoundError):
     """The SSP of an FMU family does not exist yet; the message says how to build it."""
 
 
-def family_ssp(fmus: str) -> Path:
-    """The SSP file of family ``fmus`` (ValueError names the allowed families)."""
+def family_ssp(fmus: str, folder: str | Path | None = None) -> Path:
+    """The SSP file of family ``fmus`` in the FMU folder ``folder`` (default: :func:`fmus_dir`);
+    ValueError names the allowed families."""
     try:
-        return FAMILIES[fmus]
+        return fmus_dir(folder) / FAMILIES[fmus]
     except KeyError:
         raise ValueError(f"fmus = {fmus!r} is invalid: allowed are {', '.join(FAMILIES)}") from None
 
 
-def resolve_ssp(ssp: str | None, fmus: str) -> Path:
-    """``--ssp`` if given, else the built SSP of family ``fmus``; FamilyNotBuilt if it is missing."""
+def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None) -> Path:
+    """``--ssp`` if given, else the built SSP of family ``fmus`` in ``folder`` (--fmus-dir,
+    default :func:`fmus_dir`); FamilyNotBuilt if it is missing."""
     if ssp:
         return Path(ssp)
-    path = family_ssp(fmus)
+    path = family_ssp(fmus, folder)
     if not path.is_file():
         raise FamilyNotBuilt(f"the {fmus} FMUs are not built ({path} does not exist): build them with "
-                             f"`bash build_fmus.sh` from the repository root")
+                             f"`bash build_fmus.sh` from the repository root, or `tapmp build --out DIR` "
+                             f"and pass --fmus-dir DIR (or set {ENV}=DIR)")
     return path

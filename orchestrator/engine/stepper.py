@@ -19,7 +19,6 @@ import ctypes
 import fcntl
 import hashlib
 import os
-import subprocess
 import sys
 import tempfile
 from ctypes import POINTER, Structure, c_double, c_int32, c_int64, c_uint32, c_void_p
@@ -28,7 +27,7 @@ from pathlib import Path
 SOURCE = Path(__file__).with_name("stepper.c")
 STEPPERS = ("auto", "compiled", "python")
 # No -ffast-math, no contraction: the core only copies and compares doubles, and must keep them.
-CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fPIC", "-shared", "-Wall"]
+CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-Wall"]  # exported for ctypes: no hidden visibility
 
 DONE, FAIL_CALL, SUSPECT_OUTPUT = 0, 1, 2
 CALLS = ("setReal", "doStep", "getReal")
@@ -48,24 +47,20 @@ def cache_dir() -> Path:
 
 
 def compiler_command(source: Path, output: Path) -> list[str]:
-    """The command that compiles ``source`` into the shared library ``output``; the one place
-    that chooses the C compiler ($CC, else gcc, as orchestrator.engine.build_native does)."""
-    return [os.environ.get("CC", "gcc"), *CFLAGS, "-o", str(output), str(source), "-lm"]
+    """The compiler and flags that build the core (the project's toolchain: $CC if set, else
+    zig cc from the ziglang package; orchestrator.engine.toolchain); part of the cache key."""
+    from .toolchain import compiler
+    return [*compiler(), *CFLAGS, "-shared", "-fPIC", "-o", str(output), str(source), "-lm"]
 
 
 def compile_core(source: Path, output: Path) -> Path:
-    """Compile the stepping core ``source`` into ``output``; StepperBuildError with the
-    compiler's first error line if it fails."""
-    cmd = compiler_command(source, output)
+    """Compile the stepping core ``source`` into ``output`` with the project's toolchain;
+    StepperBuildError with the compiler's first error line if it fails."""
+    from .toolchain import ToolchainError, compile_c
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-    except OSError as err:
-        raise StepperBuildError(f"C compiler {cmd[0]!r} cannot run: {err.strerror or err} (install gcc or "
-                                "set CC)") from None
-    if proc.returncode != 0:
-        first = next((line for line in proc.stderr.splitlines() if "error" in line), proc.stderr.strip()[:200])
-        raise StepperBuildError(f"{cmd[0]} failed on {source.name}: {first}")
-    return output
+        return compile_c([source], output, flags=CFLAGS, libs=("m",), what="the compiled stepping core")
+    except ToolchainError as err:
+        raise StepperBuildError(str(err)) from None
 
 
 def library_path() -> Path:

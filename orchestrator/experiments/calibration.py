@@ -35,8 +35,8 @@ base scenario, for APD-DC (the fit) and SC-DC (the prediction), with the stabili
 pre-check of both.
 
 Run: ``.venv/bin/python -m orchestrator.experiments.calibration --target simulation``
-(or ``experiment``); it writes scenarios/paper_<target>_calibrated.toml and
-<work>/calibration.json.
+(or ``experiment``); it writes <work>/paper_<target>_calibrated.toml (or the file of
+--write-to, e.g. scenarios/paper_<target>_calibrated.toml) and <work>/calibration.json.
 """
 
 import argparse
@@ -52,12 +52,13 @@ from scipy.optimize import least_squares
 
 from tapmp.params import GAIN_PRESETS
 
+from ..engine.families import SCENARIOS_DIR
 from . import scenario as scenario_mod
 from . import stability
 from .results import run_scenario, write_json
 from .scenario import Scenario, ScenarioError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = SCENARIOS_DIR  # the shipped scenario files (the repository's scenarios/ in a checkout)
 GAIN_SCALE = 0.36 / 150.0  # Eq. 40's Lambda_v of motor 1 (150) -> the default preset's 0.36
 GAIN_PRESET = "paper_simulation"  # Eq. 40 (SC-DC) and, by Eq. 41, APD-DC
 FIT_KEYS = ("tracking_mae_um", "sync_mae_um")  # the residuals: 3 motors each
@@ -124,12 +125,13 @@ TABLE_KEYS = (("tracking_std_um", "tracking_mae_um"), ("sync_std_um", "sync_mae_
 
 def base_file(target: str) -> Path:
     """The scenario file a target is calibrated on (its trajectory, step and horizon)."""
-    return ROOT / "scenarios" / f"paper_{_checked(target)}.toml"
+    return ROOT / f"paper_{_checked(target)}.toml"
 
 
 def calibrated_file(target: str) -> Path:
-    """Where the calibrated scenario of a target is written."""
-    return ROOT / "scenarios" / f"paper_{_checked(target)}_calibrated.toml"
+    """The calibrated scenario of a target shipped with the package (main writes a new one only
+    where --write-to says)."""
+    return ROOT / f"paper_{_checked(target)}_calibrated.toml"
 
 
 def _checked(target: str) -> str:
@@ -394,6 +396,9 @@ def main(argv=None) -> int:
     ap.add_argument("--horizon", type=float, default=None, help="fit horizon [s] (default: one period of the slowest reference)")
     ap.add_argument("--max-nfev", type=int, default=25, help="least_squares iterations budget")
     ap.add_argument("--no-write", action="store_true", help="do not write the calibrated scenario file")
+    ap.add_argument("--write-to", default=None, metavar="FILE",
+                    help="calibrated scenario file to write (default: paper_<target>_calibrated.toml in the work "
+                    "folder; scenarios/paper_<target>_calibrated.toml replaces the shipped one)")
     args = ap.parse_args(argv)
     from ..engine.families import FamilyNotBuilt, resolve_ssp
     try:
@@ -402,7 +407,7 @@ def main(argv=None) -> int:
             raise ValueError(f"--horizon = {args.horizon!r} is invalid: allowed is a number > 0 [s]")
         if args.max_nfev < 1:
             raise ValueError(f"--max-nfev = {args.max_nfev!r} is invalid: allowed is an integer >= 1")
-        work = Path(args.work or ROOT / "results" / "calibration" / args.target)
+        work = Path(args.work or Path("results") / "calibration" / args.target)
         fit = calibrate(args.target, ssp, work, args.horizon, args.max_nfev)
         pred = predict(args.target, fit["theta"], ssp, work)
     except (FamilyNotBuilt, ValueError, ScenarioError) as err:
@@ -410,8 +415,9 @@ def main(argv=None) -> int:
         return 2
     write_json(work / "calibration.json", {"fit": fit, "prediction": pred})
     if not args.no_write:
-        calibrated_file(args.target).write_text(scenario_text(args.target, fit, pred))
-        print(f"wrote {calibrated_file(args.target)}")
+        target_file = Path(args.write_to or work / calibrated_file(args.target).name)
+        target_file.write_text(scenario_text(args.target, fit, pred))
+        print(f"wrote {target_file}")
     print(f"fitted ({fit['evaluations']} runs of {fit['horizon_s']:g} s, {fit['wall_s']:.0f} s): "
           + ", ".join(f"{k} = {v:.6g}" for k, v in fit["values"].items()))
     print(f"J = {fit['objective']:.4f} (fit horizon), {pred['objective_full']:.4f} (full); "

@@ -43,14 +43,15 @@ from tapmp.errors import ModelInputError
 from tapmp.kinematics import inverse
 from tapmp.params import ModelParams
 
+from ..engine.families import SCENARIOS_DIR
 from . import stability
 from .metrics import ErrorStatistics
 from .scenario import Scenario, load, model_tuple
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = SCENARIOS_DIR  # the shipped scenario files (the repository's scenarios/ in a checkout)
 # case: (scenario file, gain preset, the paper's equations)
-CASES = {"Eq. 40-41": ("scenarios/paper_simulation.toml", "paper_simulation"),
-         "Eq. 42-43": ("scenarios/paper_experiment.toml", "paper_experiment")}
+CASES = {"Eq. 40-41": ("paper_simulation.toml", "paper_simulation"),
+         "Eq. 42-43": ("paper_experiment.toml", "paper_experiment")}
 READINGS = {"A": "F = u / K_T (as implemented)",
             "B": "F = K_T u_d + Lambda_v n + Lambda_p c (u in N)"}
 PLANTS = {"encoder": {}, "exact": {"encoder_resolution": 0.0}}
@@ -91,7 +92,8 @@ def reading_b(gains: Gains, controller: dict) -> tuple[dict, dict]:
 def paper_scenario(case: str, law: str, step: float, stop_time: float, reading: str = "A",
                    plant: str = "encoder", root: Path = ROOT) -> Scenario:
     """The scenario of one run: the case's TOML file with its paper gains, law, step [s],
-    stop_time [s], reading ("A" or "B") and plant variant ("encoder" or "exact")."""
+    stop_time [s], reading ("A" or "B") and plant variant ("encoder" or "exact"); ``root`` is
+    the folder of the case's scenario file."""
     for name, value, allowed in (("case", case, CASES), ("law", law, LAWS), ("reading", reading, READINGS),
                                  ("plant", plant, PLANTS)):
         if value not in allowed:

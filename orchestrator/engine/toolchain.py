@@ -1,0 +1,164 @@
+"""The one C compiler of the project: Zig's ``zig cc`` from PyPI's ``ziglang`` package.
+
+Every C file of the project (the native FMUs for every platform, the pythonfmu family's
+binary, the test hosts, the benchmark master) is compiled through :func:`compile_c`, so a
+machine needs no system compiler: ``pip install`` brings the compiler, its libc headers
+(glibc, mingw-w64, macOS) and the import libraries for every target.
+
+``CC`` is honoured for the host platform (x86_64 Linux): ``CC=gcc`` builds those binaries
+with gcc instead; cross targets always use Zig, which is the only compiler that has them.
+
+Platforms (``PLATFORMS``) are named as FMI 3.0 names them (``x86_64-linux``, ...); every
+binary is built with the same flags: -O2, C99, no fast-math, no fused multiply-add
+(-ffp-contract=off), so that every platform steps bit for bit like the Python model.
+"""
+
+import os
+import shlex
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+# FMI 3.0 platform name -> Zig target. Linux against glibc 2.17 (CentOS 7, 2014) so that the
+# binaries load on every Linux of the last decade; Windows with mingw-w64's start-up code linked
+# in and the Universal C Runtime of Windows 10 and later (api-ms-win-crt-*); macOS against
+# Zig's libSystem stubs, for macOS 11 (the first on Apple silicon) and later.
+PLATFORMS = {
+    "x86_64-linux": "x86_64-linux-gnu.2.17",
+    "aarch64-linux": "aarch64-linux-gnu.2.17",
+    "x86_64-windows": "x86_64-windows-gnu",
+    "x86-windows": "x86-windows-gnu",
+    "x86_64-darwin": "x86_64-macos.11.0",
+    "aarch64-darwin": "aarch64-macos.11.0",
+}
+HOST = "x86_64-linux"  # the platform the builds run on, and the pythonfmu family's (binaries/linux64)
+SUFFIX = {"linux": ".so", "windows": ".dll", "darwin": ".dylib"}
+# No -ffast-math and no fused multiply-add: the C model must give the Python model's doubles.
+CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-g0"]
+
+
+class ToolchainError(RuntimeError):
+    """Compiling failed; the message is one line naming the target and the compiler's first error."""
+
+
+def os_of(platform: str) -> str:
+    """"linux", "windows" or "darwin" of a platform name in PLATFORMS."""
+    return platform.split("-", 1)[1]
+
+
+def check_platform(platform: str) -> str:
+    """``platform`` if it is in PLATFORMS, else ValueError naming the allowed ones."""
+    if platform not in PLATFORMS:
+        raise ValueError(f"platform = {platform!r} is invalid: allowed are {', '.join(PLATFORMS)}")
+    return platform
+
+
+def zig_command() -> list[str]:
+    """The command that runs ``zig cc`` from the ziglang package of this interpreter: its zig
+    executable directly (no Python start per compile), else ``python -m ziglang``."""
+    import importlib.util
+    spec = importlib.util.find_spec("ziglang")
+    if spec and spec.origin:
+        zig = Path(spec.origin).parent / ("zig.exe" if os.name == "nt" else "zig")
+        if zig.is_file() and os.access(zig, os.X_OK):
+            return [str(zig), "cc"]
+    return [sys.executable, "-m", "ziglang", "cc"]
+
+
+def compiler(platform: str = HOST) -> list[str]:
+    """The compiler command for ``platform``: $CC for the host platform if set, else zig cc
+    with the platform's target."""
+    check_platform(platform)
+    cc = os.environ.get("CC", "").strip()
+    if cc and platform == HOST:
+        return shlex.split(cc)
+    return [*zig_command(), "-target", PLATFORMS[platform]]
+
+
+def first_error(stderr: str) -> str:
+    """The compiler's first error line (else its first non-empty line) of ``stderr``."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    for line in lines:
+        if "error" in line.lower():
+            return line
+    return lines[0] if lines else "no message"
+
+
+def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = True,
+              includes=(), flags=None, extra=(), libs=(), what: str | None = None) -> Path:
+    """Compile C ``sources`` into ``output`` (a shared library, or an executable if not
+    ``shared``) for ``platform`` with the project's flags (``flags`` replaces CFLAGS,
+    ``extra`` is added, ``libs`` are library names to link such as "m" or "dl").
+
+    Raises ToolchainError with one line naming ``what`` (default: the output's name), the
+    platform and the compiler's first error. The output appears only when complete.
+    """
+    output = Path(output)
+    kind = os_of(platform)
+    cmd = compiler(platform)
+    args = [*cmd, *(CFLAGS if flags is None else flags), *extra, *(f"-I{Path(i).resolve()}" for i in includes)]
+    if shared:
+        args.append("-shared")
+        if kind == "linux":
+            args.append("-fPIC")
+    elif kind == "windows":
+        args.append("-static")
+    # -o names the file in the private folder: a dylib records that name as its install name
+    args += ["-o", output.name, *(str(Path(s).resolve()) for s in sources)]
+    # libm, libdl and libpthread are part of the C runtime on Windows and macOS
+    args += [f"-l{lib}" for lib in libs if kind == "linux" or lib not in ("m", "dl", "pthread")]
+    label = what or output.name
+    # In a private folder: the linker's by-products (a DLL's import library) stay there, and
+    # the output appears under its name only when complete.
+    with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:
+        try:
+            proc = subprocess.run(args, capture_output=True, text=True, cwd=tmp)
+        except FileNotFoundError:
+            raise ToolchainError(f"{label} ({platform}): C compiler {cmd[0]!r} not found "
+                                 "(unset CC to use zig cc from the ziglang package)") from None
+        built = Path(tmp) / output.name
+        if proc.returncode != 0 or not built.is_file():
+            name = "zig cc" if platform != HOST or not os.environ.get("CC", "").strip() else cmd[0]
+            raise ToolchainError(f"{label} ({platform}): {name} failed: {first_error(proc.stderr or proc.stdout)}")
+        partial = output.with_name(f".{output.name}.{os.getpid()}.partial")
+        shutil.copyfile(built, partial)
+    partial.chmod(0o755)
+    partial.replace(output)
+    return output
+
+
+# -- universal (fat) Mach-O ----------------------------------------------------------------
+
+FAT_MAGIC = 0xCAFEBABE
+CPU_TYPE = {0x01000007: "x86_64", 0x0100000C: "arm64"}
+_CPU = {"x86_64": (0x01000007, 3), "arm64": (0x0100000C, 0)}  # (cputype, cpusubtype ALL)
+_ALIGN = 14  # 16 KiB, the page size of arm64 macOS; lipo aligns both slices to it too
+
+
+def macho_cpu(data: bytes) -> str:
+    """"x86_64" or "arm64" of a thin 64-bit Mach-O file (ValueError otherwise)."""
+    if len(data) < 8 or struct.unpack_from("<I", data)[0] != 0xFEEDFACF:
+        raise ValueError("not a 64-bit little-endian Mach-O file")
+    cputype = struct.unpack_from("<I", data, 4)[0]
+    if cputype not in CPU_TYPE:
+        raise ValueError(f"Mach-O cputype {cputype:#x} is neither x86_64 nor arm64")
+    return CPU_TYPE[cputype]
+
+
+def universal_macho(thin: list[bytes]) -> bytes:
+    """A universal ("fat") Mach-O file of the thin 64-bit Mach-O files ``thin``, as lipo
+    writes it: big-endian fat header, one fat_arch per slice, slices aligned to 16 KiB."""
+    header = struct.pack(">II", FAT_MAGIC, len(thin))
+    offset = 1 << _ALIGN
+    arch_entries, body = b"", b""
+    for data in thin:
+        cputype, subtype = _CPU[macho_cpu(data)]
+        arch_entries += struct.pack(">IIIII", cputype, subtype, offset, len(data), _ALIGN)
+        padded = data + b"\0" * (-len(data) % (1 << _ALIGN))
+        body += padded
+        offset += len(padded)
+    head = header + arch_entries
+    return head + b"\0" * ((1 << _ALIGN) - len(head)) + body
