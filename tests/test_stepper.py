@@ -142,8 +142,9 @@ def test_a_core_that_cannot_be_built_is_one_line_and_the_run_steps_in_python(tmp
                          capture_output=True, text=True, timeout=300, env=env)
     assert res.returncode == 0, res.stderr
     notes = [line for line in res.stderr.splitlines() if "compiled stepping core" in line]
-    assert notes == [f"note: compiled stepping core unavailable (C compiler {str(tmp_path / 'no-such-cc')!r} "
-                     "cannot run: No such file or directory (install gcc or set CC)); stepping in Python"]
+    assert notes == [f"note: compiled stepping core unavailable (the compiled stepping core (x86_64-linux): C compiler "
+                     f"{str(tmp_path / 'no-such-cc')!r} not found (unset CC to use zig cc from the ziglang package)); "
+                     "stepping in Python"]
     columns, rows = read_results(tmp_path / "out")
     assert rows.shape == (101, len(columns))
 
