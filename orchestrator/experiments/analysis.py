@@ -126,31 +126,7 @@ class SplitLoop:
     def step(self, x: np.ndarray, w: np.ndarray, closed: bool = False):
         """(state at t + h, controller force y [N]) from the state x at t with the plant stepping
         under the force w [N] (``closed``: under y itself, the loop of ``tapmp run``)."""
-        m = self.map
-        plant, ctrl = m.plant, m.ctrl
-        plant.state = [float(v) for v in x[:6]]
-        k = 6
-        integral = [0.0, 0.0, 0.0]
-        for i in m.integrals:
-            integral[i] = float(x[k])
-            k += 1
-        ctrl.integral = integral
-        if m.difference:
-            ctrl.q_prev = tuple(float(v) for v in x[k:k + 3])
-            k += 3
-        else:
-            ctrl.q_prev = None
-        q = plant.measured_positions()
-        dq = plant.joint_velocities()
-        F = ctrl.sample(m.t, m.h, m.ref, q, dq)[0]
-        y = np.array(x[k:k + 3], dtype=float) if m.jacobi else np.array(F)
-        plant.step(m.t, m.h, *(float(v) for v in (y if closed else w)))
-        out = list(plant.state) + [ctrl.integral[i] for i in m.integrals]
-        if m.difference:
-            out += list(ctrl.q_prev)
-        if m.jacobi:
-            out += list(F)
-        return np.array(out, dtype=float), y
+        return self.map.split_step(x, None if closed else w)
 
     def closed_loop(self) -> np.ndarray:
         """A + B C: the closed loop's one-step matrix (scaled coordinates)."""

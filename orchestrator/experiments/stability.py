@@ -198,6 +198,14 @@ class OneStepMap:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The loop state at t + h from the state x at the map's time t (see ``at``)."""
+        return self.split_step(x)[0]
+
+    def split_step(self, x: np.ndarray, w=None):
+        """(loop state at t + h, controller force y [N]) from the state x at the map's time t.
+
+        y is the force the loop hands the plant (the command of this sample, or with Jacobi the
+        one held from the previous sample); the plant steps under ``w`` [N] if given (the loop
+        opened at the plant input, orchestrator.experiments.analysis), else under y."""
         plant, ctrl = self.plant, self.ctrl
         plant.state = [float(v) for v in x[:6]]
         k = 6
@@ -215,13 +223,14 @@ class OneStepMap:
         q = plant.measured_positions()
         dq = plant.joint_velocities()
         F = ctrl.sample(self.t, self.h, self.ref, q, dq)[0]
-        plant.step(self.t, self.h, *(F_held if self.jacobi else F))
+        y = F_held if self.jacobi else F
+        plant.step(self.t, self.h, *(y if w is None else (float(v) for v in w)))
         out = list(plant.state) + [ctrl.integral[i] for i in self.integrals]
         if self.difference:
             out += list(ctrl.q_prev)
         if self.jacobi:
             out += list(F)
-        return np.array(out, dtype=float)
+        return np.array(out, dtype=float), np.array(y, dtype=float)
 
     def jacobian(self, x0: np.ndarray) -> np.ndarray:
         """Central-difference Jacobian in scaled coordinates x = x0 + diag(scale) z."""
