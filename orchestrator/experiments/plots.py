@@ -403,7 +403,7 @@ def force_figure(runs: dict):
     axes[0, 2].set_title("headroom: peak |F|\nper run (legend order)", fontsize=9)
     axes[-1, 0].set_xlabel("time [s]")
     axes[-1, 1].set_xlabel("time [ms]")
-    axes[-1, 2].set_xlabel("run")
+    axes[-1, 2].set_xlabel("run number [-]")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     if limits:
         h2, l2 = axes[0, 2].get_legend_handles_labels()
@@ -478,7 +478,7 @@ def signals_figure(runs: dict, keys: list[tuple[str, str]]):
             ax.set_title(SIGNALS[key][0], fontsize=9)
     axes[-1].set_xlabel("time [s]")
     _legend_below(fig, list(axes))
-    fig.suptitle(_title(", ".join(k for k, _ in keys) + " of", runs))
+    fig.suptitle(_title("Signals " + ", ".join(k for k, _ in keys), runs))
     return fig
 
 
