@@ -66,34 +66,44 @@ def _numeric(values) -> bool:
 
 def plot_study(out: Path, study, params: list) -> list:
     """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
+    paths = []
+    for path, fig in study_figures(out, study).items():
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def study_figures(out: Path, study) -> dict:
+    """{path: Figure} of a grid / Monte Carlo study from out/study.csv (not yet written):
+    robustness.png (Monte Carlo), sweep.png (MAE over one or two swept numeric keys)."""
     rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
     done = [r for r in rows if r["status"] == "completed" and all(isinstance(r.get(k), float) for k, _ in _MAE)]
     if not done:
-        return []
-    paths = []
+        return {}
     numeric_grid = [k for k in study.grid if _numeric(study.grid[k]) and len(study.grid[k]) > 1]
     group_keys = [k for k in study.grid if k not in numeric_grid]
     groups = {}
     for r in done:
         groups.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
     if study.samples:
-        paths.append(_histograms(Path(out) / "robustness.png", study, groups, group_keys))
-    elif len(numeric_grid) == 1:
-        paths.append(_lines(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[0]))
-    elif len(numeric_grid) >= 2:
+        return {Path(out) / "robustness.png": _histograms(study, groups, group_keys)}
+    if len(numeric_grid) == 1:
+        return {Path(out) / "sweep.png": _lines(study, groups, group_keys, numeric_grid[0])}
+    if len(numeric_grid) >= 2:
         flagged = {}
         for r in rows:
             if r.get("flag"):
                 flagged.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
-        paths.append(_heatmaps(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[:2], flagged))
-    return paths
+        return {Path(out) / "sweep.png": _heatmaps(study, groups, group_keys, numeric_grid[:2], flagged)}
+    return {}
 
 
 def _label(group_keys, group) -> str:
     return ", ".join(f"{k} = {v}" for k, v in zip(group_keys, group)) or "all cases"
 
 
-def _histograms(path, study, groups, group_keys):
+def _histograms(study, groups, group_keys):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for (key, title), ax in zip(_MAE, axes):
         data = {g: np.array([r[key] for r in rs]) for g, rs in groups.items()}
@@ -109,12 +119,10 @@ def _histograms(path, study, groups, group_keys):
     fig.suptitle(f"{study.name}: {study.samples} samples of "
                  + ", ".join(f.name for f in study.factors) + f" (seed {study.seed})", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _lines(path, study, groups, group_keys, x_key):
+def _lines(study, groups, group_keys, x_key):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for (key, title), ax in zip(_MAE, axes):
         for g, rs in groups.items():
@@ -126,12 +134,10 @@ def _lines(path, study, groups, group_keys, x_key):
         ax.legend(fontsize=8)
     fig.suptitle(study.name, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _heatmaps(path, study, groups, group_keys, keys, flagged):
+def _heatmaps(study, groups, group_keys, keys, flagged):
     """Heat maps of the MAE over two swept keys; cells of flagged cases (study.csv ``flag``:
     unstable, marginal, saturated) are cross-hatched and labelled with the flag."""
     kx, ky = keys
@@ -152,7 +158,8 @@ def _heatmaps(path, study, groups, group_keys, keys, flagged):
                 if (i, j) in flags:
                     ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="r", lw=0))
                     text += f"\n{flags[(i, j)]}"
-                cells.append(ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w"))
+                cells.append(ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w",
+                                     bbox=dict(facecolor="black", alpha=0.5, lw=0, pad=1.0)))
             ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
             ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys])
             ax.set_xlabel(key_label(kx))
@@ -164,9 +171,7 @@ def _heatmaps(path, study, groups, group_keys, keys, flagged):
                                "samples))", 130), fontsize=9)
     fig.tight_layout()
     fit_cell_labels(fig, cells)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def fit_cell_labels(fig, texts, smallest: float = 3.0) -> None:
