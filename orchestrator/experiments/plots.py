@@ -159,7 +159,10 @@ def _mean_tracking_mae(path: Path, rows=None) -> float:
     m = _metrics(path).get("tracking_mae_um")
     if m:
         return float(np.mean(m))
-    columns, data = rows or read_results(path)
+    try:
+        columns, data = rows or read_results(path)
+    except ResultFolderError:
+        return math.inf  # a run that left no rows (failed) is never the better baseline
     return float(np.mean(np.abs(error_signals(columns, data)["tracking"])) * 1e6)
 
 
@@ -555,7 +558,7 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
         kind = folder_kind(f)
         if kind is None:
             raise ResultFolderError(f"result folder {f} holds no results of tapmp run or tapmp compare (no "
-                                    "run.json, comparison.json or run folders): allowed is a run or comparison folder")
+                                    "run.json, comparison.json or run folders)")
         if kind == "comparison" and len(folders) > 1:
             raise ResultFolderError(f"result folder {f} is a comparison: overlay its run folders instead "
                                     f"(e.g. {f / 'sc-dc'}) or plot it alone")
