@@ -13,7 +13,6 @@ labelled line, and a zoom panel with every sample of a short window.
 """
 
 import difflib
-import json
 import math
 import re
 from pathlib import Path
