@@ -142,7 +142,7 @@ def _heatmaps(study, groups, group_keys, keys, flagged):
     unstable, marginal, saturated) are cross-hatched and labelled with the flag."""
     kx, ky = keys
     xs, ys = sorted(set(study.grid[kx])), sorted(set(study.grid[ky]))
-    fig, axes = plt.subplots(len(groups), 2, figsize=(11, 4 * len(groups)), squeeze=False)
+    fig, axes = plt.subplots(len(groups), 2, figsize=(13, 4.8 * len(groups)), squeeze=False)
     cells = []  # the value labels, one per cell (fitted into their cells below)
     for row_axes, (g, rs) in zip(axes, groups.items()):
         for (key, title), ax in zip(_MAE, row_axes):
@@ -157,7 +157,7 @@ def _heatmaps(study, groups, group_keys, keys, flagged):
                 text = "failed" if np.isnan(v) else f"{v:.3g}"
                 if (i, j) in flags:
                     ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="r", lw=0))
-                    text += f"\n{flags[(i, j)]}"
+                    text += "\n" + "\n".join(flags[(i, j)].split("+"))  # one flag a line: narrower
                 cells.append(ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w",
                                      bbox=dict(facecolor="black", alpha=0.5, lw=0, pad=1.0)))
             ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
