@@ -28,20 +28,49 @@ def test_a_swept_key_is_labelled_with_its_quantity_and_unit(key, label):
 
 
 @pytest.fixture(scope="module")
-def sweep(built, tmp_path_factory):
+def client():
+    """A real LocalCluster with one worker process."""
+    c = open_client(workers=1)
+    yield c
+    close_client(c)
+
+
+def run(folder: Path, name: str, text: str, ssp, client):
+    path = folder / f"{name}.toml"
+    path.write_text(f'[study]\nname = "{name}"\nbase = "{BASE}"\noutput = "{folder / name}"\n[set]\n'
+                    f'stop_time = 0.01\n{text}')
+    study = load_study(path)
+    run_study(study, ssp, client, progress=False)
+    return folder / name, study
+
+
+@pytest.fixture(scope="module")
+def sweep(built, client, tmp_path_factory):
     """A 2 x 2 grid over Lambda_v and D, 0.01 s each; Lambda_v = 5.76 is beyond the stability
-    limit at 0.1 ms (studies/gain_sweep.toml), so two cells are flagged "unstable"."""
-    folder = tmp_path_factory.mktemp("sweep")
-    path = folder / "s.toml"
-    path.write_text(f'[study]\nname = "s"\nbase = "{BASE}"\noutput = "{folder / "out"}"\n[set]\nstop_time = 0.01\n'
-                    '[grid]\n"gain_overrides.Lambda_v" = [0.36, 5.76]\n"gain_overrides.D" = [450.0, 900.0]\n')
-    client = open_client(workers=1)
-    try:
-        study = load_study(path)
-        run_study(study, built["ssp"], client, progress=False)
-    finally:
-        close_client(client)
-    return folder / "out", study
+    limit at 0.1 ms (studies/gain_sweep.toml), so two cells are flagged."""
+    return run(tmp_path_factory.mktemp("sweep"), "s", '[grid]\n"gain_overrides.Lambda_v" = [0.36, 5.76]\n'
+               '"gain_overrides.D" = [450.0, 900.0]\n', built["ssp"], client)
+
+
+def test_a_one_key_sweep_and_a_monte_carlo_study_label_their_axes_with_units(built, client, tmp_path):
+    out, study = run(tmp_path, "line", '[grid]\nlaw = ["sc-dc", "apd-dc"]\n"plant.k_pull" = [0.0, 200.0]\n',
+                     built["ssp"], client)
+    (path, fig), = study_figures(out, study).items()
+    assert path.name == "sweep.png"
+    for ax in fig.axes:
+        assert ax.get_xlabel() == "k_pull, mutual pulling stiffness between ... [N/m]"
+        assert ax.get_ylabel().endswith("MAE (mean of q1-q3) [µm]")
+        assert [t.get_text() for t in ax.get_legend().get_texts()] == ["law = sc-dc", "law = apd-dc"]
+    plt.close(fig)
+    out, study = run(tmp_path, "mc", '[monte_carlo]\nsamples = 3\nseed = 1\n[monte_carlo.vary.m]\n'
+                     'targets = ["plant.m_p"]\ndistribution = "uniform"\nlow = 0.9\nhigh = 1.1\nrelative = true\n',
+                     built["ssp"], client)
+    (path, fig), = study_figures(out, study).items()
+    assert path.name == "robustness.png"
+    assert [(ax.get_xlabel(), ax.get_ylabel()) for ax in fig.axes] == [
+        ("tracking MAE (mean of q1-q3) [µm]", "cases [count]"), ("synchronization MAE (mean of q1-q3) [µm]",
+                                                                "cases [count]")]
+    plt.close(fig)
 
 
 def test_sweep_axes_carry_units_and_cell_labels_stay_inside_their_cells(sweep):
