@@ -187,9 +187,11 @@ def check_runs(runs: dict) -> dict:
     return checks
 
 
-def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1):
+def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
+                   show: list | None = None):
     """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
-    out/comparison.md and the figures; returns (runs, results, checks, comparison.md text)."""
+    out/comparison.md and the figures (of the runs ``show``, default see plots.select_runs);
+    returns (runs, results, checks, comparison.md text)."""
     from .experiments.plots import plot
     from .experiments.pool import run_many
     from .experiments.report import write_comparison
@@ -203,7 +205,7 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
         results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
         kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
-        plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs)
+        plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs, show)
     return runs, results, checks, text
 
 
@@ -225,8 +227,12 @@ def cmd_compare(args) -> int:
     out = Path(args.out) if args.out else result_base(scenario) / "compare"
     command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     jobs = _jobs(args)
+    show = _names(args.runs)
+    if show:  # before any run starts
+        from .experiments.plots import select_runs
+        select_runs(out, list(compare_runs(scenario)), show)
     _, _, _, text = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, command,
-                                   jobs)
+                                   jobs, show)
     print(text)
     print(f"results, figures and comparison.md in {out}")
     return 0
@@ -297,13 +303,26 @@ def cmd_export(args) -> int:
     return 0
 
 
+def _names(text) -> list | None:
+    """A comma-separated option (--runs, --signals) as a list; None if not given."""
+    return None if text is None else [v.strip() for v in text.split(",") if v.strip()]
+
+
 def cmd_plot(args) -> int:
-    from .experiments.plots import plot
-    for path in plot(Path(args.result_dir)):
+    from .experiments.plots import parse_window, plot_runs
+    window = parse_window(args.window)
+    written = plot_runs(args.result_dir, args.label, _names(args.signals), window,
+                        Path(args.out) if args.out else None, args.svg, args.allow_different_horizons,
+                        _names(args.runs))
+    for path in written:
         print(f"wrote {path}")
     return 0
 
 
+PLOT_SIGNALS = ("e1..e3 tracking error of each motor [µm] (also q1_err..q3_err), es1..es3 synchronization "
+                "errors [µm], eX, eZ [µm], eB [µrad] axis errors, F1..F3 force commands [N], q1..q3 motor positions "
+                "[mm], X, Z [mm], B [deg] platform pose, or a recorded column by its full name (e.g. controller.u1) "
+                "in SI units")
 RELATIVE = "a relative path is relative to the current directory"
 PLATFORM_NAMES = tuple(PLATFORMS)
 PATHS_HELP = ("Paths: scenario files, --out, --ssp, --fmus-dir and a scenario's 'output' are relative to the "
@@ -404,6 +423,10 @@ def parser() -> argparse.ArgumentParser:
                        epilog=PATHS_HELP)
     scenario_args(c)
     c.add_argument("--jobs", metavar="N", help="runs at once, each in its own process (default: one per core)")
+    c.add_argument("--runs", metavar="R1,R2,...", help="runs the figures show (folder names, e.g. "
+                   "sc-dc,apd-dc,pid-dc-mode-matched, or all; default: sc-dc, apd-dc and the better of "
+                   "apd-dc-mode-matched and apd-dc-ms-matched by mean tracking MAE); every run still runs and is "
+                   "in comparison.md")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write docs/paper-reproduction.md",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "
@@ -455,12 +478,31 @@ def parser() -> argparse.ArgumentParser:
     ex.add_argument("--out", required=True, help="SSP file to write, ending in .ssp, e.g. export/paper.ssp")
     ex.add_argument("--overwrite", action="store_true", help="replace an existing FILE.ssp and its start values")
     ex.set_defaults(func=cmd_export)
-    pl = sub.add_parser("plot", help="plot a run or a comparison",
-                        description="Write the figures (cf. paper Fig. 4-7, and the force commands) of a result "
-                        "folder as PNG: run_fig4_trajectory.png ... run_fig8_force_commands.png for a run folder, "
-                        "fig4_trajectory.png ... fig8_force_commands.png for a comparison folder; the folder says "
-                        "which it is (run.json or comparison.json).", epilog=PATHS_HELP)
-    pl.add_argument("result_dir", help=f"a run folder or a comparison folder; {RELATIVE}")
+    pl = sub.add_parser("plot", help="plot a run, a comparison, or runs side by side",
+                        description="Write the figures (cf. paper Fig. 4-7, and the force commands) of one result "
+                        "folder, or of several run folders overlaid, as PNG (and SVG with --svg). One run folder: "
+                        "run_fig4_trajectory.png ... run_fig8_force_commands.png into it; one comparison folder: "
+                        "fig4_trajectory.png ... fig8_force_commands.png into it, showing by default SC-DC "
+                        "(proposed), APD-DC (the paper's baseline) and the better fair baseline (apd-dc-mode-matched "
+                        "or apd-dc-ms-matched, the lower mean tracking MAE); several run folders: fig4 ... fig8 "
+                        "with one trace per run into --out. With --signals one figure signals.png instead. "
+                        "Runs of different horizons (start, stop or step) are refused unless "
+                        "--allow-different-horizons.", epilog=PATHS_HELP)
+    pl.add_argument("result_dir", nargs="+", metavar="FOLDER",
+                    help=f"a run folder or a comparison folder, or several run folders to overlay; {RELATIVE}")
+    pl.add_argument("--label", action="append", metavar="TEXT", help="legend label of each run folder, in order "
+                    "(repeat once per folder; default: the folder names)")
+    pl.add_argument("--signals", metavar="S1,S2,...", help="plot these signals, one panel each, into signals.png: "
+                    + PLOT_SIGNALS)
+    pl.add_argument("--window", metavar="START:STOP", help="time window in seconds, e.g. 0.5:1.0 (either side may "
+                    "be empty: 0.5: or :1.0)")
+    pl.add_argument("--runs", metavar="R1,R2,...", help="runs of a comparison folder to show (folder names, e.g. "
+                    "sc-dc,apd-dc,pid-dc-mode-matched, or all)")
+    pl.add_argument("--out", help="output folder (default: the folder itself for one folder; "
+                    f"results/plots/<label>_vs_<label>... for several run folders); {RELATIVE}")
+    pl.add_argument("--svg", action="store_true", help="also write each figure as SVG")
+    pl.add_argument("--allow-different-horizons", action="store_true",
+                    help="overlay runs of different start time, stop time or step")
     pl.set_defaults(func=cmd_plot)
     return p
 

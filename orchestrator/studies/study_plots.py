@@ -1,8 +1,10 @@
 """Figures of studies: MAE against swept parameters, robustness histograms, tuning progress.
 
-All values in micrometres (um). Written as PNG with matplotlib's Agg backend.
+All errors in micrometres (µm); a swept key is labelled with its quantity and unit (from the
+model interface, tapmp/interface.py). Written as PNG with matplotlib's Agg backend.
 """
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -14,8 +16,48 @@ import numpy as np  # noqa: E402
 
 from .study import PENALTY_UM, STUDY_CSV, case_value, read_study_csv  # noqa: E402
 
-_MAE = (("tracking_mae_um_mean", "tracking MAE (mean of q1-q3) [um]"),
-        ("sync_mae_um_mean", "synchronization MAE (mean of q1-q3) [um]"))
+_MAE = (("tracking_mae_um_mean", "tracking MAE (mean of q1-q3) [µm]"),
+        ("sync_mae_um_mean", "synchronization MAE (mean of q1-q3) [µm]"))
+
+# Names of the gains (gain_overrides.<name>: the same value on all three motors)
+_GAIN_NAMES = {"Lambda_p": "Λp, position gain", "Lambda_v": "Λv, velocity gain", "b": "b, coupling coefficient",
+               "D": "D, error-filter gain", "K_T": "K_T, command per newton"}
+_TOP_KEYS = {"stop_time": ("stop time", "s"), "start_time": ("start time", "s"), "step": ("communication step", "s"),
+             "record_every": ("recorded every", "steps")}
+
+
+def _short(text: str, width: int = 38) -> str:
+    """The first clause of a description, cut at a word boundary to ``width`` characters."""
+    text = text.split(";")[0].split(",")[0].split(" (")[0].strip()
+    if len(text) <= width:
+        return text
+    return text[:width].rsplit(" ", 1)[0] + " ..."
+
+
+def key_label(key: str) -> str:
+    """Axis label of a swept scenario key: its quantity and unit, e.g. "gain_overrides.D" ->
+    "D, error-filter gain (all motors) [1/s]", "plant.k_pull" -> "k_pull, mutual pulling
+    stiffness ... [N/m]"; the unit from tapmp/interface.py ("-" for a number without unit)."""
+    from tapmp.interface import _GAIN_DOC, ELEMENT, VARIABLES
+    head, _, name = key.partition(".")
+    if not name:
+        if key in _TOP_KEYS:
+            what, unit = _TOP_KEYS[key]
+            return f"{what} [{unit}]"
+        return f"{key} [-]"
+    if head == "gain_overrides":
+        base = name.rstrip("123") if name not in _GAIN_DOC else name
+        if base in _GAIN_DOC:
+            motor = name[len(base):]
+            where = f"motor {motor}" if motor else "all motors"
+            return f"{_GAIN_NAMES.get(base, base)} ({where}) [{_GAIN_DOC[base][0] or '-'}]"
+        head = "controller"
+    for fmu, element in ELEMENT.items():
+        if element == head:
+            for v in VARIABLES[fmu]:
+                if v.name == name:
+                    return f"{name}, {_short(v.description)} [{v.unit or '-'}]"
+    return f"{key} [-]"
 
 
 def _numeric(values) -> bool:
@@ -24,34 +66,44 @@ def _numeric(values) -> bool:
 
 def plot_study(out: Path, study, params: list) -> list:
     """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
+    paths = []
+    for path, fig in study_figures(out, study).items():
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def study_figures(out: Path, study) -> dict:
+    """{path: Figure} of a grid / Monte Carlo study from out/study.csv (not yet written):
+    robustness.png (Monte Carlo), sweep.png (MAE over one or two swept numeric keys)."""
     rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
     done = [r for r in rows if r["status"] == "completed" and all(isinstance(r.get(k), float) for k, _ in _MAE)]
     if not done:
-        return []
-    paths = []
+        return {}
     numeric_grid = [k for k in study.grid if _numeric(study.grid[k]) and len(study.grid[k]) > 1]
     group_keys = [k for k in study.grid if k not in numeric_grid]
     groups = {}
     for r in done:
         groups.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
     if study.samples:
-        paths.append(_histograms(Path(out) / "robustness.png", study, groups, group_keys))
-    elif len(numeric_grid) == 1:
-        paths.append(_lines(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[0]))
-    elif len(numeric_grid) >= 2:
+        return {Path(out) / "robustness.png": _histograms(study, groups, group_keys)}
+    if len(numeric_grid) == 1:
+        return {Path(out) / "sweep.png": _lines(study, groups, group_keys, numeric_grid[0])}
+    if len(numeric_grid) >= 2:
         flagged = {}
         for r in rows:
             if r.get("flag"):
                 flagged.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
-        paths.append(_heatmaps(Path(out) / "sweep.png", study, groups, group_keys, numeric_grid[:2], flagged))
-    return paths
+        return {Path(out) / "sweep.png": _heatmaps(study, groups, group_keys, numeric_grid[:2], flagged)}
+    return {}
 
 
 def _label(group_keys, group) -> str:
     return ", ".join(f"{k} = {v}" for k, v in zip(group_keys, group)) or "all cases"
 
 
-def _histograms(path, study, groups, group_keys):
+def _histograms(study, groups, group_keys):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for (key, title), ax in zip(_MAE, axes):
         data = {g: np.array([r[key] for r in rs]) for g, rs in groups.items()}
@@ -62,39 +114,36 @@ def _histograms(path, study, groups, group_keys):
             ax.hist(d, bins=bins, alpha=0.55, label=f"{_label(group_keys, g)} (n = {len(d)}, "
                     f"median {np.median(d):.3f})")
         ax.set_xlabel(title)
-        ax.set_ylabel("cases")
+        ax.set_ylabel("cases [count]")
         ax.legend(fontsize=8)
     fig.suptitle(f"{study.name}: {study.samples} samples of "
                  + ", ".join(f.name for f in study.factors) + f" (seed {study.seed})", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _lines(path, study, groups, group_keys, x_key):
+def _lines(study, groups, group_keys, x_key):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for (key, title), ax in zip(_MAE, axes):
         for g, rs in groups.items():
             rs = sorted(rs, key=lambda r: r[x_key])
             ax.plot([r[x_key] for r in rs], [r[key] for r in rs], "o-", label=_label(group_keys, g))
-        ax.set_xlabel(x_key)
+        ax.set_xlabel(key_label(x_key))
         ax.set_ylabel(title)
         ax.set_yscale("log")
         ax.legend(fontsize=8)
     fig.suptitle(study.name, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _heatmaps(path, study, groups, group_keys, keys, flagged):
+def _heatmaps(study, groups, group_keys, keys, flagged):
     """Heat maps of the MAE over two swept keys; cells of flagged cases (study.csv ``flag``:
     unstable, marginal, saturated) are cross-hatched and labelled with the flag."""
     kx, ky = keys
     xs, ys = sorted(set(study.grid[kx])), sorted(set(study.grid[ky]))
-    fig, axes = plt.subplots(len(groups), 2, figsize=(11, 4 * len(groups)), squeeze=False)
+    fig, axes = plt.subplots(len(groups), 2, figsize=(13, 4.8 * len(groups)), squeeze=False)
+    cells = []  # the value labels, one per cell (fitted into their cells below)
     for row_axes, (g, rs) in zip(axes, groups.items()):
         for (key, title), ax in zip(_MAE, row_axes):
             z = np.full((len(ys), len(xs)), np.nan)
@@ -108,20 +157,37 @@ def _heatmaps(path, study, groups, group_keys, keys, flagged):
                 text = "failed" if np.isnan(v) else f"{v:.3g}"
                 if (i, j) in flags:
                     ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="r", lw=0))
-                    text += f"\n{flags[(i, j)]}"
-                ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w")
+                    text += "\n" + "\n".join(flags[(i, j)].split("+"))  # one flag a line: narrower
+                cells.append(ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w",
+                                     bbox=dict(facecolor="black", alpha=0.5, lw=0, pad=1.0)))
             ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
             ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys])
-            ax.set_xlabel(kx)
-            ax.set_ylabel(ky)
+            ax.set_xlabel(key_label(kx))
+            ax.set_ylabel(key_label(ky))
             ax.set_title(f"{title}\n{_label(group_keys, g)}", fontsize=9)
-            fig.colorbar(im, ax=ax, label="log10 [um]")
-    fig.suptitle(f"{study.name} (blank/failed: the case did not complete; cross-hatched: flagged unstable "
-                 "(spectral radius > 1) or saturated (force at the limit in > 1 % of samples))", fontsize=9)
+            fig.colorbar(im, ax=ax, label=f"log10 of the MAE in µm [-]")
+    fig.suptitle(textwrap.fill(f"{study.name} (blank/failed: the case did not complete; cross-hatched: flagged "
+                               "unstable (spectral radius > 1) or saturated (force at the limit in > 1 % of "
+                               "samples))", 130), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    fit_cell_labels(fig, cells)
+    return fig
+
+
+def fit_cell_labels(fig, texts, smallest: float = 3.0) -> None:
+    """Shrink each heat-map cell label (a Text at data (column, row)) until it lies inside its
+    cell (a unit square of the image), down to ``smallest`` points."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for t in texts:
+        ax = t.axes
+        j, i = t.get_position()
+        (x0, y0), (x1, y1) = ax.transData.transform([(j - 0.5, i - 0.5), (j + 0.5, i + 0.5)])
+        while t.get_fontsize() > smallest:
+            box = t.get_window_extent(renderer)
+            if box.x0 >= x0 and box.x1 <= x1 and box.y0 >= y0 and box.y1 <= y1:
+                break
+            t.set_fontsize(max(smallest, t.get_fontsize() - 0.5))
 
 
 def plot_objective(path: Path, results: dict) -> Path:
@@ -136,10 +202,10 @@ def plot_objective(path: Path, results: dict) -> Path:
         if (~ok).any():
             ax.plot(n[~ok], np.full((~ok).sum(), vals[ok].max() if ok.any() else 1.0), "x", color="r",
                     label="rejected (not stable) / failed")
-        ax.axhline(r["start"], color="grey", ls="--", label=f"start gains ({r['start']:.4f} um)")
-        ax.set_title(f"{law}: tuned {r['tuned']:.4f} um", fontsize=10)
-        ax.set_xlabel("evaluation")
-        ax.set_ylabel("objective (tracking + sync MAE)/2 [um]")
+        ax.axhline(r["start"], color="grey", ls="--", label=f"start gains ({r['start']:.4f} µm)")
+        ax.set_title(f"{law}: tuned {r['tuned']:.4f} µm", fontsize=10)
+        ax.set_xlabel("evaluation [count]")
+        ax.set_ylabel("objective (tracking + sync MAE)/2 [µm]")
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
