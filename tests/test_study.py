@@ -143,7 +143,8 @@ def test_tuning_on_a_short_horizon_improves_the_objective_and_writes_a_usable_pr
             f'write_to = "{tmp_path / "tuned"}"\ncompare_stop_time = 0.05\n'
             '[tune.bounds.sc-dc]\nLambda_v = [0.05, 30.0]\nD = [100.0, 5000.0]\n')
     summary = run_study(load_study(write_study(tmp_path, text)), built["ssp"], client, progress=False,
-                        command="tapmp study s.toml")
+                        command="tapmp study s.toml", write_docs=True)
+    assert summary["write_to"] == tmp_path / "tuned" and not (tmp_path / "out" / "tuning").exists()
     r = summary["tuning"]["sc-dc"]
     assert r["evaluations"] == 4 * 2 * 3  # population x dimensions x (1 + generations)
     assert r["tuned"] < 0.9 * r["start"]
