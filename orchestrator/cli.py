@@ -334,6 +334,7 @@ def cmd_study(args) -> int:
     from .studies.run import run_study
     from .studies.study import close_client, load_study, open_client
     study = load_study(args.study)
+    every = record_every(args.record_every) if args.record_every is not None else None
     ssp = _ssp(args)  # before starting a cluster
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
@@ -342,7 +343,6 @@ def cmd_study(args) -> int:
         raise StudyError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
     if args.format or args.record_every is not None:  # scenario keys, applied like the study's [set]
         import dataclasses
-        every = record_every(args.record_every) if args.record_every is not None else None
         recording = {k: v for k, v in (("format", args.format), ("record_every", every)) if v is not None}
         study = dataclasses.replace(study, set={**study.set, **recording})
     if args.write_docs and not study.tune:
