@@ -784,7 +784,7 @@ def check_output_size(scenarios, out: Path, label: str, processes: int = 1, stre
               f"and about {seconds / max(1, min(processes, len(scenarios))):.0f} s of runs", file=stream, flush=True)
     if size > WARN_BYTES:
         print(f"warning: {label}: the results will take about {human_bytes(size)} of {human_bytes(free)} free; "
-              "--record-every N keeps every N-th step, --format mat halves the size", file=stream, flush=True)
+              "--record-every N keeps every N-th step, --format mat writes about 40 % of it", file=stream, flush=True)
     return size
 
 
