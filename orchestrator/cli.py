@@ -292,9 +292,9 @@ def cmd_reproduce(args) -> int:
 
     results = Path(args.results)
     page = Path(args.out) if args.out else results / "paper-reproduction.md"
-    if args.paper_gains_stop_time <= 0:
+    if not 0 < args.paper_gains_stop_time < float("inf"):
         raise ValueError(f"--paper-gains-stop-time = {args.paper_gains_stop_time:g} is invalid: allowed is a "
-                         "horizon > 0 s")
+                         "finite horizon > 0 s")
     if args.workers < 1:
         raise ValueError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
     if page.suffix != ".md":
@@ -335,6 +335,8 @@ def cmd_study(args) -> int:
     from .studies.study import close_client, load_study, open_client
     study = load_study(args.study)
     every = record_every(args.record_every) if args.record_every is not None else None
+    if args.write_docs and not study.tune:
+        raise StudyError(f"--write-docs: {args.study} has no [tune] table; only a tuning writes a write_to folder")
     ssp = _ssp(args)  # before starting a cluster
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
@@ -345,8 +347,6 @@ def cmd_study(args) -> int:
         import dataclasses
         recording = {k: v for k, v in (("format", args.format), ("record_every", every)) if v is not None}
         study = dataclasses.replace(study, set={**study.set, **recording})
-    if args.write_docs and not study.tune:
-        raise StudyError(f"--write-docs: {args.study} has no [tune] table; only a tuning writes a write_to folder")
     out = Path(args.out or study.output)
     if study.keep_results and not study.tune:  # else each case deletes its result file once scored
         from .studies.study import cases

@@ -85,3 +85,31 @@ def test_the_readme_tour_leaves_a_fresh_clone_clean_and_write_docs_changes_only_
                                             "wrote docs/paper-reproduction.md"]
     assert _porcelain(repo) == [" M docs/paper-reproduction.md"]
     assert (repo / "docs" / "paper-reproduction.md").read_text() == page.read_text()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--out", "page.txt"], "error: --out = 'page.txt' is invalid: allowed is a Markdown file ending in .md"),
+    (["--paper-gains-stop-time", "0"], "error: --paper-gains-stop-time = 0 is invalid: allowed is a finite horizon "
+                                       "> 0 s"),
+    (["--paper-gains-stop-time", "nan"], "error: --paper-gains-stop-time = nan is invalid: allowed is a finite "
+                                         "horizon > 0 s"),
+    (["--workers", "0"], "error: --workers = 0 is invalid: allowed is an integer >= 1"),
+    (["--scenarios", "nowhere"], "error: --scenarios = 'nowhere': no paper_simulation.toml there: allowed is a folder "
+                                 "with paper_simulation.toml and paper_experiment.toml"),
+])
+def test_bad_reproduce_options_are_one_line_exit_2_and_write_nothing(tmp_path, args, message):
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "reproduce", *args], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert (res.returncode, res.stderr.splitlines(), res.stdout) == (2, [message], "")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_docs_of_a_study_without_a_tuning_is_refused(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "study", str(ROOT / "studies" / "gain_sweep.toml"),
+                          "--write-docs", "--out", str(tmp_path / "out")], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(ROOT),
+                                                          TAPMP_FMUS_DIR=str(tmp_path / "fmus")))
+    assert res.returncode == 2
+    assert res.stderr.splitlines() == [f"error: --write-docs: {ROOT / 'studies' / 'gain_sweep.toml'} has no [tune] "
+                                       "table; only a tuning writes a write_to folder"]
+    assert not (tmp_path / "out").exists()
