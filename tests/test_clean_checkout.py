@@ -44,7 +44,8 @@ def clone(tmp_path_factory):
     short = tmp / "scenarios"
     short.mkdir()
     for name in SCENARIOS:
-        text, n = re.subn(r"(?m)^stop_time = [0-9.]+", "stop_time = 0.02", (repo / "scenarios" / f"{name}.toml").read_text())
+        text = (repo / "scenarios" / f"{name}.toml").read_text()
+        text, n = re.subn(r"(?m)^stop_time = [0-9.]+", "stop_time = 0.02", text)
         assert n == 1
         (short / f"{name}.toml").write_text(text)
     return repo, env, short

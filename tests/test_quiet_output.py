@@ -28,7 +28,8 @@ def test_compare_into_a_log_prints_a_summary_of_the_metrics_and_no_long_or_progr
     for stream in (res.stdout, res.stderr):
         assert "\r" not in stream
         assert all(len(line) <= 200 for line in stream.splitlines())
-    assert res.stderr.splitlines()[0] == f"paper_simulation: 9 runs of 0.05 s (500 steps, csv) on 1 process(es) -> {out}"
+    assert res.stderr.splitlines()[0] == (f"paper_simulation: 9 runs of 0.05 s (500 steps, csv) on 1 process(es) "
+                                          f"-> {out}")
     assert "paper_simulation: figures" in res.stderr.splitlines()
     lines = res.stdout.splitlines()
     assert len(lines) == 3 + len(BASELINES)
