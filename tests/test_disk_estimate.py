@@ -125,3 +125,18 @@ def test_a_bad_record_every_is_one_line_exit_2_and_writes_nothing(tmp_path, comm
     assert res.stderr.strip().splitlines() == [f"error: --record-every = {value!r} is invalid: allowed is an integer "
                                                ">= 1 (keep every N-th step)"]
     assert not any(p.name.startswith("out") for p in tmp_path.iterdir())
+
+
+def test_a_study_takes_format_and_record_every_for_every_case(built, tmp_path):
+    study = tmp_path / "s.toml"
+    study.write_text(f'[study]\nname = "s"\nbase = "{PAPER}"\noutput = "{tmp_path / "out"}"\nkeep_results = true\n'
+                     '[set]\nstop_time = 0.0105\n[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
+    res = tapmp("study", study, "--ssp", built["ssp"], "--workers", "1", "--format", "mat", "--record-every", "10",
+                "--no-progress", tmp_path=tmp_path)
+    assert res.returncode == 0, res.stderr
+    cases = sorted((tmp_path / "out" / "cases").iterdir())
+    assert len(cases) == 2
+    for case in cases:
+        run = json.loads((case / "run.json").read_text())
+        assert (run["format"], run["record_every"]) == ("mat", 10)
+        assert read_results(case)[1].shape == (12, RECORDED_COLUMNS)  # steps 0, 10, ..., 100 and 105
