@@ -168,6 +168,17 @@ def test_tuning_on_a_short_horizon_improves_the_objective_and_writes_a_usable_pr
     assert "| sc-dc | 24 |" in (tmp_path / "tuned" / "comparison.md").read_text()
 
 
+def test_tuning_without_write_docs_writes_into_the_output_folder_and_leaves_write_to_alone(built, client, tmp_path):
+    text = ('[set]\nstop_time = 0.01\n[tune]\nlaws = ["apd-dc"]\npopulation = 2\ngenerations = 1\nseed = 3\n'
+            f'write_to = "{tmp_path / "docs"}"\ncompare_stop_time = 0.01\n'
+            '[tune.bounds.apd-dc]\nLambda_v = [0.1, 1.0]\n')
+    summary = run_study(load_study(write_study(tmp_path, text)), built["ssp"], client, progress=False)
+    tuned = tmp_path / "out" / "tuning"
+    assert summary["write_to"] == tuned and not (tmp_path / "docs").exists()
+    assert sorted(p.name for p in tuned.iterdir()) == ["apd-dc.toml", "comparison.md", "objective.png"]
+    assert summary["tuning"]["apd-dc"]["preset"] == tuned / "apd-dc.toml"
+
+
 def test_gains_file_errors_name_the_file_and_what_is_allowed(tmp_path):
     scenario = tmp_path / "s.toml"
     scenario.write_text(BASE.read_text().replace('gains = "default"', 'gains_file = "g.toml"'))
