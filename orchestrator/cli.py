@@ -504,7 +504,7 @@ def parser() -> argparse.ArgumentParser:
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "
                        "and differential-mode stiffness, the mode-matched PD and PID (PID-DC) and the SC-DC "
                        "ablations b = 0 and Lambda_p = 0 (orchestrator/experiments/baselines.py); write "
-                       "comparison.md and figures and print the tables. Output folder by default "
+                       "comparison.md (the full tables) and figures and print one summary row per run. Output folder by default "
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
     scenario_args(c)
