@@ -14,8 +14,9 @@ from .engine.toolchain import PLATFORMS
 from .engine.master import CoSimulationError, remove_stale_folders
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)
-from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError,
-                      one_line, output_lock, prepare_output, run_scenario, write_comparison_status)
+from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, Progress,
+                                  ResultsWriteError, check_output_size, one_line, output_lock, prepare_output,
+                                  run_scenario, write_comparison_status)
 from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
 from .studies.study import StudyError
 
@@ -38,17 +39,12 @@ def scenario_file(name: str) -> str:
 
 
 def _progress_bar(desc: str, enabled: bool):
-    """A tqdm bar that appears only for runs longer than a second."""
+    """(update, close) of a run's progress: a bar on a terminal (for runs longer than a
+    second), else one line per 10 % of a run longer than two seconds; nothing if not enabled."""
     if not enabled:
         return None, lambda: None
-    from tqdm import tqdm
-    bar = tqdm(total=None, desc=desc, unit="step", delay=1.0, mininterval=0.5, leave=False)
-
-    def update(done, total):
-        bar.total = total
-        bar.n = done
-        bar.refresh()
-    return update, bar.close
+    bar = Progress(desc, "step")
+    return bar, bar.close
 
 
 def _run_one(scenario, ssp, out, overwrite, progress, label):
@@ -59,12 +55,30 @@ def _run_one(scenario, ssp, out, overwrite, progress, label):
         close()
 
 
-def _load(args):
-    """The scenario of a run/compare command: the file, its --set overrides and --format."""
-    scenario = load(scenario_file(args.scenario), args.set)
+def _recording(args, scenario):
+    """``scenario`` with the --format and --record-every of ``args`` (where given)."""
     if getattr(args, "format", None):
         scenario = scenario.with_changes(format=args.format)
+    if getattr(args, "record_every", None) is not None:
+        scenario = scenario.with_changes(record_every=record_every(args.record_every))
     return scenario
+
+
+def _load(args):
+    """The scenario of a run/compare command: the file, its --set overrides, --format and --record-every."""
+    return _recording(args, load(scenario_file(args.scenario), args.set))
+
+
+def record_every(value) -> int:
+    """--record-every checked: an integer >= 1."""
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"--record-every = {value!r} is invalid: allowed is an integer >= 1 "
+                                         "(keep every N-th step)")
+    return n
 
 
 def result_base(scenario) -> Path:
@@ -160,6 +174,7 @@ def cmd_run(args) -> int:
     warn_if_implausible(scenario)
     warn_if_unstable(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / scenario.law
+    check_output_size([scenario], out, scenario.name)
     m = _run_one(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
     print("tracking MAE [um]: " + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]))
@@ -197,16 +212,53 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
     from .experiments.report import write_comparison
 
     runs = compare_runs(scenario)
+    check_output_size(runs.values(), out, scenario.name, jobs)  # before anything is written
     checks = check_runs(runs)
     with comparison_folder(out, overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
+        say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
+            f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
         bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
         records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, True, bars,
                            scenario.name)
         results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
+        say(f"{scenario.name}: figures")
         kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
         plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs, show)
     return runs, results, checks, text
+
+
+def say(line: str) -> None:
+    """One line on stderr saying what a long command starts doing."""
+    print(line, file=sys.stderr, flush=True)
+
+
+def summary_rows(results: dict) -> list[tuple]:
+    """(run, mean tracking MAE [um], mean sync MAE [um], tracking and sync reduction [%] against
+    APD-DC) per run of a comparison ({run: metrics}); the means over the three motors."""
+    from .experiments.report import reduction
+
+    def mean(v):
+        return sum(v) / len(v)
+    base = results.get("apd-dc")
+    rows = []
+    for name, m in results.items():
+        t, y = mean(m["tracking_mae_um"]), mean(m["sync_mae_um"])
+        rt = reduction(mean(base["tracking_mae_um"]), t) if base else float("nan")
+        ry = reduction(mean(base["sync_mae_um"]), y) if base else float("nan")
+        rows.append((name, t, y, rt, ry))
+    return rows
+
+
+def summary_table(results: dict) -> str:
+    """The short table `tapmp compare` prints: one row per run (see summary_rows)."""
+    rows = summary_rows(results)
+    w = max(len("run"), *(len(r[0]) for r in rows))
+    lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'vs APD-DC: tracking':>19}  "
+             f"{'sync':>8}"]
+    for name, t, y, rt, ry in rows:
+        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%")
+    return "\n".join(lines)
 
 
 def _jobs(args) -> int:
@@ -231,10 +283,11 @@ def cmd_compare(args) -> int:
     if show:  # before any run starts
         from .experiments.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
-    _, _, _, text = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, command,
-                                   jobs, show)
-    print(text)
-    print(f"results, figures and comparison.md in {out}")
+    _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
+                                      command, jobs, show)
+    print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
+    print(summary_table(results))
+    print(f"results, figures and the full tables (comparison.md) in {out}")
     return 0
 
 
@@ -243,13 +296,43 @@ def cmd_reproduce(args) -> int:
     command = "tapmp reproduce " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     jobs = _jobs(args)
 
+    results = Path(args.results)
+    page = Path(args.out) if args.out else results / "paper-reproduction.md"
+    if not 0 < args.paper_gains_stop_time < float("inf"):
+        raise ValueError(f"--paper-gains-stop-time = {args.paper_gains_stop_time:g} is invalid: allowed is a "
+                         "finite horizon > 0 s")
+    if args.workers < 1:
+        raise ValueError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+    if page.suffix != ".md":
+        raise ValueError(f"--out = {str(page)!r} is invalid: allowed is a Markdown file ending in .md")
+    if args.record_every is not None:
+        record_every(args.record_every)
+    from .experiments.reproduction import SCENARIOS
+    files = [Path(args.scenarios) / f"{name}{suffix}.toml" for suffix in ("", "_calibrated") for name in SCENARIOS]
+    for f in files[:len(SCENARIOS)]:
+        if not f.is_file():
+            raise ValueError(f"--scenarios = {args.scenarios!r}: no {f.name} there: allowed is a folder with "
+                             + " and ".join(f"{name}.toml" for name in SCENARIOS))
+    runs = [sc for f in files if f.is_file() for sc in compare_runs(_recording(args, load(f))).values()]
+    check_output_size(runs, results, "reproduce", jobs)  # every compare run, before the first starts
+
     def compare(scenario, out):
+        scenario = _recording(args, scenario)
         return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress,
                               f"tapmp compare {out.parent.name}", jobs)
 
-    reproduce(Path(args.scenarios), Path(args.results), Path(args.out), compare, command,
-              paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args))
-    print(f"wrote {args.out}")
+    text = reproduce(Path(args.scenarios), results, page, compare, command,
+                     paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args),
+                     say=say)
+    print(f"wrote {page}")
+    if args.write_docs:
+        docs = Path("docs") / "paper-reproduction.md"
+        if not docs.parent.is_dir():
+            raise ValueError(f"--write-docs: no folder {docs.parent.absolute()}: run it from the repository root")
+        tmp = docs.with_suffix(".tmp")
+        tmp.write_text(text)
+        tmp.replace(docs)
+        print(f"wrote {docs}")
     return 0
 
 
@@ -257,19 +340,31 @@ def cmd_study(args) -> int:
     from .studies.run import run_study
     from .studies.study import close_client, load_study, open_client
     study = load_study(args.study)
+    every = record_every(args.record_every) if args.record_every is not None else None
+    if args.write_docs and not study.tune:
+        raise StudyError(f"--write-docs: {args.study} has no [tune] table; only a tuning writes a write_to folder")
     ssp = _ssp(args)  # before starting a cluster
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
                          "or tapmp build) or pass --ssp")
     if args.workers is not None and args.workers < 1:
         raise StudyError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+    if args.format or args.record_every is not None:  # scenario keys, applied like the study's [set]
+        import dataclasses
+        recording = {k: v for k, v in (("format", args.format), ("record_every", every)) if v is not None}
+        study = dataclasses.replace(study, set={**study.set, **recording})
     out = Path(args.out or study.output)
+    if study.keep_results and not study.tune:  # else each case deletes its result file once scored
+        from .studies.study import cases
+        check_output_size([study.base_scenario()] * len(cases(study)), out, study.name, args.workers or 1)
     with output_lock(out):  # before starting a cluster; run_study takes it again (re-entrant)
+        say(f"{study.name}: starting the Dask workers")
         client = open_client(args.scheduler, args.workers)
         try:
             command = "tapmp study " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+            say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
-                          not args.no_progress, command)
+                          not args.no_progress, command, args.write_docs)
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped
@@ -277,7 +372,7 @@ def cmd_study(args) -> int:
         for law, r in s["tuning"].items():
             print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
                   f"{r['evaluations']} evaluations); preset {r['preset']}")
-        print(f"comparison and objective plot in {Path(study.tune['write_to'])}; every evaluation in "
+        print(f"presets, comparison and objective plot in {s['write_to']}; every evaluation in "
               f"{s['out'] / 'study.csv'}")
     else:
         c = s["counts"]
@@ -366,6 +461,15 @@ def parser() -> argparse.ArgumentParser:
                         "relative to --fmus-dir")
         sp.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
 
+    def recording_args(sp, format_too=False):
+        """--record-every (and --format): what the result files keep."""
+        if format_too:
+            sp.add_argument("--format", choices=RESULT_FORMATS, help="result files: csv (text) or mat (MATLAB 5 "
+                            "MAT-file, about 40 %% of the size); overrides the scenarios' format (default csv)")
+        sp.add_argument("--record-every", metavar="N", help="keep every N-th step (and the last) "
+                        "in the result files; the metrics still use every step (default: the scenario's "
+                        "record_every, 1)")
+
     def scenario_args(sp):
         source_args(sp)
         sp.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, "
@@ -375,6 +479,7 @@ def parser() -> argparse.ArgumentParser:
                         "scenario's format (default csv)")
         sp.add_argument("--overwrite", action="store_true", help="replace a completed result in the output folder "
                         "(a failed or interrupted one is replaced without it)")
+        recording_args(sp)
         sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     r = sub.add_parser("run", help="run one scenario", description="Co-simulate one scenario and write "
@@ -418,7 +523,7 @@ def parser() -> argparse.ArgumentParser:
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "
                        "and differential-mode stiffness, the mode-matched PD and PID (PID-DC) and the SC-DC "
                        "ablations b = 0 and Lambda_p = 0 (orchestrator/experiments/baselines.py); write "
-                       "comparison.md and figures and print the tables. Output folder by default "
+                       "comparison.md (the full tables) and figures and print one summary row per run. Output folder by default "
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
     scenario_args(c)
@@ -428,12 +533,16 @@ def parser() -> argparse.ArgumentParser:
                    "apd-dc-mode-matched and apd-dc-ms-matched by mean tracking MAE); every run still runs and is "
                    "in comparison.md")
     c.set_defaults(func=cmd_compare)
-    rp = sub.add_parser("reproduce", help="write docs/paper-reproduction.md",
+    rp = sub.add_parser("reproduce", help="write the paper-reproduction page (results/paper-reproduction.md)",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "
                         "and their calibrated versions if present, run the paper's gains at fine steps, and write the "
                         "paper-reproduction page: the paper's Tables 1-6 as printed beside ours, the modal table, "
-                        "the baselines, the paper-gain runs and which of the paper's claims hold.")
-    rp.add_argument("--out", default="docs/paper-reproduction.md", help="page to write")
+                        "the baselines, the paper-gain runs and which of the paper's claims hold. The page goes to "
+                        "RESULTS/paper-reproduction.md; docs/paper-reproduction.md only with --write-docs.")
+    rp.add_argument("--out", help="page to write, ending in .md (default: RESULTS/paper-reproduction.md)")
+    rp.add_argument("--write-docs", action="store_true", help="also write the page to docs/paper-reproduction.md "
+                    "(relative to the current directory: run it from the repository root)")
+    recording_args(rp, format_too=True)
     rp.add_argument("--scenarios", default=str(SCENARIOS_DIR), help="folder with paper_simulation.toml, "
                     "paper_experiment.toml (default: the scenarios shipped with the package)")
     rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
@@ -465,6 +574,10 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
+    recording_args(st, format_too=True)
+    st.add_argument("--write-docs", action="store_true", help="a tuning study: write its presets, comparison.md "
+                    "and objective.png into its [tune] write_to folder (studies/tune.toml: docs/tuning) instead "
+                    "of OUT/tuning")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.set_defaults(func=cmd_study)
     ex = sub.add_parser("export", help="write a scenario as an SSP with its parameter set",

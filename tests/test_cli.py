@@ -52,7 +52,11 @@ def test_compare_writes_three_runs_comparison_and_figures(built, tmp_path, capsy
     for fig in ("fig4_trajectory", "fig5_tracking_errors", "fig6_sync_errors", "fig7_axis_errors",
                 "fig8_force_commands"):
         assert (out / f"{fig}.png").stat().st_size > 10000
-    assert "ours: SC-DC (proposed)" in capsys.readouterr().out
+    printed = capsys.readouterr().out  # the summary: one row per run, the full tables only in comparison.md
+    assert "ours: SC-DC (proposed)" in text and "ours: SC-DC (proposed)" not in printed
+    sc = json.loads((out / "sc-dc" / "metrics.json").read_text())
+    row = next(line.split() for line in printed.splitlines() if line.startswith("sc-dc "))
+    assert float(row[1]) == pytest.approx(sum(sc["tracking_mae_um"]) / 3, abs=5e-5)
 
 
 def test_bad_scenario_gives_one_line_and_exit_code_2(tmp_path, capsys):

@@ -143,7 +143,8 @@ def test_tuning_on_a_short_horizon_improves_the_objective_and_writes_a_usable_pr
             f'write_to = "{tmp_path / "tuned"}"\ncompare_stop_time = 0.05\n'
             '[tune.bounds.sc-dc]\nLambda_v = [0.05, 30.0]\nD = [100.0, 5000.0]\n')
     summary = run_study(load_study(write_study(tmp_path, text)), built["ssp"], client, progress=False,
-                        command="tapmp study s.toml")
+                        command="tapmp study s.toml", write_docs=True)
+    assert summary["write_to"] == tmp_path / "tuned" and not (tmp_path / "out" / "tuning").exists()
     r = summary["tuning"]["sc-dc"]
     assert r["evaluations"] == 4 * 2 * 3  # population x dimensions x (1 + generations)
     assert r["tuned"] < 0.9 * r["start"]
@@ -165,6 +166,17 @@ def test_tuning_on_a_short_horizon_improves_the_objective_and_writes_a_usable_pr
     assert compare["compare-sc-dc-tuned"]["objective"] < compare["compare-sc-dc-start"]["objective"]
     assert (tmp_path / "tuned" / "objective.png").stat().st_size > 10_000
     assert "| sc-dc | 24 |" in (tmp_path / "tuned" / "comparison.md").read_text()
+
+
+def test_tuning_without_write_docs_writes_into_the_output_folder_and_leaves_write_to_alone(built, client, tmp_path):
+    text = ('[set]\nstop_time = 0.01\n[tune]\nlaws = ["apd-dc"]\npopulation = 2\ngenerations = 1\nseed = 3\n'
+            f'write_to = "{tmp_path / "docs"}"\ncompare_stop_time = 0.01\n'
+            '[tune.bounds.apd-dc]\nLambda_v = [0.1, 1.0]\n')
+    summary = run_study(load_study(write_study(tmp_path, text)), built["ssp"], client, progress=False)
+    tuned = tmp_path / "out" / "tuning"
+    assert summary["write_to"] == tuned and not (tmp_path / "docs").exists()
+    assert sorted(p.name for p in tuned.iterdir()) == ["apd-dc.toml", "comparison.md", "objective.png"]
+    assert summary["tuning"]["apd-dc"]["preset"] == tuned / "apd-dc.toml"
 
 
 def test_gains_file_errors_name_the_file_and_what_is_allowed(tmp_path):

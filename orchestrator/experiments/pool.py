@@ -132,8 +132,8 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
         return records
     bar = None
     if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(tasks), desc=f"{label} runs", unit="run", delay=1.0, leave=False)
+        from .results import Progress  # a bar on a terminal only
+        bar = Progress(f"{label} runs", "run", len(tasks))
     context = get_context("fork")
     cancel = context.Event()  # queued runs that a worker has already taken must not start either
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context,

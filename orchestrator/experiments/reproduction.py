@@ -236,14 +236,15 @@ def _section(title: str, name: str, sc, runs, results, checks, command: str, fol
 
 
 def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, command: str,
-              paper_gains_stop: float = PAPER_GAINS_STOP, workers: int = 2, ssp: Path | None = None) -> str:
+              paper_gains_stop: float = PAPER_GAINS_STOP, workers: int = 2, ssp: Path | None = None,
+              say=lambda line: None) -> str:
     """Run everything and write the page to ``out``; returns its text.
 
     compare(scenario, folder) runs `tapmp compare` on a scenario into folder and returns
     (runs, results, checks, text) as orchestrator.cli.run_comparison. paper_gains_stop [s]:
     horizon of the paper-gain runs (PAPER_GAIN_STEPS each), run in ``workers`` processes.
     ssp: the FMUs of the extra runs that score the calibrated prediction (predictors.run_extra;
-    None: no such section).
+    None: no such section). say(line) is told each phase as it starts.
     """
     comparisons, calibrated, folders = {}, {}, {}
     for name in SCENARIOS:
@@ -257,6 +258,8 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, comman
             key = f"{name}_calibrated"
             folders[key] = Path(results_dir) / key / "compare"
             calibrated[key] = (sc, *compare(sc, folders[key])[:3])
+    say(f"the paper's gains at steps of " + ", ".join(f"{h:g}" for h in PAPER_GAIN_STEPS)
+        + f" s, {paper_gains_stop:g} s per run, on {workers} process(es)")
     gain_rows = run_paper_gains(steps=PAPER_GAIN_STEPS, stop_time=paper_gains_stop, workers=workers)
     pg_cmd = (f"python -m orchestrator.experiments.paper_gains --stop-time {paper_gains_stop:g} --steps "
               + " ".join(f"{h:g}" for h in PAPER_GAIN_STEPS) + f" --workers {workers}")
@@ -329,6 +332,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, comman
         parts += ["## Closing note: predicted against paper reductions, Tables 1-6", "",
                   *_reduction_note(calibrated, "SC-DC predicted on the calibrated plants"), ""]
         if ssp is not None and len(calibrated) == len(SCENARIOS):
+            say("the prediction's null models and extra runs")
             extra = run_extra(scenarios_dir, Path(results_dir) / "predictors", ssp)
             parts += ["## What the prediction is worth: null models, no calibration, the experiment's gains", "",
                       *prediction_lines({k: v[2] for k, v in calibrated.items()}, extra), ""]

@@ -16,9 +16,10 @@ from .tuning import run_tuning
 
 
 def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
-              overwrite: bool = False, progress: bool = True, command: str = "") -> dict:
+              overwrite: bool = False, progress: bool = True, command: str = "", write_docs: bool = False) -> dict:
     """Run a study on a Dask client; returns a summary (counts, paths, wall time). The
-    output folder is locked for the whole study (results.OutputInUseError if in use)."""
+    output folder is locked for the whole study (results.OutputInUseError if in use).
+    write_docs: a tuning writes its presets and comparison into its write_to folder (else out/tuning)."""
     ssp = Path(ssp)
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
@@ -26,7 +27,7 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
     out = Path(out or study.output)
     with output_lock(out):  # one writer per study folder (cases lock their own folders)
         if study.tune:
-            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command)
+            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command, write_docs)
         return _run_cases(study, ssp, client, out, resume, overwrite, progress, command)
 
 

@@ -559,7 +559,8 @@ class CaseRunner:
 
         rows = {c["case"]: self.table.rows[c["case"]] for c in cases if c["case"] in self.table.rows}
         todo = [c for c in cases if c["case"] not in rows]
-        bar = tqdm(total=len(cases), initial=len(rows), desc=self.desc, unit="case", disable=not self.progress,
+        bar = tqdm(total=len(cases), initial=len(rows), desc=self.desc, unit="case",
+                   disable=not (self.progress and sys.stderr.isatty()),  # a bar on a terminal only
                    file=sys.stderr, leave=False)
         futures = {}
         try:

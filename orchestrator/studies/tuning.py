@@ -12,9 +12,11 @@ The objective is orchestrator.studies.study.objective: (mean tracking MAE + mean
 MAE) / 2 over the three motors [um], on the study's base scenario (with its [set], e.g. a
 short stop_time). K_T is not tuned: F = u / K_T, so only the ratios Lambda / K_T matter.
 
-After tuning each law it writes WRITE_TO/<law>.toml (a gain preset file a scenario uses
+After tuning each law it writes TUNED/<law>.toml (a gain preset file a scenario uses
 with gains_file = "...") and runs the starting and the tuned gains of every law over
-compare_stop_time into WRITE_TO/comparison.md, with WRITE_TO/objective.png.
+compare_stop_time into TUNED/comparison.md, with TUNED/objective.png. TUNED is the study's
+output folder's tuning/ subfolder, or the [tune] table's write_to folder when asked
+(`tapmp study --write-docs`), so that a plain run leaves the repository's files alone.
 """
 
 import json
@@ -78,8 +80,9 @@ def _preset_text(law, gains, objective_start, objective_tuned, base, command) ->
 
 
 def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
-               command: str) -> dict:
-    """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png."""
+               command: str, write_docs: bool = False) -> dict:
+    """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png
+    into out/tuning, or into the table's write_to folder if ``write_docs``."""
     from ..experiments.results import write_json
 
     spec = study.tune
@@ -90,7 +93,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
                                   "fingerprint": fp, "command": command, "tune": spec})
     names_all = [n for n in GAIN_NAMES if any(n in spec["bounds"][law] for law in spec["laws"])]
     table = StudyTable(out / STUDY_CSV, ["law", *names_all])
-    write_to = Path(spec["write_to"])
+    write_to = Path(spec["write_to"]) if write_docs else out / "tuning"
     write_to.mkdir(parents=True, exist_ok=True)
     base = study.base_scenario()
     start = time.perf_counter()
@@ -130,7 +133,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
     text = _comparison_md(write_to / "comparison.md", study, base, results, compare, spec, command)
     for r in results.values():
         r.pop("rows")
-    return {"out": out, "tuning": results, "comparison": text, "figures": [fig],
+    return {"out": out, "write_to": write_to, "tuning": results, "comparison": text, "figures": [fig],
             "wall_time_s": time.perf_counter() - start,
             "cases": len(table.rows), "counts": {}}
 
