@@ -320,7 +320,9 @@ def validate_tune(table, path) -> dict:
         _require(key in _KEYS, f"{where}.{key} is unknown: {allowed_are(key, _KEYS)}")
     laws = table.get("laws", list(_TUNABLE))  # the laws tuned on Gains (not PID-DC's modal gains)
     _require(isinstance(laws, list) and laws and all(law in _TUNABLE for law in laws),
-             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}")
+             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}"
+             + next((suggestion(law, _TUNABLE) for law in (laws if isinstance(laws, list) else [])
+                     if law not in _TUNABLE), ""))
     bounds = table.get("bounds", {})
     out_bounds = {}
     for law in laws:
