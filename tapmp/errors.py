@@ -1,5 +1,6 @@
 """Error types shared by the model core, the FMU adapters and the orchestrator."""
 
+import difflib
 import math
 
 
@@ -41,3 +42,17 @@ def require_nonnegative(name: str, value: float) -> float:
     if not (math.isfinite(value) and value >= 0.0):
         raise ModelInputError(name, value, "a finite number >= 0")
     return value
+
+
+def suggestion(value, allowed) -> str:
+    """``"; did you mean B?"`` naming the allowed names closest to ``value`` (difflib's ratio
+    >= 0.6, at most three, best first), or ``""`` when none is close."""
+    names = list(dict.fromkeys(str(a) for a in allowed))  # a name listed twice is offered once
+    close = difflib.get_close_matches(str(value), names, n=3, cutoff=0.6)
+    return f"; did you mean {' or '.join(close)}?" if close else ""
+
+
+def allowed_are(value, allowed, sep: str = ", ") -> str:
+    """``"allowed are A, B, C; did you mean B?"``: the allowed names joined by ``sep`` and the
+    closest ones to the refused ``value`` (:func:`suggestion`)."""
+    return f"allowed are {sep.join(str(a) for a in allowed)}{suggestion(value, allowed)}"

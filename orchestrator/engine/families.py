@@ -13,6 +13,8 @@ checkout) or ./build (installed as a wheel); the families' SSPs inside it:
 import os
 from pathlib import Path
 
+from tapmp.errors import allowed_are
+
 # The package's root: the repository in a checkout, site-packages in an installed wheel.
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "TAPMP_FMUS_DIR"
@@ -63,7 +65,7 @@ def family_ssp(fmus: str, folder: str | Path | None = None) -> Path:
     try:
         return fmus_dir(folder) / FAMILIES[fmus]
     except KeyError:
-        raise ValueError(f"fmus = {fmus!r} is invalid: allowed are {', '.join(FAMILIES)}") from None
+        raise ValueError(f"fmus = {fmus!r} is invalid: {allowed_are(fmus, FAMILIES)}") from None
 
 
 def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None) -> Path:

@@ -9,6 +9,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from tapmp.errors import suggestion
 from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, UNITS, VARIABLES
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -26,6 +27,9 @@ SERVO_STEP = 1e-4     # [s] the communication step of the built SSPs, the FMUs' 
 
 # Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address.
 ROLES = {role: model for model, role in ELEMENT.items()}
+# A scenario's own tables besides the roles: a misspelled one reaches the master as an element
+# table, so these are among the names offered when a table addresses no element.
+SCENARIO_TABLES = ("gain_overrides", "limits", "mismatch")
 
 
 class ParameterAddressError(ValueError):
@@ -42,16 +46,22 @@ def resolve_parameters(parameters: dict, models: dict, ssp_path) -> dict:
     A key that names an element addresses it; a role name (:data:`ROLES`) the one element
     whose FMU is that role's model (``models``: {element: modelName}); an empty table sets
     nothing (e.g. [plant] of a system with its own plant FMU). ParameterAddressError for a
-    role with no or several elements, an unknown key, or a value set by both name and role.
+    role with no or several elements, an unknown key (even with an empty table: a misspelled
+    table name), or a value set by both name and role.
     The master and ``tapmp export`` both address elements through this function.
     """
     out = {}
     for key, table in parameters.items():
+        if key not in models and key not in ROLES:
+            raise ParameterAddressError(
+                f"parameters given for unknown element(s) {key}: allowed are {', '.join(models)} (or "
+                f"{', '.join(ROLES)} for the element whose FMU is TAPMP_Plant, ...)"
+                + suggestion(key, [*models, *ROLES, *SCENARIO_TABLES]), key)
         if not table:
             continue
         if key in models:
             element = key
-        elif key in ROLES:
+        else:
             hits = [e for e, m in models.items() if m == ROLES[key]]
             if len(hits) != 1:
                 what = "none" if not hits else f"{len(hits)} ({', '.join(hits)})"
@@ -60,10 +70,6 @@ def resolve_parameters(parameters: dict, models: dict, ssp_path) -> dict:
                     f"{ssp_path} has {what}: allowed is a table named after the element, one of "
                     f"{', '.join(models)}", key)
             element = hits[0]
-        else:
-            raise ParameterAddressError(
-                f"parameters given for unknown element(s) {key}: allowed are {', '.join(models)} (or "
-                f"{', '.join(ROLES)} for the element whose FMU is TAPMP_Plant, ...)", key)
         target = out.setdefault(element, {})
         for name, value in table.items():
             if name in target:

@@ -33,6 +33,7 @@ of the linearized loop (orchestrator.experiments.stability.check) and the wall t
 """
 
 import math
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -187,11 +188,12 @@ def _run_one(spec: dict) -> dict:
 
 def run_paper_gains(steps=(1e-6, 1e-5, 1e-4), stop_time: float = 0.5, readings=("A", "B"),
                     cases=tuple(CASES), laws=LAWS, plants=tuple(PLANTS), workers: int = 1,
-                    root: Path = ROOT) -> list[dict]:
+                    root: Path = ROOT, progress=None) -> list[dict]:
     """Run every combination of case x plant x reading x law x step [s] for stop_time [s].
 
     Returns one dict per run: case, plant, reading, law, step, stop_time and the fields of
-    run_scenario. workers > 1 runs that many processes. ValueError names a bad argument.
+    run_scenario. workers > 1 runs that many processes. ``progress(done, total, row)``, if
+    given, is called after each run, in the order of the rows. ValueError names a bad argument.
     """
     if not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r} is invalid: allowed is an integer >= 1")
@@ -200,10 +202,19 @@ def run_paper_gains(steps=(1e-6, 1e-5, 1e-4), stop_time: float = 0.5, readings=(
              for c in cases for p in plants for r in readings for law in laws for h in steps]
     for s in specs:  # validate everything before the first run
         paper_scenario(s["case"], s["law"], s["step"], s["stop_time"], s["reading"], s["plant"], root)
+    rows = []
+
+    def collect(results):
+        for row in results:
+            rows.append(row)
+            if progress is not None:
+                progress(len(rows), len(specs), row)
+        return rows
+
     if workers == 1:
-        return [_run_one(s) for s in specs]
+        return collect(map(_run_one, specs))
     with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(_run_one, specs))
+        return collect(pool.map(_run_one, specs))
 
 
 def _um(values) -> str:
@@ -241,10 +252,18 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=1, help="processes")
     ap.add_argument("--json", help="also write the rows to this JSON file")
     a = ap.parse_args(argv)
+    def progress(done, total, row):  # on stderr, so that stdout stays the table
+        print(f"run {done}/{total}: {row['case']} gains, {row['plant']} plant, reading {row['reading']}, "
+              f"{row['law'].upper()}, step {row['step'] * 1e6:g} us, {row['stop_time']:g} s: {row['status']} "
+              f"({row['wall_s']:.1f} s)", file=sys.stderr, flush=True)
+
     try:
+        n = len(a.cases) * len(a.plants) * len(a.readings) * len(a.laws) * len(a.steps)
+        print(f"running the paper's gains in the plain loop: {n} runs of {a.stop_time:g} s on {a.workers} "
+              f"process(es); the table follows", file=sys.stderr, flush=True)
         rows = run_paper_gains(steps=tuple(a.steps), stop_time=a.stop_time, readings=tuple(a.readings),
                                cases=tuple(a.cases), laws=tuple(a.laws), plants=tuple(a.plants),
-                               workers=a.workers)
+                               workers=a.workers, progress=progress)
     except ValueError as err:
         ap.exit(2, f"error: {err}\n")
     print(paper_gains_table(rows))

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tapmp.control import Gains, ModalGains
-from tapmp.errors import ModelInputError
+from tapmp.errors import ModelInputError, allowed_are, suggestion
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
@@ -115,7 +115,7 @@ def load_gain_file(path) -> dict:
             raise ScenarioError(f"gains_file {path}: gains.{name} is missing: allowed is a number or a list of 3 numbers")
     for name, v in table.items():
         if name not in GAIN_NAMES:
-            raise ScenarioError(f"gains_file {path}: gains.{name} is unknown: allowed are {', '.join(GAIN_NAMES)}")
+            raise ScenarioError(f"gains_file {path}: gains.{name} is unknown: {allowed_are(name, GAIN_NAMES)}")
         vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
         if not (isinstance(vals, list) and len(vals) == 3):
             raise ScenarioError(f"gains_file {path}: gains.{name} = {v!r} is invalid: allowed is a number "
@@ -282,7 +282,7 @@ def _check_mismatch(s: Scenario) -> None:
     lo, hi = MISMATCH_RANGE
     for k, v in s.mismatch.items():
         if k not in ModelParams._fields:
-            raise ScenarioError(f"mismatch.{k} is unknown: allowed are {', '.join(ModelParams._fields)}")
+            raise ScenarioError(f"mismatch.{k} is unknown: {allowed_are(k, ModelParams._fields)}")
         v = s.mismatch[k] = _check_type(f"mismatch.{k}", v, float)
         if not (math.isfinite(v) and lo <= v <= hi):
             raise ScenarioError(f"mismatch.{k} = {v!r} is invalid: allowed is a factor in [{lo:g}, {hi:g}] "
@@ -326,7 +326,7 @@ def _check_addressing(s: Scenario) -> None:
             if isinstance(v, float) and not math.isfinite(v) or not isinstance(v, (int, float, bool)):
                 raise ScenarioError(f"{element}.{k} = {v!r} is invalid: allowed is a finite number, an integer "
                                     "or a boolean (a parameter of the FMU of SSP element "
-                                    f"{element})")
+                                    f"{element}){suggestion(element, sorted(_TABLES))}")
 
 
 def _check_move(s: Scenario) -> None:
@@ -356,18 +356,18 @@ def _check_move(s: Scenario) -> None:
 def validate(s: Scenario) -> Scenario:
     """Check every value of a scenario; raise ScenarioError naming the key."""
     if s.law not in LAWS:
-        raise ScenarioError(f"law = {s.law!r} is invalid: allowed are {', '.join(LAWS)}")
+        raise ScenarioError(f"law = {s.law!r} is invalid: {allowed_are(s.law, LAWS)}")
     if s.gains not in GAIN_PRESETS:
-        raise ScenarioError(f"gains = {s.gains!r} is invalid: allowed are {', '.join(sorted(GAIN_PRESETS))}")
+        raise ScenarioError(f"gains = {s.gains!r} is invalid: {allowed_are(s.gains, sorted(GAIN_PRESETS))}")
     if s.gains_file:
         s.gain_file_values = load_gain_file(s.gains_file)
     if s.ordering not in ORDERINGS:
-        raise ScenarioError(f"ordering = {s.ordering!r} is invalid: allowed are {', '.join(ORDERINGS)}")
+        raise ScenarioError(f"ordering = {s.ordering!r} is invalid: {allowed_are(s.ordering, ORDERINGS)}")
     if s.clock not in CLOCKS:
-        raise ScenarioError(f"clock = {s.clock!r} is invalid: allowed are {', '.join(CLOCKS)}")
+        raise ScenarioError(f"clock = {s.clock!r} is invalid: {allowed_are(s.clock, CLOCKS)}")
     if s.connection_start not in CONNECTION_STARTS:
-        raise ScenarioError(f"connection_start = {s.connection_start!r} is invalid: allowed are "
-                            f"{', '.join(CONNECTION_STARTS)}")
+        raise ScenarioError(f"connection_start = {s.connection_start!r} is invalid: "
+                            f"{allowed_are(s.connection_start, CONNECTION_STARTS)}")
     if not (math.isfinite(s.step) and s.step > 0.0):
         raise ScenarioError(f"step = {s.step!r} is invalid: allowed is a number > 0 [s]")
     if not (math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time):
@@ -376,7 +376,7 @@ def validate(s: Scenario) -> Scenario:
     _check_whole_steps(s)
     for k, v in s.gain_overrides.items():
         if k not in GAIN_NAMES:
-            raise ScenarioError(f"gain_overrides.{k} is unknown: allowed are {', '.join(GAIN_NAMES)}")
+            raise ScenarioError(f"gain_overrides.{k} is unknown: {allowed_are(k, GAIN_NAMES)}")
         vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
         if not (isinstance(vals, list) and len(vals) == 3):
             raise ScenarioError(f"gain_overrides.{k} = {v!r} is invalid: allowed is a number or a list of 3 numbers")
@@ -389,7 +389,7 @@ def validate(s: Scenario) -> Scenario:
                 raise ScenarioError(f"controller.{k} is set by the scenario's {_FROM_SCENARIO[k]} = "
                                     f"{getattr(s, _FROM_SCENARIO[k])!r}: allowed is to set {_FROM_SCENARIO[k]}")
             if k not in allowed:
-                raise ScenarioError(f"{section}.{k} is unknown: allowed are {', '.join(allowed)}")
+                raise ScenarioError(f"{section}.{k} is unknown: {allowed_are(k, allowed)}")
             table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
     _check_mismatch(s)
     _check_disturbance(s)
@@ -408,7 +408,7 @@ def validate(s: Scenario) -> Scenario:
     _check_move(s)
     for k, v in s.limits.items():
         if k not in LIMITS:
-            raise ScenarioError(f"limits.{k} is unknown: allowed are {', '.join(LIMITS)}")
+            raise ScenarioError(f"limits.{k} is unknown: {allowed_are(k, LIMITS)}")
         v = s.limits[k] = _check_type(f"limits.{k}", v, float)
         if not (math.isfinite(v) and v >= 0.0):
             raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
@@ -417,9 +417,9 @@ def validate(s: Scenario) -> Scenario:
     _check_addressing(s)
     from ..engine.families import FAMILIES
     if s.fmus not in FAMILIES:
-        raise ScenarioError(f"fmus = {s.fmus!r} is invalid: allowed are {', '.join(FAMILIES)}")
+        raise ScenarioError(f"fmus = {s.fmus!r} is invalid: {allowed_are(s.fmus, FAMILIES)}")
     if s.format not in RESULT_FORMATS:
-        raise ScenarioError(f"format = {s.format!r} is invalid: allowed are {', '.join(RESULT_FORMATS)}")
+        raise ScenarioError(f"format = {s.format!r} is invalid: {allowed_are(s.format, RESULT_FORMATS)}")
     if s.record_every < 1:
         raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
     vs = s.controller.get("velocity_source", 0)
@@ -446,8 +446,9 @@ def from_dict(data: dict, source: str = "") -> Scenario:
         elif isinstance(value, dict):  # a table named after an SSP element (checked by the master)
             kwargs.setdefault("elements", {})[key] = dict(value)
         else:
-            raise ScenarioError(f"{key} is unknown: allowed are {', '.join([*_TOP, *sorted(_TABLES)])}, "
-                              "order, or a table named after an SSP element")
+            names = [*_TOP, *sorted(_TABLES), "order"]
+            raise ScenarioError(f"{key} is unknown: allowed are {', '.join(names[:-1])}, order, or a table "
+                                f"named after an SSP element{suggestion(key, names)}")
     if "name" not in kwargs:
         kwargs["name"] = Path(source).stem if source else "scenario"
     if kwargs.get("gains_file") and source and not Path(kwargs["gains_file"]).is_absolute():

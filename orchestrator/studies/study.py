@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tapmp.errors import allowed_are, suggestion
 from tapmp.params import GAIN_NAMES
 
 from ..experiments.scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, read_toml, validate
@@ -142,15 +143,19 @@ def check_key(key: str, where: str) -> None:
                          "start_on_trajectory"),
                  f"{where}: {key} is not a scenario key a study may set: allowed are law, ordering, step, "
                  "stop_time, start_time, gains, gains_file, start_on_trajectory or SECTION.NAME "
-                 "(gain_overrides, plant, controller, trajectory)")
+                 "(gain_overrides, plant, controller, trajectory)"
+                 + suggestion(key, ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file",
+                                    "start_on_trajectory")))
     elif section == "gain_overrides":
-        _require(name in GAIN_NAMES, f"{where}: {key} is unknown: allowed are "
-                 + ", ".join(f"gain_overrides.{g}" for g in GAIN_NAMES))
+        _require(name in GAIN_NAMES, f"{where}: {key} is unknown: "
+                 + allowed_are(key, [f"gain_overrides.{g}" for g in GAIN_NAMES]))
     else:
         _require(section in _SECTIONS and name in _SECTION_PARAMS[section],
                  f"{where}: {key} is unknown: allowed are gain_overrides.NAME, "
                  + ", ".join(f"{s}.NAME" for s in _SECTIONS) + " with NAME a parameter of that FMU"
-                 + (f" ({', '.join(_SECTION_PARAMS[section])})" if section in _SECTIONS else ""))
+                 + (f" ({', '.join(_SECTION_PARAMS[section])})" if section in _SECTIONS else "")
+                 + (suggestion(name, _SECTION_PARAMS[section]) if section in _SECTIONS
+                    else suggestion(section, ("gain_overrides", *_SECTIONS))))
 
 
 def apply_changes(scenario: Scenario, changes: dict, where: str = "case") -> Scenario:
@@ -176,11 +181,13 @@ def load_study(path) -> Study:
     data = read_toml(path, f"study file {path}", StudyError)
     allowed = ("study", "set", "grid", "monte_carlo", "tune")
     for key in data:
-        _require(key in allowed, f"{path}: [{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed))
+        _require(key in allowed, f"{path}: [{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed)
+                 + suggestion(key, allowed))
     head = data.get("study", {})
     for key in head:
         _require(key in ("name", "description", "base", "output", "keep_results"),
-                 f"{path}: study.{key} is unknown: allowed are name, description, base, output, keep_results")
+                 f"{path}: study.{key} is unknown: "
+                 + allowed_are(key, ("name", "description", "base", "output", "keep_results")))
     _require(isinstance(head.get("base"), str), f"{path}: study.base is missing: allowed is the path of a "
              "scenario TOML file, relative to the study file")
     base = (path.parent / head["base"]).resolve()
@@ -201,7 +208,7 @@ def load_study(path) -> Study:
     if mc is not None:
         for key in mc:
             _require(key in ("samples", "seed", "vary"),
-                     f"{path}: monte_carlo.{key} is unknown: allowed are samples, seed, vary")
+                     f"{path}: monte_carlo.{key} is unknown: " + allowed_are(key, ("samples", "seed", "vary")))
         samples = mc.get("samples")
         _require(isinstance(samples, int) and not isinstance(samples, bool) and samples >= 1,
                  f"{path}: monte_carlo.samples = {samples!r} is invalid: allowed is an integer >= 1")
@@ -238,7 +245,8 @@ def _factor(where: str, name: str, table) -> Factor:
     _require(isinstance(table, dict), f"{where} must be a table")
     for key in table:
         _require(key in ("targets", "distribution", "low", "high", "mean", "std", "relative"),
-                 f"{where}.{key} is unknown: allowed are targets, distribution, low, high, mean, std, relative")
+                 f"{where}.{key} is unknown: " + allowed_are(key, ("targets", "distribution", "low", "high", "mean",
+                                                                  "std", "relative")))
     targets = table.get("targets", [name])
     _require(isinstance(targets, list) and targets and all(isinstance(t, str) for t in targets),
              f"{where}.targets = {targets!r} is invalid: allowed is a list of dotted scenario keys")
@@ -248,8 +256,8 @@ def _factor(where: str, name: str, table) -> Factor:
                  f"{where}.targets: {t} is invalid: a sampled target must be a number in "
                  "gain_overrides, plant, controller or trajectory")
     dist = table.get("distribution")
-    _require(dist in DISTRIBUTIONS, f"{where}.distribution = {dist!r} is invalid: allowed are "
-             + ", ".join(DISTRIBUTIONS))
+    _require(dist in DISTRIBUTIONS, f"{where}.distribution = {dist!r} is invalid: "
+             + allowed_are(dist, DISTRIBUTIONS))
     f = Factor(name=name, targets=targets, distribution=dist, relative=bool(table.get("relative", False)))
     if dist == "normal":
         f.mean, f.std = _number(f"{where}.mean", table.get("mean")), _number(f"{where}.std", table.get("std"))
@@ -309,10 +317,12 @@ def validate_tune(table, path) -> dict:
     where = f"{path}: tune"
     _require(isinstance(table, dict), f"{where} must be a table")
     for key in table:
-        _require(key in _KEYS, f"{where}.{key} is unknown: allowed are {', '.join(_KEYS)}")
+        _require(key in _KEYS, f"{where}.{key} is unknown: {allowed_are(key, _KEYS)}")
     laws = table.get("laws", list(_TUNABLE))  # the laws tuned on Gains (not PID-DC's modal gains)
     _require(isinstance(laws, list) and laws and all(law in _TUNABLE for law in laws),
-             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}")
+             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}"
+             + next((suggestion(law, _TUNABLE) for law in (laws if isinstance(laws, list) else [])
+                     if law not in _TUNABLE), ""))
     bounds = table.get("bounds", {})
     out_bounds = {}
     for law in laws:
@@ -323,7 +333,7 @@ def validate_tune(table, path) -> dict:
         for gain, lim in b.items():
             _require(gain in _TUNABLE[law], f"{where}.bounds.{law}.{gain} is invalid: allowed are "
                      f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
-                     + "K_T is not tuned: only Lambda / K_T matters)")
+                     + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
             ok = (isinstance(lim, list) and len(lim) == 2
                   and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim)
                   and 0.0 < lim[0] < lim[1])
