@@ -22,6 +22,14 @@ from .studies.study import StudyError
 
 
 
+def _family(value: str) -> str:
+    """--fmus: a family name, else the one-line refusal with the closest names."""
+    if value not in FAMILIES:
+        from tapmp.errors import allowed_are
+        raise argparse.ArgumentTypeError(f"fmus = {value!r} is invalid: {allowed_are(value, FAMILIES)}")
+    return value
+
+
 def _ssp(args, scenario=None) -> Path:
     """--ssp, else the SSP of --fmus, else of the scenario's ``fmus`` (default native)."""
     fmus = args.fmus or (scenario.fmus if scenario is not None else DEFAULT_FAMILY)
@@ -455,7 +463,7 @@ def parser() -> argparse.ArgumentParser:
         sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
         sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
-        sp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, "
+        sp.add_argument("--fmus", type=_family, metavar="{" + ",".join(FAMILIES) + "}", help="FMU family: native (default: the C FMUs, FMI 2.0, "
                         "build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, build/native/fmi3/TAPMP.ssp) or "
                         "python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the scenario's fmus; paths "
                         "relative to --fmus-dir")
@@ -495,7 +503,7 @@ def parser() -> argparse.ArgumentParser:
     ck.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="override a scenario value, e.g. --set gains='\"paper_simulation\"'")
     ck.add_argument("--eigenvalues", action="store_true", help="list every eigenvalue")
-    ck.add_argument("--fmus", choices=list(FAMILIES), help="accepted for symmetry with run: the check linearizes "
+    ck.add_argument("--fmus", type=_family, metavar="{" + ",".join(FAMILIES) + "}", help="accepted for symmetry with run: the check linearizes "
                     "the FMI-free model, which every FMU family reproduces bit for bit (tests), so the verdict "
                     "is the same for all")
     ck.set_defaults(func=cmd_check)

@@ -118,3 +118,12 @@ def test_a_misspelled_study_name_gets_the_closest_allowed_one(case, tmp_path):
     (tmp_path / "bad.toml").write_text(text)
     res = _cli("study", "bad.toml", cwd=tmp_path)
     _one_line_exit_2(res, *expected)
+
+
+def test_an_unknown_family_on_the_command_line_gets_the_closest_name(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "run", str(ROOT / "scenarios" / "paper_simulation.toml"),
+                          "--fmus", "nativ", "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                         cwd=tmp_path)
+    assert res.returncode == 2 and not (tmp_path / "out").exists()
+    assert res.stderr.splitlines()[-1].endswith(
+        "argument --fmus: fmus = 'nativ' is invalid: allowed are python, native, fmi3; did you mean native?")
