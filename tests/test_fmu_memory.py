@@ -14,8 +14,10 @@
 """
 
 import ctypes
+import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -110,11 +112,27 @@ class Instance:
             self.slave.instantiate(logMessage=lambda env, status, category, message: self.log.append(message.decode()))
             self.slave.enterInitializationMode(startTime=0.0)
         else:
-            self.slave.instantiate(callbacks=None)
+            # callbacks of this instance, kept alive with it (fmpy's shared default callbacks may
+            # hold a logger another test set and Python has since freed)
+            from fmpy.fmi2 import (calloc, free, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                                   fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+            from fmpy.logging import addLoggerProxy
+            self.callbacks = fmi2CallbackFunctions()
+            self.callbacks.logger = fmi2CallbackLoggerTYPE(
+                lambda env, name, status, category, message: self.log.append(message.decode()))
+            self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+            self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+            addLoggerProxy(ctypes.byref(self.callbacks))
+            self.slave.instantiate(callbacks=self.callbacks)
             self.slave.setupExperiment(startTime=0.0)
             self.slave.enterInitializationMode()
         self.slave.exitInitializationMode()
         self.dll, self.c = self.slave.dll, self.slave.component
+
+    def fn(self, name: str, *argtypes):
+        """The FMI function ``name`` of this instance's library with its full prototype (status,
+        instance pointer, ``argtypes``): without one, ctypes would pass the pointer as a C int."""
+        return ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, *argtypes)((name, self.dll))
 
 
 def test_fmi3_set_float64_with_fewer_values_than_value_references_is_an_error_not_a_read_past_them(
@@ -122,7 +140,7 @@ def test_fmi3_set_float64_with_fewer_values_than_value_references_is_an_error_no
     fmu = Instance(native_built["fmi3"][PLANT], tmp_path, "plant")
     vrs = (ctypes.c_uint * 3)(fmu.vr["F1"], fmu.vr["F2"], fmu.vr["F3"])
     values = (ctypes.c_double * 3)(5.0, 6.0, 7.0)
-    status = fmu.dll.fmi3SetFloat64(fmu.c, vrs, 3, values, 1)
+    status = fmu.fn("fmi3SetFloat64", ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t, ctypes.POINTER(ctypes.c_double), ctypes.c_size_t)(fmu.c, vrs, 3, values, 1)
     assert status == 3  # fmi3Error
     assert fmu.log == ["fmi3SetFloat64: nValues = 1 is invalid: allowed is 3, the number of value references "
                        "(every variable of TAPMP_Plant is a scalar)"]
@@ -133,39 +151,55 @@ def test_fmi3_get_float64_with_fewer_values_than_value_references_writes_nothing
     fmu = Instance(native_built["fmi3"][CONTROLLER], tmp_path, "controller")
     vrs = (ctypes.c_uint * 3)(fmu.vr["F1"], fmu.vr["F2"], fmu.vr["F3"])
     values = (ctypes.c_double * 3)(-1.5, -2.5, -3.5)
-    assert fmu.dll.fmi3GetFloat64(fmu.c, vrs, 3, values, 2) == 3
+    assert fmu.fn("fmi3GetFloat64", ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t, ctypes.POINTER(ctypes.c_double), ctypes.c_size_t)(fmu.c, vrs, 3, values, 2) == 3
     assert list(values) == [-1.5, -2.5, -3.5]  # not a value written
     assert fmu.log == ["fmi3GetFloat64: nValues = 2 is invalid: allowed is 3, the number of value references "
                        "(every variable of TAPMP_Controller is a scalar)"]
     ints = (ctypes.c_int32 * 1)(7)
     law = (ctypes.c_uint * 1)(fmu.vr["law"])
-    assert fmu.dll.fmi3GetInt32(fmu.c, law, 1, ints, 0) == 3 and list(ints) == [7]
+    get_int32 = fmu.fn("fmi3GetInt32", ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t, ctypes.POINTER(ctypes.c_int32), ctypes.c_size_t)
+    assert get_int32(fmu.c, law, 1, ints, 0) == 3 and list(ints) == [7]
+
+
+def _foreign_and_freed_states(fmu: str, family: str, tmp: str) -> list:
+    """Instance b is handed a state of instance a, then a is handed its own freed state: the
+    statuses and both instances' log lines."""
+    a, b = Instance(Path(fmu), Path(tmp), "a"), Instance(Path(fmu), Path(tmp), "b")
+    get, set_, free = (("fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState") if family == "fmi3" else
+                       ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate"))
+    state = ctypes.c_void_p()
+    out = [a.fn(get, ctypes.POINTER(ctypes.c_void_p))(a.c, ctypes.byref(state)), bool(state.value)]
+    out.append(b.fn(set_, ctypes.c_void_p)(b.c, state))
+    kept = ctypes.c_void_p(state.value)
+    out += [a.fn(free, ctypes.POINTER(ctypes.c_void_p))(a.c, ctypes.byref(state)), state.value]
+    out.append(a.fn(set_, ctypes.c_void_p)(a.c, kept))  # freed: refused without being read
+    out += [a.log, b.log]
+    for x in (a, b):
+        x.slave.freeInstance()
+    return out
 
 
 @pytest.mark.parametrize("family", FAMILIES)
 def test_a_state_of_another_instance_or_a_freed_one_is_refused_with_a_message(native_built, family, tmp_path):
-    a = Instance(native_built[family][PLANT], tmp_path, "a")
-    b = Instance(native_built[family][PLANT], tmp_path, "b")
-    fmi3 = family == "fmi3"
-    get, set_, free = (("fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState") if fmi3 else
-                       ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate"))
-    state = ctypes.c_void_p()
-    assert getattr(a.dll, get)(a.c, ctypes.byref(state)) == 0 and state.value
-    assert getattr(b.dll, set_)(b.c, state) == 3
-    kept = ctypes.c_void_p(state.value)
-    assert getattr(a.dll, free)(a.c, ctypes.byref(state)) == 0 and state.value is None
-    assert getattr(a.dll, set_)(a.c, kept) == 3  # freed: refused without being read
-    if fmi3:
+    # in a process of its own: two copies of the library and states handed between them, away from
+    # the FMUs other tests of this session loaded
+    script = ("import json, sys; sys.path.insert(0, sys.argv[4]); from test_fmu_memory import _foreign_and_freed_states; "
+              "print(json.dumps(_foreign_and_freed_states(*sys.argv[1:4])))")
+    res = subprocess.run([sys.executable, "-c", script, str(native_built[family][PLANT]), family, str(tmp_path),
+                          str(Path(__file__).parent)], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    got, has_state, foreign, freed, after, refused, a_log, b_log = json.loads(res.stdout.splitlines()[-1])
+    assert (got, has_state, foreign, freed, after, refused) == (0, True, 3, 0, None, 3)
+    if family == "fmi3":
         allowed = "allowed is a state from fmi3GetFMUState or fmi3DeserializeFMUState of this instance that was not freed"
-        assert b.log == [f"fmi3SetFMUState: FMUstate is invalid: {allowed}"]
-        assert a.log == [f"fmi3SetFMUState: FMUstate is invalid: {allowed}"]
-    for fmu in (a, b):
-        fmu.slave.freeInstance()
+        assert b_log == [f"fmi3SetFMUState: FMUstate is invalid: {allowed}"]
+        assert a_log == [f"fmi3SetFMUState: FMUstate is invalid: {allowed}"]
 
 
 def test_fmi2_get_real_status_without_a_value_pointer_is_an_error(native_built, tmp_path):
     fmu = Instance(native_built["fmi2"][PLANT], tmp_path, "plant")
-    assert fmu.dll.fmi2GetRealStatus(fmu.c, 2, None) == 3  # fmi2LastSuccessfulTime into NULL
+    get_real_status = fmu.fn("fmi2GetRealStatus", ctypes.c_int, ctypes.POINTER(ctypes.c_double))
+    assert get_real_status(fmu.c, 2, None) == 3  # fmi2LastSuccessfulTime into NULL
     value = ctypes.c_double(-1.0)
-    assert fmu.dll.fmi2GetRealStatus(fmu.c, 2, ctypes.byref(value)) == 0 and value.value == 0.0
+    assert get_real_status(fmu.c, 2, ctypes.byref(value)) == 0 and value.value == 0.0
     fmu.slave.freeInstance()
