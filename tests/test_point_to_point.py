@@ -179,11 +179,11 @@ def test_move_metrics_of_a_hand_built_signal():
     assert short == {"1e-06": pytest.approx(0.0120, abs=1e-12), "1e-07": None}
 
 
-def test_point_to_point_scenario_is_stable_and_does_not_saturate(tmp_path, capsys):
+def test_point_to_point_scenario_is_stable_and_does_not_saturate(native_built, tmp_path, capsys):
     assert main(["check", str(P2P)]) == 0
     assert "stable: spectral radius 0.996172" in capsys.readouterr().out
     out = tmp_path / "run"
-    assert main(["run", str(P2P), "--out", str(out), "--no-progress"]) == 0
+    assert main(["run", str(P2P), "--out", str(out), "--no-progress", "--ssp", str(native_built["fmi2"]["ssp"])]) == 0
     import json
     m = json.loads((out / "metrics.json").read_text())
     assert m["saturation_fraction"] == [0.0, 0.0, 0.0]

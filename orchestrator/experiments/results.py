@@ -773,7 +773,9 @@ def check_output_size(scenarios, out: Path, label: str, processes: int = 1, stre
     size, seconds = output_estimate(scenarios)
     need = sum(output_estimate([s])[0] * (2 if getattr(s, "format", "csv") == "mat" else 1) for s in scenarios)
     free = shutil.disk_usage(_existing_parent(out)).free
-    if need > free:
+    # TAPMP_NO_DISK_CHECK=1: run anyway (a disk whose free space is misreported; the tests of a
+    # disk that fills up while a run writes)
+    if need > free and os.environ.get("TAPMP_NO_DISK_CHECK") != "1":
         raise DiskSpaceError(f"{label}: the runs would write about {human_bytes(need)} into {out} but its disk has "
                              f"{human_bytes(free)} free: shorten stop_time, record fewer rows (--record-every N) or "
                              "write MAT (--format mat)")
