@@ -13,6 +13,8 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 from fmpy.fmi3 import FMU3Slave
 from fmpy.logging import addLoggerProxy
 
+
+
 REF = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d")
 CONTROLLER_INPUTS = REF + ("q1", "q2", "q3", "dq1", "dq2", "dq3")
 CONTROLLER_OUTPUTS = tuple(f"{n}{i}" for n in ("F", "u", "e", "es") for i in (1, 2, 3))
@@ -99,11 +101,3 @@ class Host:
             pass
         self.fmu.freeInstance()
 
-
-def call_status(call) -> int:
-    """The status of an fmpy call: 0 if it returned, else the status it raised (> Warning)."""
-    try:
-        call()
-    except FMICallException as err:
-        return err.status
-    return 0

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from conftest import paper_scenario
-from fmu_host import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, REF, Host, call_status
+from conftest import call_status, paper_scenario
+from fmu_host import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, REF, Host
 from tapmp.control import SAMPLE_TOLERANCE, ControllerModel, Gains, sample_index
 from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
