@@ -1,6 +1,7 @@
 """Command-line tool ``tapmp`` (also ``python -m orchestrator``)."""
 
 import argparse
+import os
 import shlex
 import signal
 import sys
@@ -11,12 +12,16 @@ from pathlib import Path
 
 from .engine import build as build_mod
 from .engine.toolchain import PLATFORMS
-from .engine.master import CoSimulationError, remove_stale_folders
+from .engine.master import CoSimulationError
+from .engine.tempdirs import remove_stale_folders
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)
-from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, Progress,
-                                  ResultsWriteError, check_output_size, one_line, output_lock, prepare_output,
-                                  run_scenario, write_comparison_status)
+from .experiments.estimate import check_output_size
+from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, output_lock, prepare_output,
+                                  write_comparison_status)
+from .experiments.progress import Progress
+from .experiments.results import one_line, run_scenario
+from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
 from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
 from .studies.study import StudyError
 
@@ -628,22 +633,27 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def _interrupt(signum, frame):
-    """Handler of SIGINT, SIGTERM, SIGHUP outside a run: raise Interrupted once, then let the
-    clean-up (folders, locks, a study's workers) finish undisturbed by repeats."""
-    for s in STOP_SIGNALS:
-        signal.signal(s, signal.SIG_IGN)
-    raise Interrupted(signum)
-
-
 @contextmanager
 def _signals_interrupt():
-    """For the duration, SIGINT, SIGTERM and SIGHUP raise Interrupted (a run in progress
-    turns them into a stop at its next step boundary instead); main thread only."""
+    """For the duration, SIGINT, SIGTERM and SIGHUP stop the run in progress on the main thread
+    at its next step boundary (stops.deliver_signal) or, without one, raise Interrupted once and
+    let the clean-up (folders, locks, a study's workers) finish undisturbed by repeats. The only
+    signal handler of the package; main thread only. A worker process forked by `tapmp compare`
+    inherits it: there a signal stops the worker's run, or is ignored while it is idle (the
+    parent stops the set)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {s: signal.signal(s, _interrupt) for s in STOP_SIGNALS}
+    command = os.getpid()
+
+    def interrupt(signum, frame):
+        if deliver_signal(signum) or os.getpid() != command:
+            return
+        for s in STOP_SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
+        raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, interrupt) for s in STOP_SIGNALS}
     try:
         yield
     finally:

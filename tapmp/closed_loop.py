@@ -19,10 +19,9 @@ Orderings (per macro step k, t = t0 + k h):
 """
 
 from .control import ControllerModel
+from .interface import ORDERINGS
 from .plant import PlantModel
 from .trajectory import TrajectoryParams, reference
-
-ORDERINGS = ("gauss-seidel", "jacobi")
 
 
 def simulate(plant: PlantModel, controller: ControllerModel, traj: TrajectoryParams,

@@ -17,6 +17,12 @@ TRAJECTORY = "TAPMP_Trajectory"
 FMU_NAMES = (TRAJECTORY, CONTROLLER, PLANT)
 # Element names in the SSP system, per model.
 ELEMENT = {TRAJECTORY: "trajectory", CONTROLLER: "controller", PLANT: "plant"}
+# Orderings of one macro step (docs/master.md): one element after the other on the latest outputs,
+# or all on the outputs at t (one extra step of delay in the feedback path).
+ORDERINGS = ("gauss-seidel", "jacobi")
+# How connections start: outputs propagated in Initialization Mode, or every connection at 0
+# until the first step (FMPy's simulate_ssp).
+CONNECTION_STARTS = ("propagated", "zero")
 
 
 class Var(NamedTuple):

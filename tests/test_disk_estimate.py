@@ -14,8 +14,9 @@ import sys
 import pytest
 
 from conftest import PAPER
-from orchestrator.experiments.results import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_STEP, DiskSpaceError,
-                                              check_output_size, output_estimate, read_results, recorded_rows)
+from orchestrator.experiments.estimate import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_STEP, DiskSpaceError,
+                                               check_output_size, output_estimate, recorded_rows)
+from orchestrator.experiments.reading import read_results
 from orchestrator.experiments.scenario import load
 
 

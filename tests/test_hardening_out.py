@@ -86,7 +86,7 @@ def test_overwrite_does_not_take_a_folder_another_run_is_writing(built, tmp_path
     assert json.loads((out / "run.json").read_text())["status"] == "completed"
 
 
-HOLD = ("import sys; from orchestrator.experiments.results import output_lock\n"
+HOLD = ("import sys; from orchestrator.experiments.folders import output_lock\n"
         "with output_lock(sys.argv[1]):\n    print('held', flush=True); sys.stdin.read()\n")
 
 
@@ -127,7 +127,7 @@ def test_a_run_into_the_folder_or_a_subfolder_of_a_running_compare_is_refused(bu
 
 
 def test_json_files_are_written_under_unique_temporary_names(tmp_path):
-    from orchestrator.experiments.results import write_json
+    from orchestrator.experiments.folders import write_json
     for i in range(3):
         write_json(tmp_path / "run.json", {"i": i})
     assert [p.name for p in tmp_path.iterdir()] == ["run.json"]
@@ -203,7 +203,7 @@ def test_a_full_disk_ends_the_run_with_one_line_whole_rows_and_no_temporary_file
 
 
 def test_stale_temporary_folders_of_dead_processes_are_removed_at_the_start_of_a_run(built, tmp_path):
-    from orchestrator.engine.master import _host
+    from orchestrator.engine.tempdirs import host as _host
     tmpdir = tmp_path / "tmp"
     dead = subprocess.Popen(["true"])
     dead.wait()

@@ -11,7 +11,7 @@ import pytest
 from orchestrator.cli import main
 from orchestrator.experiments.plots import (COLUMNS, _load_run, decimate, error_figure, parse_window,
                                             resolve_signal, signals_figure)
-from orchestrator.experiments.results import read_results
+from orchestrator.experiments.reading import read_results
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")

@@ -11,7 +11,7 @@ import pytest
 
 from conftest import PAPER
 from orchestrator.experiments.baselines import BASELINES
-from orchestrator.experiments.results import Progress
+from orchestrator.experiments.progress import Progress
 
 
 def _mean(v):

@@ -16,7 +16,9 @@ from scipy.io import loadmat
 from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation
 from orchestrator.experiments import metrics
-from orchestrator.experiments.results import mat_names, read_results, run_scenario
+from orchestrator.experiments.reading import read_results
+from orchestrator.experiments.results import run_scenario
+from orchestrator.experiments.writers import mat_names
 from orchestrator.experiments.scenario import ScenarioError, load
 
 ROOT = Path(__file__).resolve().parent.parent

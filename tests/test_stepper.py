@@ -12,7 +12,10 @@ import pytest
 
 from orchestrator.engine import stepper
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.experiments.results import read_results, request_stop, run_scenario
+from orchestrator.experiments.envelope import envelope
+from orchestrator.experiments.reading import read_results
+from orchestrator.experiments.results import run_scenario
+from orchestrator.experiments.stops import request_stop
 from conftest import PAPER, paper_scenario
 
 from test_master_failures import faulty_ssps  # noqa: F401  (the fixture: real FMUs that fail at 0.5 ms)
@@ -21,7 +24,7 @@ from test_master_failures import faulty_ssps  # noqa: F401  (the fixture: real F
 def rows_of(ssp, scenario, stepper_kind, ordering, clock="exact", blocks=(7, 300, 193)):
     """Row 0 and the rows of ``sum(blocks)`` steps, stepped in blocks of those sizes."""
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      limits=scenario.limit_values(), clock=clock, stepper=stepper_kind) as sim:
+                      check=envelope(scenario), clock=clock, stepper=stepper_kind) as sim:
         assert (sim._core is not None) == (stepper_kind == "compiled")
         out = [np.array([sim.row()])]
         for n in blocks:
@@ -159,7 +162,7 @@ def test_a_bad_stepper_is_refused_naming_the_allowed_values(built, monkeypatch):
 def test_csv_rows_read_back_to_the_same_doubles_at_every_magnitude():
     """Shortest round-trip text for every magnitude and sign, subnormals and the extremes
     included; a block with a non-finite value is written with Python's repr."""
-    from orchestrator.experiments.results import format_csv_rows
+    from orchestrator.experiments.writers import format_csv_rows
     rng = np.random.default_rng(7)
     block = rng.standard_normal((300, 12)) * np.logspace(-310, 300, 12)
     block[0, :6] = [0.0, -0.0, 5e-324, 1.7976931348623157e308, 1e-05, 0.1]

@@ -39,11 +39,8 @@ test_ecos.py, test_fmpy_ssp.py):
 
 import math
 import os
-import posixpath
 import re
 import shutil
-import socket
-import tempfile
 import weakref
 import zipfile
 from ctypes import byref, c_bool, c_double, c_int64, c_uint
@@ -57,15 +54,17 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 from fmpy.ssp.ssd import read_ssd
 
 
+from tapmp.interface import CONNECTION_STARTS, ORDERINGS
+
 from . import stepper as stepper_core
+from .archive import MEMBER_RULE, inside_archive
 from .clocks import Clock
 from .ssp import ROLES, ParameterAddressError, resolve_parameters
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
                        initialization_order)
+from .tempdirs import make_folder, remove_stale_folders
 
-ORDERINGS = ("gauss-seidel", "jacobi")
 STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
-CONNECTION_STARTS = ("propagated", "zero")
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
 
@@ -90,75 +89,27 @@ class DivergenceError(CoSimulationError):
         super().__init__(message, element, time, log)
 
 
-HINT = ("hint: gains unstable at this step size? `tapmp check` tells before a run; "
-        "use stable gains or a smaller step")
-# Envelope signals per limit name (see orchestrator.experiments.scenario.LIMITS): (column prefix, output,
-# unit); a signal the system does not record is not checked.
-ENVELOPE = {"motor_travel": [("plant", f"q{i}_true", "m") for i in (1, 2, 3)],
-            "platform_angle": [("plant", "B", "rad")]}
+class OutputCheck:
+    """The per-step check of the recorded outputs that the caller supplies (``check`` of
+    :class:`CoSimulation`; TAPMP's platform envelope: orchestrator.experiments.envelope).
+
+    :attr:`bounds` is data, so that the compiled core checks it too: (column, limit) pairs,
+    |value| <= limit in the column's unit after every step. :meth:`breach` and
+    :meth:`not_finite` word the DivergenceError. This base class bounds nothing."""
+
+    bounds: tuple = ()
+
+    def breach(self, column: str, value: float, limit: float, t: float) -> str:
+        """The message of ``column`` = ``value`` outside |column| <= ``limit`` at ``t`` [s]."""
+        return f"{column} = {value:.6g} at t = {t:.6g} s is outside |{column}| <= {limit:g}"
+
+    def not_finite(self, column: str, value: float, t: float) -> str:
+        """The message of a non-finite output ``column`` = ``value`` at ``t`` [s]."""
+        return f"{column} = {value!r} at t = {t:.6g} s is not finite: the co-simulation diverged"
 
 
 _ELEMENT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _NAME_RULE = "a name matching [A-Za-z_][A-Za-z0-9_]* (letters, digits, _), unique in the system"
-_MEMBER_RULE = ("allowed is a relative path inside the archive, without a leading /, a URI scheme, "
-                "backslashes or .. above its root, e.g. resources/TAPMP_Plant.fmu")
-
-
-def _inside_archive(path: str) -> str | None:
-    """``path`` (an SSD source or an archive member name) normalized relative to the archive
-    root, or None if it is absolute, a URI, holds a backslash or NUL or climbs out with ``..``."""
-    if not isinstance(path, str) or not path or "\\" in path or "\0" in path \
-            or path.startswith("/") or re.match(r"[A-Za-z][A-Za-z0-9+.-]*:", path):
-        return None
-    norm = posixpath.normpath(path)
-    if norm in (".", "..") or norm.startswith("../"):
-        return None
-    return norm
-
-
-_TMP_PREFIX = "tapmp_cosim_"
-_TMP_NAME = re.compile(r"tapmp_cosim_(\d+)_([A-Za-z0-9.-]*)_.+")
-
-
-def _host() -> str:
-    """This machine's name as it appears in temporary folder names."""
-    return re.sub(r"[^A-Za-z0-9.-]", "-", socket.gethostname())[:64]
-
-
-def _tmp_prefix() -> str:
-    """Prefix of this process's temporary folders: tapmp_cosim_<pid>_<host>_."""
-    return f"{_TMP_PREFIX}{os.getpid()}_{_host()}_"
-
-
-def _alive(pid: int) -> bool:
-    """Whether a process ``pid`` exists on this machine (owned by anyone)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def remove_stale_folders(tmpdir=None) -> list:
-    """Remove the temporary folders (tapmp_cosim_<pid>_<host>_*) that processes of this
-    machine left in ``tmpdir`` (default: tempfile.gettempdir()) when they were killed: only
-    those whose owner pid no longer exists. Returns the removed paths."""
-    root = Path(tmpdir or tempfile.gettempdir())
-    removed, host = [], _host()
-    try:
-        entries = list(os.scandir(root))
-    except OSError:
-        return removed
-    for entry in entries:
-        m = _TMP_NAME.fullmatch(entry.name)
-        if not m or m.group(2) != host or int(m.group(1)) == os.getpid() or _alive(int(m.group(1))):
-            continue
-        if entry.is_dir(follow_symlinks=False):
-            shutil.rmtree(entry.path, ignore_errors=True)
-            removed.append(Path(entry.path))
-    return removed
 
 
 _DESCRIPTIONS = {}  # sha-1 of an FMU archive -> its parsed modelDescription (read-only)
@@ -302,9 +253,9 @@ class CoSimulation:
 
     ``parameters`` maps element name -> {parameter name: value}. After entering,
     :attr:`columns` names the recorded values and :meth:`row` returns them.
-    Every step checks that every output is finite and that the signals of ENVELOPE
-    stay within ``limits`` ({"motor_travel": m, "platform_angle": rad}, 0 = off);
-    a breach raises DivergenceError naming the time, the signal and the value.
+    Every step checks that every output is finite and that the columns of ``check.bounds``
+    (an :class:`OutputCheck` from the caller, e.g. TAPMP's platform envelope) stay within
+    their limits; a breach raises DivergenceError naming the time, the signal and the value.
     ``start_time`` and ``step_size`` are in s; ``clock`` and ``connection_start`` select
     the conventions described in the module docstring. Every FMU input must be driven by
     a connection unless ``open_inputs`` names it ("element.variable"): such an input keeps
@@ -316,7 +267,7 @@ class CoSimulation:
 
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
-                 limits: dict | None = None, clock: str = "exact",
+                 check: OutputCheck | None = None, clock: str = "exact",
                  connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
@@ -357,11 +308,7 @@ class CoSimulation:
         self.tmp = None
         self.k = 0
         self.guids = {}
-        self.limits = dict(limits or {})
-        unknown = set(self.limits) - set(ENVELOPE)
-        if unknown:
-            raise CoSimulationError(f"limits {', '.join(sorted(unknown))} unknown: allowed are "
-                                    f"{', '.join(ENVELOPE)}")
+        self.check = check or OutputCheck()
 
     # --- setup ---------------------------------------------------------------------
     def _logger(self, env, instance, status, category, message):
@@ -389,7 +336,7 @@ class CoSimulation:
         ssd, members = self._read_ssp()
         elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
         remove_stale_folders()
-        self.tmp = Path(tempfile.mkdtemp(prefix=_tmp_prefix()))
+        self.tmp = make_folder()
         weakref.finalize(self, shutil.rmtree, str(self.tmp), True)  # also if close() is never reached
         fmus = self._extract(members, elements)
         self.callbacks = fmi2CallbackFunctions()
@@ -435,16 +382,14 @@ class CoSimulation:
         self.columns = ["time"] + [f"{prefix[n]}.{o}" for n, u in self.units.items() for o in u.outputs]
         self._row_units = list(self.units.values())
         self._step_units = [self.units[n] for n in self.step_order]
-        by_prefix = {prefix[n]: u for n, u in self.units.items()}
-        self._envelope = []  # (outputs array, index, signal, limit, unit, limit name, element)
-        envelope_units = []  # (unit, output index, limit) for the compiled core
-        for key, limit in self.limits.items():
-            for element, output, unit_name in ENVELOPE[key]:
-                unit = by_prefix.get(element)
-                if limit > 0.0 and unit is not None and output in unit.outputs:
-                    self._envelope.append((unit.out, unit.outputs.index(output),
-                                           f"{element}.{output}", float(limit), unit_name, key, unit.name))
-                    envelope_units.append((unit, unit.outputs.index(output), float(limit)))
+        where = {f"{prefix[n]}.{o}": (u, i) for n, u in self.units.items() for i, o in enumerate(u.outputs)}
+        self._bounds = []     # (outputs array, index, column, limit, element)
+        envelope_units = []   # (unit, output index, limit) for the compiled core
+        for column, limit in self.check.bounds:
+            if column in where:  # a signal the system does not record is not checked
+                unit, i = where[column]
+                self._bounds.append((unit.out, i, column, float(limit), unit.name))
+                envelope_units.append((unit, i, float(limit)))
         self._check_outputs(self.t0)
         if self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
             try:
@@ -509,10 +454,10 @@ class CoSimulation:
                                     "holding SystemStructure.ssd and the FMUs)") from err
         members = {}
         for name in names:
-            inside = _inside_archive(name)
+            inside = inside_archive(name)
             if inside is None:
                 raise CoSimulationError(f"SSP file {self.ssp_path}: archive member {name!r} points outside the "
-                                        f"archive: {_MEMBER_RULE}")
+                                        f"archive: {MEMBER_RULE}")
             members[inside] = name
         return ssd, members
 
@@ -533,10 +478,10 @@ class CoSimulation:
             if type(e).__name__ != "Component" or not isinstance(source, str):
                 raise CoSimulationError(f"{where} is a {type(e).__name__}: allowed are FMU components "
                                         "(ssd:Component with a source)", name)
-            inside = _inside_archive(source)
+            inside = inside_archive(source)
             if inside is None:
                 raise CoSimulationError(f"{where}: source {source!r} points outside the archive: "
-                                        f"{_MEMBER_RULE}", name)
+                                        f"{MEMBER_RULE}", name)
             if inside not in members:
                 raise CoSimulationError(f"SSP file {self.ssp_path}: the FMU {source} of element {name} is missing "
                                         f"from the archive: allowed are its members "
@@ -556,7 +501,7 @@ class CoSimulation:
                     target = (root / inside).resolve()
                     if not target.is_relative_to(root):  # cannot happen after _inside_archive; be sure
                         raise CoSimulationError(f"SSP file {self.ssp_path}: element {name}: source {source!r} "
-                                                f"points outside the archive: {_MEMBER_RULE}", name)
+                                                f"points outside the archive: {MEMBER_RULE}", name)
                     if not target.exists():
                         target.parent.mkdir(parents=True, exist_ok=True)
                         with z.open(members[inside]) as src, open(target, "wb") as dst:
@@ -735,20 +680,18 @@ class CoSimulation:
         return self.filled
 
     def _check_outputs(self, t: float) -> None:
-        """Raise DivergenceError if an output is not finite or leaves the envelope."""
+        """Raise DivergenceError if an output is not finite or leaves a bound of :attr:`check`."""
         for unit in self._row_units:
             if not math.isfinite(sum(unit.out)):  # one sum per unit on the fast path
                 for name, value in zip(unit.outputs, unit.out):
                     if not math.isfinite(value):
-                        raise DivergenceError(f"{unit.name}.{name} = {value!r} at t = {t:.6g} s is not "
-                                              f"finite: the co-simulation diverged; {HINT}",
-                                              unit.name, t, f"{unit.name}.{name}", value, list(self.log))
-        for out, i, signal, limit, unit_name, key, element in self._envelope:
+                        signal = f"{unit.name}.{name}"
+                        raise DivergenceError(self.check.not_finite(signal, value, t), unit.name, t, signal,
+                                              value, list(self.log))
+        for out, i, column, limit, element in self._bounds:
             value = out[i]
             if not -limit <= value <= limit:
-                raise DivergenceError(f"{signal} = {value:.6g} {unit_name} at t = {t:.6g} s is outside the "
-                                      f"envelope |{signal}| <= {limit:g} {unit_name} (limits.{key}): the "
-                                      f"closed loop is diverging; {HINT}", element, t, signal,
+                raise DivergenceError(self.check.breach(column, value, limit, t), element, t, column,
                                       value, list(self.log))
 
     def _step_failed(self, unit: _Unit, t: float, n_log: int, status: int) -> None:

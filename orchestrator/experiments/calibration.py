@@ -55,7 +55,8 @@ from tapmp.params import GAIN_PRESETS
 from ..engine.families import SCENARIOS_DIR
 from . import scenario as scenario_mod
 from . import stability
-from .results import run_scenario, write_json
+from .folders import write_json
+from .results import run_scenario
 from .scenario import Scenario, ScenarioError
 
 ROOT = SCENARIOS_DIR  # the shipped scenario files (the repository's scenarios/ in a checkout)

@@ -24,7 +24,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from .metrics import error_signals  # noqa: E402
-from .results import COMPARISON_JSON, ResultFolderError, _read_json, folder_kind, read_results  # noqa: E402
+from .folders import COMPARISON_JSON, folder_kind, read_json  # noqa: E402
+from .reading import ResultFolderError, read_results  # noqa: E402
 
 LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
               "pid-dc": "PID-DC",
@@ -124,12 +125,12 @@ def parse_window(text: str | None) -> tuple[float, float] | None:
 
 
 def _metrics(path: Path) -> dict:
-    return _read_json(Path(path) / "metrics.json") or {}
+    return read_json(Path(path) / "metrics.json") or {}
 
 
 def _run_info(path: Path) -> dict:
     """The scenario a run folder recorded (run.json), {} if none."""
-    return ((_read_json(Path(path) / "run.json") or {}).get("scenario")) or {}
+    return ((read_json(Path(path) / "run.json") or {}).get("scenario")) or {}
 
 
 def horizon(path: Path) -> tuple | None:
@@ -190,7 +191,7 @@ def _load_run(path: Path, rows=None, window=None) -> dict:
     try:
         columns, data = rows or read_results(path)
     except ResultFolderError:
-        status = (_read_json(path / "run.json") or {}).get("status", "unknown")
+        status = (read_json(path / "run.json") or {}).get("status", "unknown")
         raise ResultFolderError(f"{path} holds no rows to plot (its run is {status}; run.json says why)") from None
     if window is not None:
         t = data[:, 0]
@@ -218,7 +219,7 @@ def load_folder(folder: Path, rows: dict | None = None, show: list[str] | None =
     if kind == "run":
         paths = {label(folder.name, _run_info(folder).get("law")): folder}
     elif kind == "comparison":
-        info = _read_json(folder / COMPARISON_JSON) or {}
+        info = read_json(folder / COMPARISON_JSON) or {}
         names = info.get("runs") or {p.name: None for p in sorted(folder.iterdir())
                                      if (p / "run.json").is_file()}
         present = {n: law for n, law in names.items() if folder_kind(folder / n) == "run"}
@@ -526,7 +527,7 @@ def plot(folder: Path, rows: dict | None = None, jobs: int = 1, show: list[str] 
 
 def _comparison_names(folder: Path) -> list[str]:
     """Folder names of the runs a comparison folder holds, in comparison.json's order."""
-    info = _read_json(Path(folder) / COMPARISON_JSON) or {}
+    info = read_json(Path(folder) / COMPARISON_JSON) or {}
     names = list(info.get("runs") or [p.name for p in sorted(Path(folder).iterdir()) if (p / "run.json").is_file()])
     return [n for n in names if folder_kind(Path(folder) / n) == "run"]
 

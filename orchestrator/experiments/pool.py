@@ -15,8 +15,9 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from ..engine.master import CoSimulationError
-from .results import (STOP_SIGNALS, Interrupted, OutputExistsError, OutputInUseError, ResultsWriteError, one_line,
-                      output_lock)
+from .folders import OutputExistsError, OutputInUseError, ResultsWriteError, output_lock
+from .results import one_line
+from .stops import Interrupted
 
 KEEP_ROWS_BYTES = 64 << 20  # a run's rows come back for the figures up to this size, else they are read
 
@@ -74,12 +75,10 @@ _CANCEL = None  # in a worker: the parent's event "start no more runs"
 
 
 def _worker_init(cancel) -> None:
-    """An idle worker ignores stop signals (a run installs its own handlers while it runs) and
-    keeps the parent's cancel event."""
+    """A worker keeps the parent's cancel event. Stop signals reach its run through the command
+    line's handler, which the forked worker inherits (an idle worker ignores them)."""
     global _CANCEL
     _CANCEL = cancel
-    for s in STOP_SIGNALS:
-        signal.signal(s, signal.SIG_IGN)
 
 
 def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -> dict:
@@ -132,7 +131,7 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
         return records
     bar = None
     if progress:
-        from .results import Progress  # a bar on a terminal only
+        from .progress import Progress  # a bar on a terminal only
         bar = Progress(f"{label} runs", "run", len(tasks))
     context = get_context("fork")
     cancel = context.Event()  # queued runs that a worker has already taken must not start either

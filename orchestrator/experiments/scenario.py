@@ -32,7 +32,7 @@ from pathlib import Path
 
 from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, allowed_are, suggestion
-from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
+from tapmp.interface import CONNECTION_STARTS, CONTROLLER, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import TrajectoryParams, reference
@@ -49,8 +49,6 @@ LAWS = {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}  # PID-DC: modal gains in [control
 # field of tapmp.params.ModelParams the controller gets (plant value) x factor; the plant
 # keeps its own. A factor within MISMATCH_RANGE; not together with [controller] NAME.
 MISMATCH_RANGE = (0.01, 100.0)
-ORDERINGS = ("gauss-seidel", "jacobi")
-CONNECTION_STARTS = ("propagated", "zero")
 _TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
         "start_time": float, "step": float, "ordering": str, "output": str,
         "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..experiments.results import output_lock, write_json
+from ..experiments.folders import output_lock, write_json
 from .study import (STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, Study, StudyError, StudyTable, cases,
                     fingerprint, prepare)
 from .study_plots import plot_study

@@ -373,10 +373,11 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
     paths. Never raises for a failing case: the row's status is "failed" with the error,
     or "rejected" (not run) when reject_unstable and the stability check finds the loop
     not stable. The row carries the full metrics under "metrics" (not a CSV column).
-    After results.request_stop(stop_token) (the study was stopped) the case ends at a
+    After stops.request_stop(stop_token) (the study was stopped) the case ends at a
     step boundary, or does not start, with status "interrupted" (never a study.csv row).
     """
-    from ..experiments.results import run_scenario, stop_requested
+    from ..experiments.results import run_scenario
+    from ..experiments.stops import stop_requested
     from ..experiments.stability import check
 
     start = time.perf_counter()
@@ -546,7 +547,7 @@ class CaseRunner:
     """Runs cases on a Dask client and records their rows in a StudyTable.
 
     If the run is left by an exception (e.g. Interrupted by SIGTERM), the running cases are
-    asked to stop at their next step boundary (results.request_stop on every worker) and
+    asked to stop at their next step boundary (stops.request_stop on every worker) and
     waited for, so they free their FMUs and temporary folders before the workers go.
     """
 
@@ -607,7 +608,7 @@ class CaseRunner:
         them, and record the rows of cases that finished meanwhile."""
         from dask.distributed import wait
 
-        from ..experiments.results import request_stop
+        from ..experiments.stops import request_stop
         try:
             self.client.run(request_stop, self.token, signum, on_error="ignore")
             wait(list(futures), timeout=STOP_WAIT_S)

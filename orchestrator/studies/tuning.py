@@ -83,7 +83,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
                command: str, write_docs: bool = False) -> dict:
     """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png
     into out/tuning, or into the table's write_to folder if ``write_docs``."""
-    from ..experiments.results import write_json
+    from ..experiments.folders import write_json
 
     spec = study.tune
     fp = fingerprint(study, [])
