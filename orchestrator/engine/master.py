@@ -62,7 +62,7 @@ from .clocks import Clock
 from .ssp import ROLES, ParameterAddressError, resolve_parameters
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
                        initialization_order)
-from .tempdirs import make_folder, remove_stale_folders
+from .tempdirs import make_folder
 
 STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
@@ -335,7 +335,6 @@ class CoSimulation:
             raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
         ssd, members = self._read_ssp()
         elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
-        remove_stale_folders()
         self.tmp = make_folder()
         weakref.finalize(self, shutil.rmtree, str(self.tmp), True)  # also if close() is never reached
         fmus = self._extract(members, elements)

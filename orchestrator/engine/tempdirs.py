@@ -2,8 +2,9 @@
 
 A folder is removed when its co-simulation closes (or its object is collected). A process
 killed outright (SIGKILL, a worker ended by its pool) cannot remove its own, so every
-folder is named after its process, tapmp_cosim_<pid>_<host>_*, and the next co-simulation
-on the machine removes those whose process no longer exists.
+folder is named after its process, tapmp_cosim_<pid>_<host>_*, and remove_stale_folders
+(called at the start of every run and at the end of a study) removes those whose process
+no longer exists.
 """
 
 import os

@@ -23,6 +23,7 @@ import numpy as np
 
 from . import metrics
 from ..engine.master import CoSimulation
+from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
 from .folders import FORMATS, ResultsWriteError, output_lock, prepare_output, write_json, write_result
 from .scenario import Scenario
@@ -100,6 +101,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
     with stop_scope(stop, stop_token):  # a signal after the last check is raised after the run
         try:
             stop.check(scenario.start_time)
+            remove_stale_folders()  # of processes killed before they could remove their own
             with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
                               scenario.ordering, check=envelope(scenario), clock=scenario.clock,
                               connection_start=scenario.connection_start,
