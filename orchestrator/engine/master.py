@@ -43,50 +43,29 @@ import re
 import shutil
 import weakref
 import zipfile
-from ctypes import byref, c_bool, c_double, c_int64, c_uint
+from ctypes import byref, c_double, c_int64
 from pathlib import Path
 
-from fmpy import calloc, extract, free, read_model_description
+from fmpy import calloc, free
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi3 import FMU3Slave
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                       fmi2CallbackLoggerTYPE)
 from fmpy.ssp.ssd import read_ssd
-
 
 from tapmp.interface import CONNECTION_STARTS, ORDERINGS
 
 from . import stepper as stepper_core
 from .archive import MEMBER_RULE, inside_archive
 from .clocks import Clock
-from .ssp import ROLES, ParameterAddressError, resolve_parameters
+from .errors import CoSimulationError, DivergenceError
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
                        initialization_order)
+from .ssp import ROLES, ParameterAddressError, resolve_parameters
 from .tempdirs import make_folder
+from .units import Unit
 
 STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
-
-
-class CoSimulationError(RuntimeError):
-    """A failure of the co-simulation, with where and when it happened."""
-
-    def __init__(self, message: str, element: str | None = None, time: float | None = None,
-                 log: list[str] | None = None):
-        self.element = element
-        self.time = time
-        self.log = log or []
-        super().__init__(message)
-
-
-class DivergenceError(CoSimulationError):
-    """An output left the envelope or stopped being finite: the run is diverging."""
-
-    def __init__(self, message: str, element: str, time: float, signal: str, value: float,
-                 log: list[str] | None = None):
-        self.signal = signal
-        self.value = value
-        super().__init__(message, element, time, log)
 
 
 class OutputCheck:
@@ -110,142 +89,6 @@ class OutputCheck:
 
 _ELEMENT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _NAME_RULE = "a name matching [A-Za-z_][A-Za-z0-9_]* (letters, digits, _), unique in the system"
-
-
-_DESCRIPTIONS = {}  # sha-1 of an FMU archive -> its parsed modelDescription (read-only)
-
-
-def _model_description(fmu_path: Path):
-    """fmpy's read_model_description, parsed once per process for each FMU content: a study
-    worker runs the same FMUs case after case (parsing costs ~15 ms per FMU)."""
-    import hashlib
-    key = hashlib.sha1(Path(fmu_path).read_bytes()).hexdigest()
-    md = _DESCRIPTIONS.get(key)
-    if md is None:
-        md = read_model_description(str(fmu_path))
-        if len(_DESCRIPTIONS) >= 64:
-            _DESCRIPTIONS.clear()
-        _DESCRIPTIONS[key] = md
-    return md
-
-
-class _Unit:
-    """One FMU instance in the system, its cached outputs and its input connections.
-
-    The hot path calls the FMU's C functions directly with ctypes arrays built once
-    (fmpy's getReal/setReal wrappers build new arrays and lists on every call).
-    """
-
-    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
-        self.name = name
-        self.md = _model_description(fmu_path)
-        self.fmi3 = self.md.fmiVersion.startswith("3")
-        self.vars = {v.name: v for v in self.md.modelVariables}
-        self.log = log
-        extract(str(fmu_path), unzipdir=str(unzip_dir))
-        slave_type = FMU3Slave if self.fmi3 else FMU2Slave
-        self.slave = slave_type(guid=self.md.guid, unzipDirectory=str(unzip_dir),
-                                modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.outputs = [v.name for v in self.md.modelVariables if v.causality == "output"]
-        inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
-        # {output: inputs it depends on directly}; an output without declared dependencies
-        # depends on every input (FMI 2.0 and 3.0 ModelStructure rules).
-        self.feedthrough = {o: frozenset(inputs) for o in self.outputs}
-        for u in self.md.outputs:
-            if u.dependencies is not None:
-                self.feedthrough[u.variable.name] = frozenset(d.name for d in u.dependencies
-                                                              if d.causality == "input")
-        self.n_out = len(self.outputs)
-        self.out_vrs = (c_uint * self.n_out)(*(self.vars[n].valueReference for n in self.outputs))
-        self.out = (c_double * self.n_out)()   # outputs at the last communication point
-        self.sources = []                      # (source unit, index in source.out) per input
-        self.in_vrs = self.inp = None
-        self.n_in = 0
-        self.instantiated = False
-        dll = self.slave.dll
-        if self.fmi3:
-            self._get_real, self._set_real, self._do_step3 = dll.fmi3GetFloat64, dll.fmi3SetFloat64, dll.fmi3DoStep
-            self._flags = [c_bool(), c_bool(), c_bool()]  # eventHandlingNeeded, terminate, earlyReturn
-            self._last_time = c_double()
-            self._step_out = (*(byref(f) for f in self._flags), byref(self._last_time))
-        else:
-            self._get_real, self._set_real, self._do_step = dll.fmi2GetReal, dll.fmi2SetReal, dll.fmi2DoStep
-
-    def instantiate(self, callbacks, log_message) -> None:
-        """fmi2Instantiate with the master's ``callbacks``, or fmi3InstantiateCoSimulation with
-        ``log_message(instance, status, category, message)`` (FMI 3 logs carry no instance name)."""
-        if self.fmi3:
-            name = self.name.encode()
-            self.slave.instantiate(loggingOn=True, logMessage=lambda env, status, category, message:
-                                   log_message(None, name, status, category, message))
-        else:
-            self.slave.instantiate(callbacks=callbacks, loggingOn=True)
-
-    def enter_initialization(self, start_time: float) -> None:
-        """fmi2SetupExperiment + fmi2EnterInitializationMode, or fmi3EnterInitializationMode."""
-        if self.fmi3:
-            self.slave.enterInitializationMode(startTime=start_time)
-        else:
-            self.slave.setupExperiment(startTime=start_time)
-            self.slave.enterInitializationMode()
-
-    def connect(self, source: "_Unit", output: str, input_vr: int) -> None:
-        """Feed this unit's input ``input_vr`` from ``source``'s output ``output``."""
-        self.sources.append((source, source.outputs.index(output), input_vr))
-        self.n_in = len(self.sources)
-        self.in_vrs = (c_uint * self.n_in)(*(vr for _, _, vr in self.sources))
-        self.inp = (c_double * self.n_in)()
-
-    def finish_connections(self) -> None:
-        """Bind the connection table for the hot path (after all units are instantiated)."""
-        self._copies = tuple((j, src.out, i) for j, (src, i, _) in enumerate(self.sources))
-
-    def read_outputs(self) -> int:
-        """fmi2GetReal (fmi3GetFloat64) of every output into :attr:`out`; returns the status."""
-        if self.fmi3:
-            return self._get_real(self.slave.component, self.out_vrs, self.n_out, self.out, self.n_out)
-        return self._get_real(self.slave.component, self.out_vrs, self.n_out, self.out)
-
-    def apply_inputs(self) -> int:
-        """Copy the sources' outputs into the inputs and fmi2SetReal them; the fmi2Status."""
-        if not self.n_in:
-            return 0
-        inp = self.inp
-        for j, src, i in self._copies:
-            inp[j] = src[i]
-        if self.fmi3:
-            return self._set_real(self.slave.component, self.in_vrs, self.n_in, inp, self.n_in)
-        return self._set_real(self.slave.component, self.in_vrs, self.n_in, inp)
-
-    def do_step(self, t: float, h: float) -> int:
-        """fmi2DoStep(t, h) (fmi3DoStep); returns the status."""
-        if self.fmi3:
-            return self._do_step3(self.slave.component, t, h, True, *self._step_out)
-        return self._do_step(self.slave.component, t, h, 1)
-
-    def set_parameter(self, name: str, value) -> None:
-        var = self.vars.get(name)
-        if var is None or var.causality != "parameter":
-            allowed = sorted(v.name for v in self.vars.values() if v.causality == "parameter")
-            raise CoSimulationError(f"{self.name}.{name} is not a parameter of {self.md.modelName}: "
-                                    f"allowed are {', '.join(allowed)}", self.name)
-        if var.type == "Boolean":
-            if not isinstance(value, bool) and value not in (0, 1):
-                raise CoSimulationError(f"{self.name}.{name} = {value!r} is invalid: allowed is a boolean",
-                                        self.name)
-            self.slave.setBoolean([var.valueReference], [bool(value)])  # FMI 2.0 and 3.0 alike in fmpy
-        elif var.type in ("Integer", "Int32"):
-            if int(value) != value:
-                raise CoSimulationError(f"{self.name}.{name} = {value!r} is invalid: allowed is an integer",
-                                        self.name)
-            if self.fmi3:
-                self.slave.setInt32([var.valueReference], [int(value)])
-            else:
-                self.slave.setInteger([var.valueReference], [int(value)])
-        elif self.fmi3:
-            self.slave.setFloat64([var.valueReference], [float(value)])
-        else:
-            self.slave.setReal([var.valueReference], [float(value)])
 
 
 class CoSimulation:
@@ -303,7 +146,7 @@ class CoSimulation:
         self.t0 = float(start_time)
         self.h = float(step_size)
         self.ordering = ordering
-        self.units: dict[str, _Unit] = {}
+        self.units: dict[str, Unit] = {}
         self.log: list[str] = []
         self.tmp = None
         self.k = 0
@@ -346,7 +189,7 @@ class CoSimulation:
         addLoggerProxy(byref(self.callbacks))
         for name, (source, _) in elements.items():
             try:
-                unit = _Unit(name, fmus[name], self.tmp / "fmu" / name, self.log)
+                unit = Unit(name, fmus[name], self.tmp / "fmu" / name, self.log)
             except Exception as err:
                 raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {source} of "
                                         f"element {name} (truncated or not an FMU): {err}", name) from err
@@ -562,7 +405,7 @@ class CoSimulation:
                                     "or named in the scenario's open_inputs to keep its start value",
                                     undriven[0].split(".")[0])
 
-    def _call(self, unit: _Unit, action, what: str, t: float | None = None):
+    def _call(self, unit: Unit, action, what: str, t: float | None = None):
         """Run one FMI call; a failed call (an exception or a returned status above
         fmi2Warning) or an error it logged raises CoSimulationError."""
         n_log = len(self.log)
@@ -577,12 +420,12 @@ class CoSimulation:
         self._check_log(unit, what, t, n_log)
         return result
 
-    def _check_log(self, unit: _Unit, what: str, t: float | None, n_log: int) -> None:
+    def _check_log(self, unit: Unit, what: str, t: float | None, n_log: int) -> None:
         """Fail if an error was logged since ``n_log``: pythonfmu may return OK after one."""
         if any(m.startswith(("[ERROR]", "[FATAL]")) for m in self.log[n_log:]):
             self._fail(unit, what, t, None)
 
-    def _fail(self, unit: _Unit, what: str, t: float | None, err):
+    def _fail(self, unit: Unit, what: str, t: float | None, err):
         when = "" if t is None else f" at t = {t:.6g} s"
         detail = [m for m in self.log if m.startswith(("[ERROR]", "[FATAL]"))]
         reason = detail[0] if detail else str(err)
@@ -693,7 +536,7 @@ class CoSimulation:
                 raise DivergenceError(self.check.breach(column, value, limit, t), element, t, column,
                                       value, list(self.log))
 
-    def _step_failed(self, unit: _Unit, t: float, n_log: int, status: int) -> None:
+    def _step_failed(self, unit: Unit, t: float, n_log: int, status: int) -> None:
         """Raise for a failed step of ``unit``: ``status`` (the worst status of its calls so far) above
         fmi2Warning or an error logged since ``n_log``; return if it only logged non-errors."""
         errors = any(m.startswith(("[ERROR]", "[FATAL]")) for m in self.log[n_log:])

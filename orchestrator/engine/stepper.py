@@ -147,8 +147,9 @@ def _addr(obj) -> int:
 
 class CompiledStepper:
     """The C loop bound to the units of one opened CoSimulation (``sim``): ``units`` in row
-    order, ``step_order`` their indices in step order, the envelope as (unit index, output
-    index, limit), the logger's counters ``log_count`` and ``log_errors`` (c_int64)."""
+    order, ``step_order`` their indices in step order, ``envelope`` the bounds of the master's
+    OutputCheck as (unit, output index, limit), the logger's counters ``log_count`` and
+    ``log_errors`` (c_int64)."""
 
     def __init__(self, units, step_order, jacobi: bool, clock, envelope, log_count, log_errors):
         self.lib = load()

@@ -1,0 +1,21 @@
+"""The errors of a co-simulation: where and when it failed, and the FMUs' log up to then."""
+
+class CoSimulationError(RuntimeError):
+    """A failure of the co-simulation, with where and when it happened."""
+
+    def __init__(self, message: str, element: str | None = None, time: float | None = None,
+                 log: list[str] | None = None):
+        self.element = element
+        self.time = time
+        self.log = log or []
+        super().__init__(message)
+
+
+class DivergenceError(CoSimulationError):
+    """An output left the envelope or stopped being finite: the run is diverging."""
+
+    def __init__(self, message: str, element: str, time: float, signal: str, value: float,
+                 log: list[str] | None = None):
+        self.signal = signal
+        self.value = value
+        super().__init__(message, element, time, log)
