@@ -12,7 +12,8 @@ class CoSimulationError(RuntimeError):
 
 
 class DivergenceError(CoSimulationError):
-    """An output left the envelope or stopped being finite: the run is diverging."""
+    """An output left a bound of the output check (e.g. the platform envelope) or stopped being
+    finite: the run is diverging."""
 
     def __init__(self, message: str, element: str, time: float, signal: str, value: float,
                  log: list[str] | None = None):
