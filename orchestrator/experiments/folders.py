@@ -43,20 +43,28 @@ class ResultsWriteError(RuntimeError):
     """A result file could not be written (e.g. the disk is full); the message names it."""
 
 
-def write_json(path: Path, data) -> None:
-    """Write JSON atomically: a reader sees the old file or the whole new one. The
-    temporary file has a unique name in the same folder and is removed on failure."""
+@contextmanager
+def atomic_file(path: Path, mode: str = "w"):
+    """A new file object (``mode`` "w" or "wb") that replaces ``path`` when the block ends
+    without an error: a reader sees the old file or the whole new one. The temporary file
+    has a unique name in the same folder and is removed on failure."""
     path = Path(path)
-    text = json.dumps(data, indent=2, default=str) + "\n"
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w") as f:
+        with os.fdopen(fd, mode) as f:
             os.fchmod(f.fileno(), 0o644)  # mkstemp makes 0600; results are for everyone to read
-            f.write(text)
+            yield f
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def write_json(path: Path, data) -> None:
+    """Write JSON atomically (atomic_file)."""
+    text = json.dumps(data, indent=2, default=str) + "\n"
+    with atomic_file(path) as f:
+        f.write(text)
 
 
 def write_result(path: Path, data) -> None:

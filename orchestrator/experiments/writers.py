@@ -15,14 +15,13 @@ which reading.read_results reads as well.
 import io
 import os
 import re
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import orjson
 from numpy.lib import format as npy
 
-from .folders import FORMATS, PART_FILE, ResultsWriteError
+from .folders import FORMATS, PART_FILE, ResultsWriteError, atomic_file
 
 
 def _write_error(path: Path, err: OSError, detail: str = "") -> ResultsWriteError:
@@ -195,17 +194,9 @@ def write_mat(path: Path, columns, data: np.ndarray) -> None:
     """Write rows ``data`` (n x columns) as a MAT-file (version 5, uncompressed, readable
     by MATLAB's load, scipy.io.loadmat): one n x 1 double variable per column (mat_names)
     and ``columns``, the original names as a char matrix (MATLAB: cellstr(columns)).
-    Written under a temporary name in the same folder, then os.replace."""
+    Written atomically (folders.atomic_file)."""
     from scipy.io import savemat
-    path = Path(path)
     variables = {name: data[:, j:j + 1] for j, name in enumerate(mat_names(columns))}
     variables["columns"] = np.array(list(columns))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            os.fchmod(f.fileno(), 0o644)
-            savemat(f, variables, do_compression=False, oned_as="column")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(path, "wb") as f:
+        savemat(f, variables, do_compression=False, oned_as="column")
