@@ -3,11 +3,10 @@
 from pathlib import Path
 
 from .baselines import BASELINES, BY_NAME, robustness_matched, run_gains_text, scdc_modal
-from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, printed, reduction
+from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, TABLES, printed, reduction, tables_of
 
-_KIND = {"tracking": ("tracking error of each motor", "um", ("q1", "q2", "q3"), "tracking"),
-         "sync": ("synchronization error of each motor", "um", ("q1", "q2", "q3"), "sync"),
-         "axis": ("tracking error of each drive axis", "um, um, urad", ("X", "Z", "B"), "axis")}
+_TITLE = {"tracking": "tracking error of each motor", "sync": "synchronization error of each motor",
+          "axis": "tracking error of each drive axis"}
 # Runs whose reduction of SC-DC is shown in the tables (the paper's baseline and the fair ones).
 REDUCTION_AGAINST = ("apd-dc", "apd-dc-diff-stiffness", "apd-dc-mode-matched")
 
@@ -27,9 +26,11 @@ def comparison_tables(scenario_name: str, results: dict) -> str:
     paper = SCENARIO_TABLES.get(scenario_name)
     order = [b.name for b in BASELINES if b.name in results] + [r for r in results if r not in BY_NAME]
     lines = []
-    for n, (kind, (title, unit, labels, _)) in enumerate(_KIND.items()):
+    for n, table in enumerate(tables_of("simulation")):  # the layout of Tables 1-3, the same for every scenario
+        kind, labels, units = TABLES[table].quantity, TABLES[table].columns, TABLES[table].units
+        unit = units[0] if len(set(units)) == 1 else ", ".join(units)
         ref = f" (paper: {paper[n]})" if paper else ""
-        lines += [f"### Comparison of the {title} [{unit}]{ref}", "",
+        lines += [f"### Comparison of the {_TITLE[kind]} [{unit}]{ref}", "",
                   "| Control strategy | " + " | ".join(f"STD {x}" for x in labels) + " | "
                   + " | ".join(f"MAE {x}" for x in labels) + " |",
                   "|---" * 7 + "|"]
