@@ -13,6 +13,7 @@ from tapmp.errors import ModelInputError
 
 from .engine import build as build_mod
 from .engine.toolchain import PLATFORMS
+from .engine.build_native import NativeBuildError
 from .engine.master import CoSimulationError, remove_stale_folders
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)
@@ -26,12 +27,12 @@ from .experiments.results import (STOP_SIGNALS, Interrupted, OutputExistsError, 
 from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
 from .studies.study import StudyError
 
-# What `tapmp` prints as one line (exit code 2): bad input (an option, a file's content), a run that
-# failed for a reason it names, and OSError (a file or folder the user named, a full disk, a
-# scheduler address). Every other exception is a programming error and shows its traceback.
+# What `tapmp` prints as one line (exit code 2): bad input (an option, a file's content), a run or
+# build that failed for a reason it names, and OSError (a file or folder the user named, a full
+# disk, a scheduler address). Every other exception is a programming error and shows its traceback.
 USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
                ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-               ResultsWriteError, OSError)
+               ResultsWriteError, build_mod.BuildError, NativeBuildError, OSError)
 
 
 def _family(value: str) -> str:
@@ -137,16 +138,13 @@ def warn_if_implausible(scenario) -> None:
 
 
 def cmd_build(args) -> int:
-    from .engine.build_native import NativeBuildError, build_native
+    from .engine.build_native import build_native
     out = Path(args.out or default_build_dir())
     for p in args.platform or ():  # before building anything
         if p not in PLATFORMS:
             raise UsageError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
-    try:
-        build_mod.build_all(out)
-        build_native(out / "native", platforms=args.platform)
-    except (build_mod.BuildError, NativeBuildError) as err:
-        raise UsageError(one_line(err)) from None
+    build_mod.build_all(out)
+    build_native(out / "native", platforms=args.platform)
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")

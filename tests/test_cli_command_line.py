@@ -76,3 +76,18 @@ def test_a_user_error_is_still_one_line_and_debug_shows_its_traceback(tmp_path, 
     assert main(["--debug", "plot", str(tmp_path), "--window", "2:1"]) == 2
     err = capsys.readouterr().err
     assert "Traceback" in err and err.strip().splitlines()[-1].startswith("error: --window = '2:1' is invalid")
+
+
+def test_a_worker_keeps_bad_input_one_line_and_a_plain_value_error_a_programming_error():
+    # a run in a worker process comes back to the parent by its message: the project's own
+    # ValueErrors (bad input) as UsageError, a plain ValueError as ValueError (not one line)
+    from orchestrator.errors import UsageError
+    from orchestrator.experiments import pool
+    from orchestrator.experiments.scenario import ScenarioError
+
+    for err, expected in ((ScenarioError("step = -1.0 is invalid: allowed is a number > 0"), UsageError),
+                          (ValueError("math domain error"), ValueError)):
+        with pytest.raises(ValueError) as raised:
+            pool._raise(pool._error_record(err))
+        assert type(raised.value) is expected and str(raised.value) == str(err)
+        assert isinstance(raised.value, cli.USER_ERRORS) == (expected is UsageError)
