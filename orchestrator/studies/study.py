@@ -40,7 +40,7 @@ import numpy as np
 from tapmp.errors import allowed_are, suggestion
 from tapmp.params import GAIN_NAMES
 
-from ..experiments.scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, read_toml, validate
+from ..experiments.scenario import SECTION_PARAMS, Scenario, ScenarioError, create, load, read_toml
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -131,7 +131,7 @@ def base_value(scenario: Scenario, key: str):
         return list(getattr(scenario.gain_values(), name))
     if section in _SECTIONS:
         table = getattr(scenario, section)
-        return table[name] if name in table else _SECTION_PARAMS[section][name].start
+        return table[name] if name in table else SECTION_PARAMS[section][name].start
     return getattr(scenario, key)
 
 
@@ -150,11 +150,11 @@ def check_key(key: str, where: str) -> None:
         _require(name in GAIN_NAMES, f"{where}: {key} is unknown: "
                  + allowed_are(key, [f"gain_overrides.{g}" for g in GAIN_NAMES]))
     else:
-        _require(section in _SECTIONS and name in _SECTION_PARAMS[section],
+        _require(section in _SECTIONS and name in SECTION_PARAMS[section],
                  f"{where}: {key} is unknown: allowed are gain_overrides.NAME, "
                  + ", ".join(f"{s}.NAME" for s in _SECTIONS) + " with NAME a parameter of that FMU"
-                 + (f" ({', '.join(_SECTION_PARAMS[section])})" if section in _SECTIONS else "")
-                 + (suggestion(name, _SECTION_PARAMS[section]) if section in _SECTIONS
+                 + (f" ({', '.join(SECTION_PARAMS[section])})" if section in _SECTIONS else "")
+                 + (suggestion(name, SECTION_PARAMS[section]) if section in _SECTIONS
                     else suggestion(section, ("gain_overrides", *_SECTIONS))))
 
 
@@ -384,7 +384,7 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
     if stop_requested(stop_token):
         return dict(row, status="interrupted", error="not run: the study was stopped", wall_time_s=0.0)
     try:
-        scenario = apply_changes(validate(Scenario(**base)), changes)
+        scenario = apply_changes(create(**base), changes)
         report = check(scenario)
         row["spectral_radius"] = report.spectral_radius
         if reject_unstable and not report.stable:
