@@ -74,21 +74,26 @@ def three_numbers(where: str, value, error: type[Exception] = ValueError) -> lis
     return [check_type(where, x, float, error) for x in values]
 
 
-def one_of(allowed) -> BeforeValidator:
-    """Field rule: the value is one of ``allowed`` (a collection, or a function returning one)."""
+def one_of(allowed, where: str = "") -> BeforeValidator:
+    """Field rule: the value is one of ``allowed``, else "WHERE.FIELD = VALUE is invalid:
+    allowed are ..." (``where`` is the table's dotted name with its dot, "" at the top)."""
     def check(value, info):
-        names = allowed() if callable(allowed) else allowed
-        require(value in names, f"{info.field_name} = {value!r} is invalid: {allowed_are(value, names)}")
+        require(value in allowed, f"{where}{info.field_name} = {value!r} is invalid: {allowed_are(value, allowed)}")
         return value
     return BeforeValidator(check)
 
 
-def rule(test, allowed: str) -> BeforeValidator:
-    """Field rule: ``test(value)`` holds, else "FIELD = VALUE is invalid: allowed is ALLOWED"."""
+def rule(test, allowed: str, where: str = "") -> BeforeValidator:
+    """Field rule: ``test(value)`` holds, else "WHERE.FIELD = VALUE is invalid: allowed is ALLOWED"."""
     def check(value, info):
-        require(test(value), f"{info.field_name} = {value!r} is invalid: allowed is {allowed}")
+        require(test(value), f"{where}{info.field_name} = {value!r} is invalid: allowed is {allowed}")
         return value
     return BeforeValidator(check)
+
+
+def is_int(value, low: int) -> bool:
+    """True for an int >= ``low`` (not a bool)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= low
 
 
 def known_keys(where: str, allowed, data) -> None:
@@ -103,6 +108,8 @@ def one_line(err: ValidationError) -> str:
     <pydantic's reason>"."""
     first = err.errors()[0]
     cause = first.get("ctx", {}).get("error")
+    if isinstance(cause, ValidationError):  # a rule that validated a nested table
+        return one_line(cause)
     if isinstance(cause, ValueError):
         return str(cause)
     where = ".".join(str(p) for p in first["loc"])

@@ -35,12 +35,18 @@ from dataclasses import dataclass, field
 from multiprocessing import resource_tracker
 from pathlib import Path
 
+from typing import Annotated, Any
+
 import numpy as np
+from pydantic import BeforeValidator, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+from pydantic import BaseModel
+from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from tapmp.errors import allowed_are, suggestion
 from tapmp.params import GAIN_NAMES
 
-from ..experiments.scenario import SECTION_PARAMS, Scenario, ScenarioError, create, load, read_toml
+from ..experiments.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
+from ..experiments.scenario import SECTION_PARAMS, Scenario, ScenarioError, create, load
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -58,7 +64,24 @@ class StudyError(ValueError):
     """A study file or value is invalid, or its output folder is in the way; the message says which."""
 
 
-@dataclass
+def _targets(targets, info) -> list:
+    where = f"monte_carlo.vary.{info.data['name']}"
+    require(isinstance(targets, list) and targets and all(isinstance(t, str) for t in targets),
+            f"{where}.targets = {targets!r} is invalid: allowed is a list of dotted scenario keys")
+    for t in targets:
+        check_key(t, f"{where}.targets")
+        require(t.partition(".")[0] in (*_SECTIONS, "gain_overrides"), f"{where}.targets: {t} is invalid: a "
+                "sampled target must be a number in gain_overrides, plant, controller or trajectory")
+    return list(targets)
+
+
+def _distribution(dist, info) -> str:
+    require(dist in DISTRIBUTIONS, f"monte_carlo.vary.{info.data['name']}.distribution = {dist!r} is invalid: "
+            + allowed_are(dist, DISTRIBUTIONS))
+    return dist
+
+
+@pydantic_dataclass
 class Factor:
     """A Monte Carlo factor: one draw per sample, applied to every target.
 
@@ -67,13 +90,29 @@ class Factor:
     """
 
     name: str
-    targets: list
-    distribution: str
-    low: float = 0.0
-    high: float = 0.0
-    mean: float = 0.0
-    std: float = 0.0
-    relative: bool = False
+    targets: Annotated[list, BeforeValidator(_targets)]
+    distribution: Annotated[str, BeforeValidator(_distribution)]
+    low: Any = None  # finite numbers, required by the distribution that uses them (the others are 0)
+    high: Any = None
+    mean: Any = None
+    std: Any = None
+    relative: Annotated[bool, BeforeValidator(bool)] = False
+
+    @model_validator(mode="after")
+    def _numbers(self) -> "Factor":
+        where = f"monte_carlo.vary.{self.name}"
+        if self.distribution == "normal":
+            self.mean, self.std = finite_number(f"{where}.mean", self.mean), finite_number(f"{where}.std", self.std)
+            require(self.std >= 0.0, f"{where}.std = {self.std!r} is invalid: allowed is a number >= 0")
+            self.low = self.high = 0.0
+        else:
+            self.low, self.high = finite_number(f"{where}.low", self.low), finite_number(f"{where}.high", self.high)
+            require(self.high >= self.low, f"{where}.high = {self.high!r} is invalid: allowed is a number >= low = "
+                    f"{self.low!r}")
+            require(self.distribution != "loguniform" or self.low > 0.0,
+                    f"{where}.low = {self.low!r} is invalid for loguniform: allowed is a number > 0")
+            self.mean = self.std = 0.0
+        return self
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """n draws from the distribution."""
@@ -114,14 +153,7 @@ class Study:
 
 
 def _require(cond: bool, message: str) -> None:
-    if not cond:
-        raise StudyError(message)
-
-
-def _number(where: str, v) -> float:
-    _require(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
-             f"{where} = {v!r} is invalid: allowed is a finite number")
-    return float(v)
+    require(cond, message, StudyError)
 
 
 def base_value(scenario: Scenario, key: str):
@@ -175,58 +207,177 @@ def apply_changes(scenario: Scenario, changes: dict, where: str = "case") -> Sce
         raise ScenarioError(f"{where}: {err}") from None
 
 
+_HEAD = ("name", "description", "base", "output", "keep_results")
+
+
+class _Head(BaseModel):
+    """The [study] table."""
+
+    name: Any = None  # default: the study file's name
+    description: Annotated[str, BeforeValidator(str)] = ""
+    base: str
+    output: Any = None  # default: results/studies/NAME
+    keep_results: Annotated[bool, BeforeValidator(bool)] = False
+
+    @model_validator(mode="before")
+    @classmethod
+    def _keys(cls, data):
+        known_keys("study", _HEAD, data)
+        require(isinstance(data.get("base"), str), "study.base is missing: allowed is the path of a scenario TOML "
+                "file, relative to the study file")
+        return data
+
+
+def _set(table: dict) -> dict:
+    for key in table:
+        check_key(key, "set")
+    return dict(table)
+
+
+def _grid(table: dict) -> dict:
+    for key, values in table.items():
+        check_key(key, "grid")
+        require(isinstance(values, list) and len(values) >= 1,
+                f"grid.{key} = {values!r} is invalid: allowed is a non-empty list of values")
+    return {key: list(values) for key, values in table.items()}
+
+
+def _vary(tables) -> dict:
+    """[monte_carlo.vary.NAME] tables as Factors (targets default to [NAME])."""
+    require(isinstance(tables, dict) and tables, "[monte_carlo.vary.NAME] tables are missing: allowed is at least "
+            "one factor")
+    factors = {}
+    for name, table in tables.items():
+        where = f"monte_carlo.vary.{name}"
+        require(isinstance(table, dict), f"{where} must be a table")
+        known_keys(where, ("targets", "distribution", "low", "high", "mean", "std", "relative"), table)
+        factors[name] = _FACTOR.validate_python({"targets": [name], **table, "name": name})
+    return factors
+
+
+_FACTOR = TypeAdapter(Factor)
+
+
+class _MonteCarlo(BaseModel):
+    """The [monte_carlo] table."""
+
+    samples: Annotated[int, rule(lambda v: is_int(v, 1), "an integer >= 1", "monte_carlo.")] = None
+    seed: Annotated[int, rule(lambda v: is_int(v, 0), "an integer >= 0 (stated, so the draws can be repeated)",
+                              "monte_carlo.")] = None
+    vary: Annotated[dict, BeforeValidator(_vary)] = None
+    model_config = ConfigDict(validate_default=True)  # a missing samples, seed or vary is refused by its rule
+
+    @model_validator(mode="before")
+    @classmethod
+    def _keys(cls, data):
+        known_keys("monte_carlo", ("samples", "seed", "vary"), data)
+        return data
+
+
+PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
+_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
+_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
+
+
+def _write_to(w) -> str:
+    require(isinstance(w, str) and w, "tune.write_to is missing: allowed is a folder for the preset files, "
+            "comparison.md and objective.png (relative to the working directory)")
+    return w
+
+
+def _laws(laws) -> list:
+    require(isinstance(laws, list) and laws and all(law in _TUNABLE for law in laws),
+            f"tune.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}"
+            + next((suggestion(law, _TUNABLE) for law in (laws if isinstance(laws, list) else [])
+                    if law not in _TUNABLE), ""))
+    return list(laws)
+
+
+def _bounds(bounds, info) -> dict:
+    """{law: {gain: [low, high]}} for every tuned law (0 < low < high: searched on a log scale)."""
+    out = {}
+    for law in info.data.get("laws", ()):
+        b = bounds.get(law)
+        require(isinstance(b, dict) and b, f"tune.bounds.{law} is missing: allowed is a table of "
+                f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
+        out[law] = {}
+        for gain, lim in b.items():
+            require(gain in _TUNABLE[law], f"tune.bounds.{law}.{gain} is invalid: allowed are "
+                    f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
+                    + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
+            require(isinstance(lim, list) and len(lim) == 2 and all(is_number(v) and math.isfinite(v) for v in lim)
+                    and 0.0 < lim[0] < lim[1], f"tune.bounds.{law}.{gain} = {lim!r} is invalid: allowed is "
+                    "[low, high] with 0 < low < high (searched on a log scale)")
+            out[law][gain] = [float(lim[0]), float(lim[1])]
+    return out
+
+
+class _Tune(BaseModel):
+    """The [tune] table: the gains of each law searched by differential evolution (tuning.py)."""
+
+    laws: Annotated[list, BeforeValidator(_laws)] = list(_TUNABLE)  # the laws tuned on Gains (not PID-DC's)
+    bounds: Annotated[dict, BeforeValidator(_bounds)] = Field(default_factory=dict, validate_default=True)
+    population: Annotated[int, rule(lambda v: is_int(v, 2), "an integer >= 2", "tune.")] = 6
+    generations: Annotated[int, rule(lambda v: is_int(v, 1), "an integer >= 1", "tune.")] = 5
+    seed: Annotated[int, rule(lambda v: is_int(v, 0), "an integer >= 0", "tune.")] = 0
+    write_to: Annotated[str, BeforeValidator(_write_to)] = Field(None, validate_default=True)
+    compare_stop_time: Annotated[float, rule(lambda v: is_number(v) and v > 0, "a number > 0 [s]", "tune.")] = 2.5
+
+    @model_validator(mode="before")
+    @classmethod
+    def _keys(cls, data):
+        require(isinstance(data, dict), "tune must be a table")
+        known_keys("tune", _KEYS, data)
+        return data
+
+
+class _StudyFile(BaseModel):
+    """A study file: [study], [set], [grid], [monte_carlo], [tune]."""
+
+    study: _Head = Field(default_factory=dict, validate_default=True)  # base is required
+    set: Annotated[dict, BeforeValidator(_set)] = {}
+    grid: Annotated[dict, BeforeValidator(_grid)] = {}
+    monte_carlo: _MonteCarlo | None = None
+    tune: _Tune | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _sections(cls, data):
+        allowed = ("study", "set", "grid", "monte_carlo", "tune")
+        for key in data:
+            require(key in allowed, f"[{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed)
+                    + suggestion(key, allowed))
+        return data
+
+    @model_validator(mode="after")
+    def _varies(self) -> "_StudyFile":
+        require(self.tune is None or not (self.grid or self.monte_carlo),
+                "[tune] cannot be combined with [grid] or [monte_carlo]: use separate studies")
+        require(self.grid or self.monte_carlo or self.tune,
+                "nothing varies: allowed is a [grid], a [monte_carlo] or a [tune] table")
+        return self
+
+
 def load_study(path) -> Study:
-    """Read and validate a study file; StudyError names the key and what is allowed."""
+    """Read and validate a study file, then look for its base scenario and check it with the
+    study's [set] changes; StudyError names the key and what is allowed."""
     path = Path(path)
     data = read_toml(path, f"study file {path}", StudyError)
-    allowed = ("study", "set", "grid", "monte_carlo", "tune")
-    for key in data:
-        _require(key in allowed, f"{path}: [{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed)
-                 + suggestion(key, allowed))
-    head = data.get("study", {})
-    for key in head:
-        _require(key in ("name", "description", "base", "output", "keep_results"),
-                 f"{path}: study.{key} is unknown: "
-                 + allowed_are(key, ("name", "description", "base", "output", "keep_results")))
-    _require(isinstance(head.get("base"), str), f"{path}: study.base is missing: allowed is the path of a "
-             "scenario TOML file, relative to the study file")
-    base = (path.parent / head["base"]).resolve()
-    _require(base.exists(), f"{path}: study.base = {head['base']!r} does not exist (looked for {base})")
-    name = head.get("name", path.stem)
-    study = Study(name=name, source=str(path.resolve()), base=str(base),
-                  output=str(head.get("output", f"results/studies/{name}")),
-                  description=str(head.get("description", "")), keep_results=bool(head.get("keep_results", False)))
-    for key, value in data.get("set", {}).items():
-        check_key(key, f"{path}: set")
-        study.set[key] = _resolve_path(key, value, path)
-    for key, values in data.get("grid", {}).items():
-        check_key(key, f"{path}: grid")
-        _require(isinstance(values, list) and len(values) >= 1,
-                 f"{path}: grid.{key} = {values!r} is invalid: allowed is a non-empty list of values")
-        study.grid[key] = [_resolve_path(key, v, path) for v in values]
-    mc = data.get("monte_carlo")
-    if mc is not None:
-        for key in mc:
-            _require(key in ("samples", "seed", "vary"),
-                     f"{path}: monte_carlo.{key} is unknown: " + allowed_are(key, ("samples", "seed", "vary")))
-        samples = mc.get("samples")
-        _require(isinstance(samples, int) and not isinstance(samples, bool) and samples >= 1,
-                 f"{path}: monte_carlo.samples = {samples!r} is invalid: allowed is an integer >= 1")
-        seed = mc.get("seed")
-        _require(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
-                 f"{path}: monte_carlo.seed = {seed!r} is invalid: allowed is an integer >= 0 (stated, "
-                 "so the draws can be repeated)")
-        vary = mc.get("vary", {})
-        _require(isinstance(vary, dict) and vary, f"{path}: [monte_carlo.vary.NAME] tables are missing: "
-                 "allowed is at least one factor")
-        study.samples, study.seed = samples, seed
-        study.factors = [_factor(f"{path}: monte_carlo.vary.{n}", n, t) for n, t in vary.items()]
-    if "tune" in data:
-        _require(not study.grid and not study.samples,
-                 f"{path}: [tune] cannot be combined with [grid] or [monte_carlo]: use separate studies")
-        study.tune = validate_tune(data["tune"], path)
-    _require(study.grid or study.samples or study.tune,
-             f"{path}: nothing varies: allowed is a [grid], a [monte_carlo] or a [tune] table")
+    try:
+        f = _StudyFile.model_validate(data)
+    except ValidationError as err:
+        raise StudyError(f"{path}: {one_line(err)}") from None
+    head, mc = f.study, f.monte_carlo
+    name = path.stem if head.name is None else head.name
+    study = Study(name=name, source=str(path.resolve()), base=str((path.parent / head.base).resolve()),
+                  output=str(f"results/studies/{name}" if head.output is None else head.output),
+                  description=head.description, keep_results=head.keep_results,
+                  set={k: _resolve_path(k, v, path) for k, v in f.set.items()},
+                  grid={k: [_resolve_path(k, v, path) for v in values] for k, values in f.grid.items()},
+                  samples=mc.samples if mc else 0, seed=mc.seed if mc else 0,
+                  factors=list(mc.vary.values()) if mc else [], tune=f.tune.model_dump() if f.tune else {})
+    _require(Path(study.base).exists(), f"{path}: study.base = {head.base!r} does not exist (looked for "
+             f"{study.base})")
     try:
         study.base_scenario()
     except ScenarioError as err:
@@ -239,35 +390,6 @@ def _resolve_path(key: str, value, study_path: Path):
     if key == "gains_file" and isinstance(value, str) and value and not Path(value).is_absolute():
         return str((study_path.parent / value).resolve())
     return value
-
-
-def _factor(where: str, name: str, table) -> Factor:
-    _require(isinstance(table, dict), f"{where} must be a table")
-    for key in table:
-        _require(key in ("targets", "distribution", "low", "high", "mean", "std", "relative"),
-                 f"{where}.{key} is unknown: " + allowed_are(key, ("targets", "distribution", "low", "high", "mean",
-                                                                  "std", "relative")))
-    targets = table.get("targets", [name])
-    _require(isinstance(targets, list) and targets and all(isinstance(t, str) for t in targets),
-             f"{where}.targets = {targets!r} is invalid: allowed is a list of dotted scenario keys")
-    for t in targets:
-        check_key(t, f"{where}.targets")
-        _require(t.partition(".")[0] in (*_SECTIONS, "gain_overrides"),
-                 f"{where}.targets: {t} is invalid: a sampled target must be a number in "
-                 "gain_overrides, plant, controller or trajectory")
-    dist = table.get("distribution")
-    _require(dist in DISTRIBUTIONS, f"{where}.distribution = {dist!r} is invalid: "
-             + allowed_are(dist, DISTRIBUTIONS))
-    f = Factor(name=name, targets=targets, distribution=dist, relative=bool(table.get("relative", False)))
-    if dist == "normal":
-        f.mean, f.std = _number(f"{where}.mean", table.get("mean")), _number(f"{where}.std", table.get("std"))
-        _require(f.std >= 0.0, f"{where}.std = {f.std!r} is invalid: allowed is a number >= 0")
-    else:
-        f.low, f.high = _number(f"{where}.low", table.get("low")), _number(f"{where}.high", table.get("high"))
-        _require(f.high >= f.low, f"{where}.high = {f.high!r} is invalid: allowed is a number >= low = {f.low!r}")
-        _require(dist != "loguniform" or f.low > 0.0,
-                 f"{where}.low = {f.low!r} is invalid for loguniform: allowed is a number > 0")
-    return f
 
 
 def cases(study: Study) -> list[dict]:
@@ -305,56 +427,6 @@ def cases(study: Study) -> list[dict]:
 def objective(metrics: dict) -> float:
     """(mean tracking MAE + mean synchronization MAE) / 2 over the three motors [um]."""
     return 0.5 * (float(np.mean(metrics["tracking_mae_um"])) + float(np.mean(metrics["sync_mae_um"])))
-
-
-PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
-_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
-_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
-
-
-def validate_tune(table, path) -> dict:
-    """Check a study's [tune] table; returns it as plain data. StudyError names the key."""
-    where = f"{path}: tune"
-    _require(isinstance(table, dict), f"{where} must be a table")
-    for key in table:
-        _require(key in _KEYS, f"{where}.{key} is unknown: {allowed_are(key, _KEYS)}")
-    laws = table.get("laws", list(_TUNABLE))  # the laws tuned on Gains (not PID-DC's modal gains)
-    _require(isinstance(laws, list) and laws and all(law in _TUNABLE for law in laws),
-             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}"
-             + next((suggestion(law, _TUNABLE) for law in (laws if isinstance(laws, list) else [])
-                     if law not in _TUNABLE), ""))
-    bounds = table.get("bounds", {})
-    out_bounds = {}
-    for law in laws:
-        b = bounds.get(law)
-        _require(isinstance(b, dict) and b, f"{where}.bounds.{law} is missing: allowed is a table of "
-                 f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
-        out_bounds[law] = {}
-        for gain, lim in b.items():
-            _require(gain in _TUNABLE[law], f"{where}.bounds.{law}.{gain} is invalid: allowed are "
-                     f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
-                     + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
-            ok = (isinstance(lim, list) and len(lim) == 2
-                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim)
-                  and 0.0 < lim[0] < lim[1])
-            _require(ok, f"{where}.bounds.{law}.{gain} = {lim!r} is invalid: allowed is [low, high] with "
-                     "0 < low < high (searched on a log scale)")
-            out_bounds[law][gain] = [float(lim[0]), float(lim[1])]
-    spec = {"laws": laws, "bounds": out_bounds}
-    for key, default, lo in (("population", 6, 2), ("generations", 5, 1), ("seed", 0, 0)):
-        v = table.get(key, default)
-        _require(isinstance(v, int) and not isinstance(v, bool) and v >= lo,
-                 f"{where}.{key} = {v!r} is invalid: allowed is an integer >= {lo}")
-        spec[key] = v
-    w = table.get("write_to")
-    _require(isinstance(w, str) and w, f"{where}.write_to is missing: allowed is a folder for the preset "
-             "files, comparison.md and objective.png (relative to the working directory)")
-    spec["write_to"] = w
-    cst = table.get("compare_stop_time", 2.5)
-    _require(isinstance(cst, (int, float)) and not isinstance(cst, bool) and cst > 0,
-             f"{where}.compare_stop_time = {cst!r} is invalid: allowed is a number > 0 [s]")
-    spec["compare_stop_time"] = float(cst)
-    return spec
 
 
 def case_value(row) -> float:
