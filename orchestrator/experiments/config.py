@@ -78,7 +78,8 @@ def one_of(allowed, where: str = "") -> BeforeValidator:
     """Field rule: the value is one of ``allowed``, else "WHERE.FIELD = VALUE is invalid:
     allowed are ..." (``where`` is the table's dotted name with its dot, "" at the top)."""
     def check(value, info):
-        require(value in allowed, f"{where}{info.field_name} = {value!r} is invalid: {allowed_are(value, allowed)}")
+        if value not in allowed:  # the message (with its suggestions) only when it is needed
+            raise ValueError(f"{where}{info.field_name} = {value!r} is invalid: {allowed_are(value, allowed)}")
         return value
     return BeforeValidator(check)
 
@@ -96,10 +97,17 @@ def is_int(value, low: int) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= low
 
 
+def known(key, allowed, where: str = "", error: type[Exception] = ValueError) -> None:
+    """``key`` is in ``allowed``, else "WHERE.KEY is unknown: allowed are ...; did you mean ...?"
+    (``where`` is the table's dotted name with its dot)."""
+    if key not in allowed:  # the message (with its suggestions) only when it is needed
+        raise error(f"{where}{key} is unknown: {allowed_are(key, allowed)}")
+
+
 def known_keys(where: str, allowed, data) -> None:
     """Every key of the table ``data`` is in ``allowed``, else "WHERE.KEY is unknown: allowed are ..."."""
     for key in data:
-        require(key in allowed, f"{where}.{key} is unknown: {allowed_are(key, allowed)}")
+        known(key, allowed, f"{where}.")
 
 
 def one_line(err: ValidationError) -> str:

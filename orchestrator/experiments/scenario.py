@@ -36,7 +36,7 @@ from pydantic import BeforeValidator, model_validator
 from pydantic.dataclasses import dataclass
 
 from tapmp.control import Gains, ModalGains
-from tapmp.errors import ModelInputError, allowed_are, suggestion
+from tapmp.errors import ModelInputError, suggestion
 from tapmp.interface import CONNECTION_STARTS, CONTROLLER, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
@@ -44,7 +44,7 @@ from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, referenc
 
 from ..engine.clocks import CLOCKS
 from ..engine.families import FAMILIES
-from .config import build, check_type, is_number, one_of, read_toml, require, rule, three_numbers
+from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -109,8 +109,7 @@ def load_gain_file(path) -> dict:
                 "numbers", ScenarioError)
     preset = {}
     for name, v in table.items():
-        require(name in GAIN_NAMES, f"gains_file {path}: gains.{name} is unknown: {allowed_are(name, GAIN_NAMES)}",
-                ScenarioError)
+        known(name, GAIN_NAMES, f"gains_file {path}: gains.", ScenarioError)
         preset[name] = tuple(three_numbers(f"gains_file {path}: gains.{name}", v, ScenarioError))
     try:
         Gains.from_preset(preset).validated()
@@ -125,7 +124,7 @@ def load_gain_file(path) -> dict:
 def _gain_overrides(table: dict) -> dict:
     out = {}
     for k, v in table.items():
-        require(k in GAIN_NAMES, f"gain_overrides.{k} is unknown: {allowed_are(k, GAIN_NAMES)}")
+        known(k, GAIN_NAMES, "gain_overrides.")
         out[k] = three_numbers(f"gain_overrides.{k}", v)
     return out
 
@@ -138,7 +137,7 @@ def _section(table: dict, info) -> dict:
             key = _FROM_SCENARIO[k]
             raise ValueError(f"controller.{k} is set by the scenario's {key} = {info.data.get(key)!r}: "
                              f"allowed is to set {key}")
-        require(k in allowed, f"{section}.{k} is unknown: {allowed_are(k, allowed)}")
+        known(k, allowed, f"{section}.")
         out[k] = check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
     return out
 
@@ -148,7 +147,7 @@ def _mismatch(table: dict, info) -> dict:
     lo, hi = MISMATCH_RANGE
     controller, out = info.data.get("controller", {}), {}
     for k, v in table.items():
-        require(k in ModelParams._fields, f"mismatch.{k} is unknown: {allowed_are(k, ModelParams._fields)}")
+        known(k, ModelParams._fields, "mismatch.")
         v = out[k] = check_type(f"mismatch.{k}", v, float)
         require(math.isfinite(v) and lo <= v <= hi, f"mismatch.{k} = {v!r} is invalid: allowed is a factor in "
                 f"[{lo:g}, {hi:g}] (controller value = plant value x factor)")
@@ -160,7 +159,7 @@ def _mismatch(table: dict, info) -> dict:
 def _limits(table: dict) -> dict:
     out = {}
     for k, v in table.items():
-        require(k in LIMITS, f"limits.{k} is unknown: {allowed_are(k, LIMITS)}")
+        known(k, LIMITS, "limits.")
         v = out[k] = check_type(f"limits.{k}", v, float)
         require(math.isfinite(v) and v >= 0.0, f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
                 f"[{LIMITS[k][1]}] (0 = no limit)")
@@ -200,9 +199,10 @@ def _elements(tables: dict) -> dict:
         require(_OPEN_INPUT.fullmatch(f"{element}.x") and isinstance(table, dict), f"[{element}] is invalid: "
                 "allowed is a table of FMU parameters named after an SSP element ([A-Za-z_][A-Za-z0-9_]*)")
         for k, v in table.items():
-            require(isinstance(v, (int, float, bool)) and not (isinstance(v, float) and not math.isfinite(v)),
-                    f"{element}.{k} = {v!r} is invalid: allowed is a finite number, an integer or a boolean (a "
-                    f"parameter of the FMU of SSP element {element}){suggestion(element, sorted(TABLES))}")
+            if not isinstance(v, (int, float, bool)) or isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"{element}.{k} = {v!r} is invalid: allowed is a finite number, an integer or a "
+                                 f"boolean (a parameter of the FMU of SSP element {element})"
+                                 f"{suggestion(element, sorted(TABLES))}")
     return copy.deepcopy(tables)
 
 
@@ -216,10 +216,6 @@ def _settling_bands(bands) -> list:
     return out
 
 
-def _table(check):
-    return BeforeValidator(check)
-
-
 @dataclass
 class Scenario:
     """A validated scenario: every field is checked by its rule when the scenario is made,
@@ -231,7 +227,7 @@ class Scenario:
     law: Annotated[str, one_of(LAWS)] = "sc-dc"
     gains: Annotated[str, one_of(sorted(GAIN_PRESETS))] = "default"
     gains_file: str = ""
-    gain_overrides: Annotated[dict, _table(_gain_overrides)] = field(default_factory=dict)
+    gain_overrides: Annotated[dict, BeforeValidator(_gain_overrides)] = field(default_factory=dict)
     start_time: float = 0.0
     stop_time: float = 2.5
     step: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v) and v > 0.0, "a number > 0 [s]")] = 1e-4
@@ -240,23 +236,23 @@ class Scenario:
     start_on_trajectory: bool = True
     clock: Annotated[str, one_of(CLOCKS)] = "exact"
     connection_start: Annotated[str, one_of(CONNECTION_STARTS)] = "propagated"
-    trajectory: Annotated[dict, _table(_section)] = field(default_factory=dict)
-    plant: Annotated[dict, _table(_section)] = field(default_factory=dict)
-    controller: Annotated[dict, _table(_section)] = field(default_factory=dict)
-    limits: Annotated[dict, _table(_limits)] = field(default_factory=dict)
+    trajectory: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
+    plant: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
+    controller: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
+    limits: Annotated[dict, BeforeValidator(_limits)] = field(default_factory=dict)
     # ModelParams field -> controller/plant factor
-    mismatch: Annotated[dict, _table(_mismatch)] = field(default_factory=dict)
+    mismatch: Annotated[dict, BeforeValidator(_mismatch)] = field(default_factory=dict)
     record_every: Annotated[int, rule(lambda v: is_number(v) and v >= 1, "an integer >= 1")] = 1
     # "element.variable" inputs left undriven on purpose
-    open_inputs: Annotated[list, _table(_open_inputs)] = field(default_factory=list)
+    open_inputs: Annotated[list, BeforeValidator(_open_inputs)] = field(default_factory=list)
     # explicit Gauss-Seidel step order: every SSP element name once
-    order: Annotated[list | None, _table(_order)] = None
+    order: Annotated[list | None, BeforeValidator(_order)] = None
     # [ELEMENT] tables: FMU parameters by SSP element name
-    elements: Annotated[dict, _table(_elements)] = field(default_factory=dict)
+    elements: Annotated[dict, BeforeValidator(_elements)] = field(default_factory=dict)
     fmus: Annotated[str, one_of(FAMILIES)] = "native"  # FMU family: python, native or fmi3 (engine.families)
     format: Annotated[str, one_of(RESULT_FORMATS)] = "csv"   # result file: csv or mat (RESULT_FORMATS)
     # point-to-point runs: settling bands [m for X, Z and the motors, rad for B] of the move metrics
-    settling_bands: Annotated[list, _table(_settling_bands)] = field(default_factory=lambda: [1e-6, 1e-7])
+    settling_bands: Annotated[list, BeforeValidator(_settling_bands)] = field(default_factory=lambda: [1e-6, 1e-7])
     source: str = ""
     # the gains_file's preset, filled by read_gains_file after validation
     gain_file_values: dict = field(default_factory=dict, repr=False)

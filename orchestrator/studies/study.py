@@ -76,8 +76,9 @@ def _targets(targets, info) -> list:
 
 
 def _distribution(dist, info) -> str:
-    require(dist in DISTRIBUTIONS, f"monte_carlo.vary.{info.data['name']}.distribution = {dist!r} is invalid: "
-            + allowed_are(dist, DISTRIBUTIONS))
+    if dist not in DISTRIBUTIONS:
+        raise ValueError(f"monte_carlo.vary.{info.data['name']}.distribution = {dist!r} is invalid: "
+                         + allowed_are(dist, DISTRIBUTIONS))
     return dist
 
 
@@ -302,9 +303,10 @@ def _bounds(bounds, info) -> dict:
                 f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
         out[law] = {}
         for gain, lim in b.items():
-            require(gain in _TUNABLE[law], f"tune.bounds.{law}.{gain} is invalid: allowed are "
-                    f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
-                    + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
+            if gain not in _TUNABLE[law]:
+                raise ValueError(f"tune.bounds.{law}.{gain} is invalid: allowed are {', '.join(_TUNABLE[law])} "
+                                 f"({law} " + ("does not use b or D; " if law == "apd-dc" else "")
+                                 + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
             require(isinstance(lim, list) and len(lim) == 2 and all(is_number(v) and math.isfinite(v) for v in lim)
                     and 0.0 < lim[0] < lim[1], f"tune.bounds.{law}.{gain} = {lim!r} is invalid: allowed is "
                     "[low, high] with 0 < low < high (searched on a log scale)")
@@ -345,8 +347,9 @@ class _StudyFile(BaseModel):
     def _sections(cls, data):
         allowed = ("study", "set", "grid", "monte_carlo", "tune")
         for key in data:
-            require(key in allowed, f"[{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed)
-                    + suggestion(key, allowed))
+            if key not in allowed:
+                raise ValueError(f"[{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed)
+                                 + suggestion(key, allowed))
         return data
 
     @model_validator(mode="after")
@@ -503,7 +506,7 @@ def _metric_columns(m: dict) -> dict:
 
 
 def scenario_data(scenario: Scenario) -> dict:
-    """A scenario as plain data that crosses process boundaries (Scenario(**data) rebuilds it)."""
+    """A scenario as plain data that crosses process boundaries (scenario.create(**data) rebuilds it)."""
     return dataclasses.asdict(scenario)
 
 
