@@ -31,8 +31,8 @@ from tapmp.params import GAIN_NAMES
 
 from ..experiments.config import require
 from ..experiments.scenario import load_gain_file
-from .study import (PENALTY_UM, STUDY_CSV, STUDY_JSON, CaseRunner, StudyError, StudyTable, apply_changes,
-                    case_value, fingerprint, prepare)
+from .study import PENALTY_UM, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, case_value, fingerprint, prepare
+from .study_file import StudyError, apply_changes
 
 class TuneObjective:
     """The objective of one law's candidates x = log10(gains), evaluated as study cases."""
