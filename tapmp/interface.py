@@ -353,3 +353,6 @@ def dependency_attributes(names, reference: dict, position: dict | None = None) 
         return {"dependencies": ""}
     return {"dependencies": " ".join(str(reference[n]) for n in known),
             "dependenciesKind": " ".join("dependent" for _ in known)}
+
+ORDERINGS = ("gauss-seidel", "jacobi")
+CONNECTION_STARTS = ("propagated", "zero")

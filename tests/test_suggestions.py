@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.engine.ssp import ROLES, SCENARIO_TABLES
-from orchestrator.experiments.scenario import _TABLES
+from orchestrator.experiments.scenario import TABLES
 from tapmp.errors import allowed_are, suggestion
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,7 +43,7 @@ def test_the_helper_names_the_closest_allowed_names_or_none():
 
 def test_the_scenario_tables_offered_by_the_ssp_check_are_the_scenarios_own():
     # a table the scenario reads itself never reaches the master: the master offers the others
-    assert set(SCENARIO_TABLES) == _TABLES - set(ROLES)
+    assert set(SCENARIO_TABLES) == TABLES - set(ROLES)
 
 
 SCENARIOS = {
