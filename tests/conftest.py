@@ -86,6 +86,14 @@ def built(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def faulty_ssps(built, tmp_path_factory):
+    """{fault: SSP path}: the real controller and trajectory with a plant FMU that misbehaves
+    from t = 0.5 ms on, one per fault of tests/faults.py's FAULTY ("status", "error_log", "info_log")."""
+    from faults import faulty_ssps as build
+    return build(built, tmp_path_factory.mktemp("faulty"))
+
+
+@pytest.fixture(scope="session")
 def native_built(tmp_path_factory):
     """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real for every
     platform (zig cc) into a temporary folder laid out as build/native/."""

@@ -14,7 +14,7 @@ from orchestrator.engine.ssp import ROLES, SCENARIO_TABLES
 from orchestrator.experiments.scenario import _TABLES
 from tapmp.errors import allowed_are, suggestion
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = (ROOT / "scenarios" / "paper_simulation.toml").as_posix()
 
 

@@ -1,6 +1,6 @@
 """The native FMUs' binaries for every platform, built by zig cc (orchestrator/engine/toolchain.py).
 
-* aarch64 Linux runs: the C hosts (tests/c_host), built for aarch64 by the same toolchain, step
+* aarch64 Linux runs: the C hosts (tests/fmu/c_host), built for aarch64 by the same toolchain, step
   the aarch64 binaries 2,000 times under qemu-aarch64 (Debian's qemu-user, libc6-arm64-cross as
   the sysroot) and must give the x86_64 binaries' outputs.
 * Every binary is checked structurally with lief: its format and architecture, that it exports

@@ -16,7 +16,7 @@ from orchestrator.engine import master
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 
 

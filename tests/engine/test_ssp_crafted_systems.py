@@ -11,7 +11,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from faults import faulty_plant_fmu, faulty_ssp
+
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 SSD = "SystemStructure.ssd"
 TRAJECTORY = 'name="trajectory" type="application/x-fmu-sharedlibrary" source="resources/TAPMP_Trajectory.fmu"'
@@ -164,11 +166,6 @@ def test_open_inputs_entries_are_checked_against_the_system(no_dq1, sandbox, cas
 
 
 WARNING_STEP = """
-
-
-class TAPMP_Plant(_RealPlant):
-    \"\"\"The real plant, logging a warning (not an error) on every step from t = 0.5 ms.\"\"\"
-
     def step(self, t, h):
         super().step(t, h)
         if t >= 4.5e-4:
@@ -177,19 +174,12 @@ class TAPMP_Plant(_RealPlant):
 
 
 def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
-    from orchestrator.engine.build import SCRIPTS, build_fmu
     from orchestrator.engine.master import CoSimulation
     from orchestrator.experiments.scenario import load
-    from orchestrator.engine.ssp import write_ssp
-    from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
 
-    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
-    script = tmp_path / "src" / "TAPMP_Plant.py"
-    script.parent.mkdir()
-    script.write_text(real.replace("TAPMP_Plant.block(", "_RealPlant.block(") + WARNING_STEP)
-    plant = build_fmu(PLANT, tmp_path / "fmus", script=script)
-    ssp = write_ssp(tmp_path / "warn.ssp", {PLANT: plant, CONTROLLER: built[CONTROLLER],
-                                            TRAJECTORY: built[TRAJECTORY]})
+    plant = faulty_plant_fmu(tmp_path, WARNING_STEP, "The real plant, logging a warning (not an error) on every "
+                                                      "step from t = 0.5 ms.")
+    ssp = faulty_ssp(tmp_path / "warn.ssp", plant, built)
     sc = load(PAPER, ["stop_time=0.002"])
     with CoSimulation(ssp, sc.parameters(), 0.0, sc.step) as sim:
         for _ in range(sc.n_steps):

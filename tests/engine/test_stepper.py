@@ -15,8 +15,6 @@ from orchestrator.engine.master import CoSimulation, CoSimulationError, Divergen
 from orchestrator.experiments.results import read_results, request_stop, run_scenario
 from conftest import PAPER, paper_scenario
 
-from test_master_failures import faulty_ssps  # noqa: F401  (the fixture: real FMUs that fail at 0.5 ms)
-
 
 def rows_of(ssp, scenario, stepper_kind, ordering, clock="exact", blocks=(7, 300, 193)):
     """Row 0 and the rows of ``sum(blocks)`` steps, stepped in blocks of those sizes."""

@@ -15,7 +15,7 @@ from orchestrator.engine.build_native import PLATFORM_DIRS
 from orchestrator.engine.toolchain import PLATFORMS
 from tapmp.interface import FMU_NAMES
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 VENV_BIN = Path(sys.executable).parent
 # Every name under which a system C compiler or linker could be called.
 COMPILERS = ("gcc", "cc", "c99", "clang", "ld", "x86_64-linux-gnu-gcc", "x86_64-w64-mingw32-gcc",

@@ -15,8 +15,6 @@ from orchestrator.experiments.plots import COLUMNS, decimate
 from orchestrator.experiments.pool import cores, parse_jobs
 from conftest import PAPER
 
-from test_master_failures import faulty_ssps  # noqa: F401  (the fixture: real FMUs that fail at 0.5 ms)
-
 
 def tapmp(*args, tmp_path):
     return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True, text=True,

@@ -16,7 +16,7 @@ from tapmp.control import Gains
 from tapmp.kinematics import S3, forward, rotation_column
 from tapmp.params import GAIN_PRESETS, PAPER_MODEL
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_reading_b_is_force_equal_k_t_u_d_plus_feedback():

@@ -7,7 +7,7 @@ from pathlib import Path
 from orchestrator.experiments.plausibility import USUAL, implausible
 from orchestrator.experiments.scenario import load
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 

@@ -13,7 +13,7 @@ from orchestrator.experiments.plots import (COLUMNS, _load_run, decimate, error_
                                             resolve_signal, signals_figure)
 from orchestrator.experiments.results import read_results
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 STOP = 0.4  # [s]: 4001 samples at 0.1 ms, more than 4 per pixel column, so the figures decimate
 

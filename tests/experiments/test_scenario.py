@@ -6,7 +6,7 @@ import pytest
 
 from orchestrator.experiments.scenario import ScenarioError, load
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 

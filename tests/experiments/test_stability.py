@@ -15,7 +15,7 @@ from tapmp.closed_loop import simulate
 from tapmp.errors import KinematicDomainError
 from tapmp.kinematics import inverse
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 EQ40 = 'gains="paper_simulation"'

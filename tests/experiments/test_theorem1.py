@@ -12,7 +12,7 @@ from scipy.linalg import expm
 from orchestrator.experiments import theorem1 as t1
 from tapmp.params import GAIN_PRESETS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 COUNTER = t1.COUNTEREXAMPLE
 
 

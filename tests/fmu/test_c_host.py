@@ -1,4 +1,4 @@
-"""The FMUs in a host process without Python: a small C program (tests/c_host/fmi2_host.c),
+"""The FMUs in a host process without Python: a small C program (tests/fmu/c_host/fmi2_host.c),
 compiled here by the project's toolchain (zig cc), loads the FMU binary, steps it and must match FMPy exactly."""
 
 import os

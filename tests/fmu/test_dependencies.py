@@ -19,7 +19,7 @@ from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARI
 from tapmp.kinematics import inverse
 from tapmp.params import DEFAULT_MODAL_GAINS
 
-FMIL = Path(__file__).resolve().parents[2] / "shared" / "tools" / "fmil" / "fmil_check"
+FMIL = Path(__file__).resolve().parents[3] / "shared" / "tools" / "fmil" / "fmil_check"
 FAMILIES = ("python", "fmi2", "fmi3")
 
 
@@ -103,7 +103,7 @@ FMIL_READER = Path(__file__).resolve().parent / "c_host" / "fmil_dependencies.c"
 
 @pytest.mark.needs_shared("tools/fmil/fmil_check")
 def test_fmil_reads_the_declared_dependencies(fmus, built, tmp_path):
-    """What FMIL 3.0.4 reads back (tests/c_host/fmil_dependencies.c on its API) equals the
+    """What FMIL 3.0.4 reads back (tests/fmu/c_host/fmil_dependencies.c on its API) equals the
     interface, with one limitation of FMIL's FMI 2.0 parser: a section (<Outputs> or
     <InitialUnknowns>) in which no unknown lists any known is read as "no dependency
     information" (fmi2_xml_zero_empty_dependencies), which is the case of every FMI 2.0 FMU's

@@ -1,9 +1,9 @@
 """The native FMUs are memory-safe under any call sequence.
 
 * Sanitizer builds (AddressSanitizer + UndefinedBehaviorSanitizer, detect_leaks=1), no
-  finding: the C hosts of tests/c_host (fmi2_host.c, fmi3_host.c) built with the sanitizers
+  finding: the C hosts of tests/fmu/c_host (fmi2_host.c, fmi3_host.c) built with the sanitizers
   load sanitizer builds of every FMU and step them 1,000 times, with FMPy's results on the
-  shipped binaries; tests/c_host/memory_host.c runs the call sequences a memory defect would
+  shipped binaries; tests/fmu/c_host/memory_host.c runs the call sequences a memory defect would
   show in (nValues shorter than the value references, states held at FreeInstance, a state
   used after it or its instance was freed, a state of another instance, a second free) on
   every FMU of both versions; the three FMUs linked into one program run the closed loop.
@@ -29,8 +29,8 @@ from fmpy.fmi3 import FMU3Slave
 from ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT
 
-ROOT = Path(__file__).resolve().parent.parent
-C_HOST = ROOT / "tests" / "c_host"
+ROOT = Path(__file__).resolve().parents[2]
+C_HOST = ROOT / "tests" / "fmu" / "c_host"
 FAMILIES = ("fmi2", "fmi3")
 BINARIES = {"fmi2": "linux64", "fmi3": "x86_64-linux"}
 ENV = {"PATH": os.environ["PATH"], **SANITIZER_ENV}

@@ -1,15 +1,15 @@
-"""libFuzzer on the native FMUs: tests/fuzz/fuzz_fmi2.c and fuzz_fmi3.c drive each FMU of
+"""libFuzzer on the native FMUs: tests/fmu/fuzz/fuzz_fmi2.c and fuzz_fmi3.c drive each FMU of
 both FMI versions (its sources/all.c in the same translation unit) through arbitrary call
 sequences, built with clang -fsanitize=fuzzer,address,undefined (Debian's clang and
 libclang-rt-14-dev, installed by tests/run.sh).
 
 * Every target runs for TAPMP_FUZZ_SECONDS seconds (default 60) with no finding: no
   AddressSanitizer, LeakSanitizer or UndefinedBehaviorSanitizer report, no crash, no timeout.
-* Every input on which the fuzzer found a defect is kept in tests/fuzz/regressions/<target>/
+* Every input on which the fuzzer found a defect is kept in tests/fmu/fuzz/regressions/<target>/
   and replayed here: each must run clean.
 
 A finding is kept by libFuzzer in the test's temporary folder; the failure message names the
-file: copy it into tests/fuzz/regressions/<target>/ when the bug is fixed.
+file: copy it into tests/fmu/fuzz/regressions/<target>/ when the bug is fixed.
 """
 
 import os
@@ -91,7 +91,7 @@ def test_fuzzing_finds_nothing(fuzz_targets, target, tmp_path):
     proc = subprocess.run(args, capture_output=True, text=True, timeout=SECONDS + 300, env=ENV)
     found = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(("crash-", "leak-", "timeout-", "oom-")))
     assert proc.returncode == 0 and not finding(proc.stderr) and not found, (
-        f"{target}: finding(s) {found} in {tmp_path}: keep them in tests/fuzz/regressions/{target}/\n"
+        f"{target}: finding(s) {found} in {tmp_path}: keep them in tests/fmu/fuzz/regressions/{target}/\n"
         + proc.stderr[-4000:])
     runs = int(next(line.split()[-1] for line in proc.stderr.splitlines() if "stat::number_of_executed_units" in line))
     assert runs > 100 * SECONDS  # measured: 9,000 to 30,000 runs per second and target

@@ -1,6 +1,6 @@
 """The native FMUs (C, no Python at run time) in real hosts other than the orchestrator.
 
-* Linux: small C hosts (tests/c_host/fmi2_host.c, fmi3_host.c), compiled here by the
+* Linux: small C hosts (tests/fmu/c_host/fmi2_host.c, fmi3_host.c), compiled here by the
   project's toolchain (zig cc, orchestrator/engine/toolchain.py) and
   started with an empty environment (`env -i`), load the shipped .so files and must give
   FMPy's results exactly; the .so files need nothing but the C runtime.
@@ -35,7 +35,7 @@ from orchestrator.engine.toolchain import compile_c
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 
 C_HOST = Path(__file__).parent / "c_host"
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FMU_CHECK = ROOT.parent / "shared" / "tools" / "fmuCheck" / "fmuCheck.linux64"
 HEADERS = Path(fmpy.__file__).parent / "c-code"
 FAMILIES = ("fmi2", "fmi3")
@@ -69,7 +69,7 @@ def unzip(fmu: Path, dest: Path) -> Path:
 
 
 def compile_host(family: str, out_dir: Path, windows: bool = False, platform: str | None = None) -> Path:
-    """tests/c_host/<family>_host.c compiled by the project's toolchain for ``platform``
+    """tests/fmu/c_host/<family>_host.c compiled by the project's toolchain for ``platform``
     (default x86_64-linux, or x86_64-windows if ``windows``; Windows executables static)."""
     platform = platform or ("x86_64-windows" if windows else "x86_64-linux")
     source = C_HOST / f"{family}_host.c"

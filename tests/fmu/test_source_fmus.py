@@ -12,7 +12,7 @@
 * a binary built as the build description says (with the external libm) loads in FMI
   Library, which resolves every symbol at load time, and runs like the shipped binary;
 * with FMI2_FUNCTION_PREFIX / FMI3_FUNCTION_PREFIX the three FMUs link statically into one
-  C program (tests/c_host/static_loop.c) that runs the closed loop bit for bit like the
+  C program (tests/fmu/c_host/static_loop.c) that runs the closed loop bit for bit like the
   shipped binaries run by FMPy.
 """
 
@@ -32,7 +32,7 @@ from fmpy.model_description import read_build_description
 from ctools import compile_c, extract_sources
 from tapmp.interface import CONNECTIONS, CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FAMILIES = ("fmi2", "fmi3")
 STANDARD_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3Functions.h",
                     "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"}
@@ -163,7 +163,7 @@ def test_fmpy_compile_with_all_warnings_as_errors_builds_every_native_fmu_and_it
 # -- three source FMUs in one program --------------------------------------------------------
 
 def loop_config(native: dict, family: str) -> str:
-    """loop_config.h of tests/c_host/static_loop.c for ``family``, from tapmp/interface.py."""
+    """loop_config.h of tests/fmu/c_host/static_loop.c for ``family``, from tapmp/interface.py."""
     lines = [f"#define FMI_VERSION {family[-1]}"]
     for k, model in enumerate(LOOP_ORDER):
         md = read_model_description(str(native[model]))
@@ -193,7 +193,7 @@ def build_static_loop(native: dict, family: str, folder: Path, flags=()) -> Path
         objects.append(obj)
     exe = folder / "static_loop"
     proc = compile_c(["-std=c99", "-O2", "-Wall", "-Wextra", *flags, f"-I{folder}", "-o", exe,
-                      ROOT / "tests" / "c_host" / "static_loop.c", *objects, "-lm"], headers=headers)
+                      ROOT / "tests" / "fmu" / "c_host" / "static_loop.c", *objects, "-lm"], headers=headers)
     assert proc.returncode == 0, proc.stderr
     return exe
 

@@ -1,11 +1,11 @@
 """Measure how far each third-party tool running an exported scenario is from `tapmp run`.
 
-    .venv/bin/python tests/measure_export.py [--fmus python|native] [--stop-time 0.2]
+    .venv/bin/python tests/interop/measure_export.py [--fmus python|native] [--stop-time 0.2]
 
 Exports scenarios/paper_simulation.toml with the real `tapmp export` from the built SSP of
 the family (bash build_fmus.sh first), runs libcosim, Ecos (ecospy and the `ecos`
 executable), FMPy's simulate_ssp and `fmpy simulate` on build/TAPMP_ClosedLoop.fmu with
-only what the export wrote (tests/test_export.py's runners), and prints, per tool, the
+only what the export wrote (tests/interop/test_export.py's runners), and prints, per tool, the
 largest difference on the true motor positions [m], the encoder positions [m] and the
 commands [N] against the orchestrator (the engine of `tapmp run`): on the tool's own
 conventions, with `--set ordering='"jacobi"'`, with the defaults (gauss-seidel), and with
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+sys.path[:0] = [str(HERE), str(HERE.parent)]  # this folder's tests and tests/conftest.py
 from conftest import COMMANDS, MOTOR_POSITIONS, ROOT, orchestrator_rows, paper_scenario  # noqa: E402
 from test_export import (run_container, run_ecos_executable, run_ecos_exported,  # noqa: E402
                          run_fmpy_ssp_exported, run_libcosim_exported)

@@ -1,11 +1,11 @@
 """Measure how far OMSimulator, fmusim and FMIL's fmil_check are from `tapmp run` and fmpy.
 
-    .venv/bin/python tests/measure_tools.py
+    .venv/bin/python tests/interop/measure_tools.py
 
 Needs the built FMUs (bash build_fmus.sh) and ../shared/tools. Prints:
 
 * OMSimulator on the paper scenario exported from each family's TAPMP.ssp (first 0.2 s), run
-  as tests/test_omsimulator.py runs it: the largest difference on the true motor positions [m],
+  as tests/interop/test_omsimulator.py runs it: the largest difference on the true motor positions [m],
   the encoder positions [m] and the commands [N] against the orchestrator (the engine of
   `tapmp run`) on OMSimulator's conventions (Jacobi, accumulated clock) and with `tapmp run`'s
   defaults (Gauss-Seidel, exact clock), and FMI 3.0 against FMI 2.0;
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+sys.path[:0] = [str(HERE), str(HERE.parent)]  # this folder's tests and tests/conftest.py
 from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, ROOT, SHARED, orchestrator_rows, paper_scenario  # noqa: E402
 from fmpy import simulate_fmu  # noqa: E402
 from measure_export import fmt, gaps  # noqa: E402

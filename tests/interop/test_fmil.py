@@ -2,7 +2,7 @@
 family without a warning, through ``fmil_check`` (../shared/tools/fmil, a small C program on
 FMIL): ``parse`` reports every FMIL log message of level warning or worse and exits non-zero on
 any; ``alone`` instantiates an FMU and steps it, recording its outputs at every communication point.
-What FMIL reads back of the dependencies: tests/test_dependencies.py.
+What FMIL reads back of the dependencies: tests/fmu/test_dependencies.py.
 """
 
 import re

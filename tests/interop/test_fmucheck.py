@@ -1,6 +1,6 @@
 """The FMI Compliance Checker (../shared/tools/fmuCheck) on the closed-loop container FMU
 TAPMP_ClosedLoop.fmu (the three pythonfmu FMUs inside fmpy's container runtime; the FMUs
-themselves are checked in tests/test_native_hosts.py): no warning or error, and the values it
+themselves are checked in tests/fmu/test_native_hosts.py): no warning or error, and the values it
 records are fmpy's (fmuCheck writes 17 significant digits)."""
 
 import numpy as np

@@ -1,8 +1,8 @@
 """The native FMUs (C, no Python at run time) in third-party masters.
 
 * libcosim (libcosimpy) and Ecos (ecospy) load the native FMI 2.0 TAPMP.ssp unchanged and
-  give the orchestrator's results on their conventions, exactly as tests/test_libcosim.py
-  and tests/test_ecos.py show for the pythonfmu SSP (their run helpers are reused here):
+  give the orchestrator's results on their conventions, exactly as tests/interop/test_libcosim.py
+  and tests/interop/test_ecos.py show for the pythonfmu SSP (their run helpers are reused here):
   Jacobi ordering, libcosim's integer-nanosecond clock, Ecos's accumulated clock.
 * FMPy's simulate_fmu simulates each native FMI 3.0 FMU on its own.
 """

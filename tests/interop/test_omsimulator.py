@@ -35,7 +35,7 @@ NAMES = MOTOR_POSITIONS + COMMANDS
 STEP = 1e-4
 FIXED_POINT = ["--algLoopSolver=fixedpoint"]  # FMI 3.0: see the module docstring
 LOOP_OF_FMI3 = "Alg. loop (size 9/45)"
-# Measured maxima (tests/measure_tools.py): against the orchestrator on OMSimulator's conventions
+# Measured maxima (tests/interop/measure_tools.py): against the orchestrator on OMSimulator's conventions
 # the commands and encoder positions are identical and the true positions differ in the last bit;
 # against `tapmp run` with its defaults (Gauss-Seidel, exact clock) by the Jacobi delay.
 POSITION_LAST_BIT = 1e-15      # [m]

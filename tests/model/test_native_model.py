@@ -36,7 +36,7 @@ from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel, quantize
 from tapmp.trajectory import TrajectoryParams, reference
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 MODEL_SOURCE = ROOT / "tapmp" / "c" / "tapmp_model.c"
 MODEL_HEADER = ROOT / "tapmp" / "c" / "tapmp_model.h"
 PAPER_SCENARIO = ROOT / "scenarios" / "paper_simulation.toml"

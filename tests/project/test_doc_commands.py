@@ -31,7 +31,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ["README.md"] + sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md"))
 SHORT = 0.05  # [s] horizon of the shortened runs
 
@@ -41,7 +41,7 @@ NOT_RUN = {
     r"^pip install \. && tapmp build": "installs the package into the Python on PATH, outside the checkout",
     r"\.venv/bin/python -m pytest": "runs test files of this suite, which CI runs anyway",
     r"benchmarks/(bench_|throughput)": "a timing benchmark, best of several runs of full horizons (minutes)",
-    r"tests/measure_export\.py": "a measurement of every third-party master against tapmp run (minutes)",
+    r"tests/interop/measure_export\.py": "a measurement of every third-party master against tapmp run (minutes)",
 }
 # Commands whose answer is their exit code: tapmp check exits 1 for an unstable loop (the docs show
 # unstable gains on purpose); 2, bad input, fails the test as for any command.

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from test_toolchain import EXPECTED_BINARIES, shim_path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SKIP = shutil.ignore_patterns(".git", ".venv", "build", "results", "__pycache__", "*.egg-info", ".pytest_cache",
                               ".hypothesis", "dist")
 

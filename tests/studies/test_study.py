@@ -13,7 +13,7 @@ from orchestrator.studies.run import run_study
 from orchestrator.studies.study import (StudyError, cases, close_client, load_study, open_client,
                                         read_study_csv)
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
 
 

@@ -17,7 +17,7 @@ import pytest
 
 from orchestrator.studies.study import StudyError, StudyTable
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 

@@ -10,7 +10,7 @@ from orchestrator.studies.run import run_study
 from orchestrator.studies.study import close_client, load_study, open_client, read_study_csv
 from orchestrator.studies.study_plots import key_label, study_figures
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
 
 

@@ -11,8 +11,9 @@ from orchestrator.engine.master import CoSimulation, CoSimulationError, Divergen
 from orchestrator.experiments.results import run_scenario
 from orchestrator.experiments.scenario import load
 from tapmp.closed_loop import simulate
+from faults import faulty_plant_fmu, faulty_ssp
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 
@@ -105,11 +106,6 @@ def test_envelope_breach_stops_with_time_signal_value_and_hint(built, tmp_path):
 
 
 BROKEN_STEP = """
-
-
-class TAPMP_Plant(_RealPlant):
-    \"\"\"The real plant, except that q2_true is NaN after the step from t = 0.5 ms.\"\"\"
-
     def step(self, t, h):
         super().step(t, h)
         if t >= 4.5e-4:
@@ -118,17 +114,9 @@ class TAPMP_Plant(_RealPlant):
 
 
 def test_a_non_finite_output_of_any_fmu_stops_the_run(built, tmp_path):
-    from orchestrator.engine.build import SCRIPTS, build_fmu
-    from orchestrator.engine.ssp import write_ssp
-    from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
-
-    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
-    script = tmp_path / "src" / "TAPMP_Plant.py"
-    script.parent.mkdir()
-    script.write_text(real.replace("TAPMP_Plant.block(", "_RealPlant.block(") + BROKEN_STEP)
-    broken = build_fmu(PLANT, tmp_path / "fmus", script=script)
-    ssp = write_ssp(tmp_path / "broken.ssp", {PLANT: broken, CONTROLLER: built[CONTROLLER],
-                                              TRAJECTORY: built[TRAJECTORY]})
+    broken = faulty_plant_fmu(tmp_path, BROKEN_STEP, "The real plant, except that q2_true is NaN after the step "
+                                                     "from t = 0.5 ms.")
+    ssp = faulty_ssp(tmp_path / "broken.ssp", broken, built)
     with pytest.raises(DivergenceError, match=r"plant.q2_true = nan at t = 0.0006 s is not finite") as info:
         run_scenario(load(PAPER), ssp, tmp_path / "run")
     assert info.value.signal == "plant.q2_true"

@@ -14,7 +14,7 @@ from orchestrator.engine.schedule import (Connection, ScheduleError, check_algeb
                                           initialization_order)
 from orchestrator.experiments.scenario import load
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC_NS = "http://ssp-standard.org/SSP1/SystemStructureCommon"

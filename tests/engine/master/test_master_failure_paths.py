@@ -1,5 +1,6 @@
 """The master's failure paths, for both orderings, through the real
-CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on:
+CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on (tests/faults.py,
+the ``faulty_ssps`` fixture):
 
 * ``status``: doStep returns fmi2Error and logs nothing;
 * ``error_log``: doStep logs an error and returns fmi2OK;
@@ -12,52 +13,6 @@ import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from conftest import PAPER
-
-FAULT_AT = 4.5e-4  # the step that starts at t = 0.5 ms (5 steps of 0.1 ms) is the first faulty one
-
-FAULTY = {
-    "status": '''
-    def fmi2_do_step(self, current_time, step_size):
-        status = super().fmi2_do_step(current_time, step_size)
-        return 3 if current_time >= {at} else status  # fmi2Error, nothing logged
-''',
-    "error_log": '''
-    def step(self, t, h):
-        super().step(t, h)
-        if t >= {at}:
-            self.log(f"encoder lost at t = {{t:.6g}} s", 3, "logStatusError")  # status stays fmi2OK
-''',
-    "info_log": '''
-    def step(self, t, h):
-        super().step(t, h)
-        if t >= {at}:
-            self.log(f"step at t = {{t:.6g}} s", 0, "logAll")
-''',
-}
-
-
-@pytest.fixture(scope="module")
-def faulty_ssps(built, tmp_path_factory):
-    """{fault: SSP path}: the real controller and trajectory with a plant FMU that misbehaves."""
-    from orchestrator.engine.build import SCRIPTS, build_fmu, compile_binaries
-    from orchestrator.engine.ssp import write_ssp
-    from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
-
-    root = tmp_path_factory.mktemp("faulty")
-    (root / "bin").mkdir()
-    binaries = compile_binaries(root / "bin")
-    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
-    real = real.replace("TAPMP_Plant.block(", "_RealPlant.block(")
-    ssps = {}
-    for fault, body in FAULTY.items():
-        script = root / fault / "src" / "TAPMP_Plant.py"
-        script.parent.mkdir(parents=True)
-        script.write_text(real + "\n\nclass TAPMP_Plant(_RealPlant):\n    \"\"\"The real plant, faulty.\"\"\"\n"
-                          + body.format(at=FAULT_AT))
-        plant = build_fmu(PLANT, root / fault / "fmus", binaries=binaries, script=script)
-        ssps[fault] = write_ssp(root / fault / "system.ssp", {PLANT: plant, CONTROLLER: built[CONTROLLER],
-                                                                TRAJECTORY: built[TRAJECTORY]})
-    return ssps
 
 
 def run(ssp, ordering, steps=20):

@@ -13,8 +13,8 @@ import math
 import pytest
 
 from conftest import PAPER
+from faults import faulty_plant_fmu, faulty_ssp
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
 
 ORDERINGS = {"gauss-seidel": ["plant", "controller", "trajectory"], "jacobi": None}  # the plant steps first
 
@@ -72,19 +72,9 @@ WARN_THEN_DISCARD = '''
 def warn_then_discard_ssp(built, tmp_path_factory):
     """The real controller and trajectory with a plant that answers a non-finite input with
     fmi2Warning and every doStep from t = 0.3 ms on with fmi2Discard."""
-    from orchestrator.engine.build import SCRIPTS, build_fmu, compile_binaries
-    from orchestrator.engine.ssp import write_ssp
     root = tmp_path_factory.mktemp("warn_discard")
-    (root / "bin").mkdir()
-    binaries = compile_binaries(root / "bin")
-    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
-    real = real.replace("TAPMP_Plant.block(", "_RealPlant.block(")
-    script = root / "src" / "TAPMP_Plant.py"
-    script.parent.mkdir(parents=True)
-    script.write_text(real + "\n\nclass TAPMP_Plant(_RealPlant):\n    \"\"\"The real plant: Warning, then Discard.\"\"\"\n"
-                      + WARN_THEN_DISCARD)
-    plant = build_fmu(PLANT, root / "fmus", binaries=binaries, script=script)
-    return write_ssp(root / "system.ssp", {PLANT: plant, CONTROLLER: built[CONTROLLER], TRAJECTORY: built[TRAJECTORY]})
+    plant = faulty_plant_fmu(root, WARN_THEN_DISCARD, "The real plant: Warning, then Discard.")
+    return faulty_ssp(root / "system.ssp", plant, built)
 
 
 @pytest.mark.parametrize("ordering", ORDERINGS)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from orchestrator.cli import main
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 SHORT = ["--set", "stop_time=0.01", "--no-progress"]
 

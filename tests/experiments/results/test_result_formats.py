@@ -19,7 +19,7 @@ from orchestrator.experiments import metrics
 from orchestrator.experiments.results import mat_names, read_results, run_scenario
 from orchestrator.experiments.scenario import ScenarioError, load
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 

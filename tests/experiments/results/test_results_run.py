@@ -13,7 +13,7 @@ from orchestrator.engine.master import CoSimulation
 from orchestrator.experiments.results import run_scenario
 from orchestrator.experiments.scenario import load
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 

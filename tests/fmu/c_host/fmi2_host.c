@@ -1,5 +1,5 @@
 /* A minimal FMI 2.0 co-simulation host in C, with no Python in the process, used by
- * tests/test_c_host.py and tests/test_native_hosts.py. Usage:
+ * tests/fmu/test_c_host.py and tests/fmu/test_native_hosts.py. Usage:
  *   fmi2_host UNZIPPED_FMU_DIR MODEL_IDENTIFIER STEPS STEP_SIZE [VR=VALUE ...] -- [VR ...]
  * reads the GUID from UNZIPPED_FMU_DIR/modelDescription.xml, loads
  * binaries/linux64/MODEL_IDENTIFIER.so (Linux, gcc) or binaries\win64\MODEL_IDENTIFIER.dll

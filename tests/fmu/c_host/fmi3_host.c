@@ -1,5 +1,5 @@
 /* A minimal FMI 3.0 co-simulation host in C, with no Python in the process, used by
- * tests/test_native_hosts.py (the FMI 3.0 twin of fmi2_host.c). Usage:
+ * tests/fmu/test_native_hosts.py (the FMI 3.0 twin of fmi2_host.c). Usage:
  *   fmi3_host UNZIPPED_FMU_DIR MODEL_IDENTIFIER STEPS STEP_SIZE [VR=VALUE ...] -- [VR ...]
  * reads the instantiationToken from UNZIPPED_FMU_DIR/modelDescription.xml, loads
  * binaries/x86_64-linux/MODEL_IDENTIFIER.so (Linux, gcc) or

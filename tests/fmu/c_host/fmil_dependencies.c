@@ -5,7 +5,7 @@
  * one line per unknown, "<fmu> O|I <variable>:" followed by the names of the knowns it depends
  * on (O: <Outputs>/<Output>, I: <InitialUnknowns>/<InitialUnknown>), or " ALL" when FMIL
  * reports a dependency on every known (no dependency information). Exit 1 if an FMU cannot
- * be read. WORKDIR must exist. Built and run by tests/test_dependencies.py against the FMIL in ../shared/tools/fmil. */
+ * be read. WORKDIR must exist. Built and run by tests/fmu/test_dependencies.py against the FMIL in ../shared/tools/fmil. */
 #define _POSIX_C_SOURCE 200809L
 #include <stdio.h>
 #include <stdlib.h>

@@ -1,6 +1,6 @@
 /* Call sequences that would show a memory defect of the native FMUs, run on one FMU (its
  * sources/all.c, included below) of either FMI version, built with AddressSanitizer and
- * UndefinedBehaviorSanitizer by tests/test_fmu_memory.py: every value array has exactly the
+ * UndefinedBehaviorSanitizer by tests/fmu/test_fmu_memory.py: every value array has exactly the
  * length the call is given, so a read or write past it is a finding; FMU states are still
  * held when their instance is freed (a leak is a finding at exit) and are used after they or
  * their instance were freed (a use after free is a finding). Each call must return the

@@ -3,7 +3,7 @@
  * instantiation with odd arguments, get/set with arbitrary value references and counts
  * (value arrays of exactly the count given), doStep with any t and h, FMU states got, set,
  * freed, serialized and deserialized from fuzzed bytes, also after their instance was
- * freed, reset, terminate and free twice. Built by tests/test_fuzz.py with
+ * freed, reset, terminate and free twice. Built by tests/fmu/test_fuzz.py with
  * clang -fsanitize=fuzzer,address,undefined. */
 #include "all.c"
 #include "fuzz_input.h"

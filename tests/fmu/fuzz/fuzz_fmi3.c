@@ -4,7 +4,7 @@
  * and counts (value arrays of exactly the count given, so a read or write past them is
  * caught), doStep with any t and h, FMU states got, set, freed, serialized and deserialized
  * from fuzzed bytes, also after their instance was freed, reset, terminate and free twice.
- * Built by tests/test_fuzz.py with clang -fsanitize=fuzzer,address,undefined. */
+ * Built by tests/fmu/test_fuzz.py with clang -fsanitize=fuzzer,address,undefined. */
 #include "all.c"
 #include "fuzz_input.h"
 

@@ -58,7 +58,7 @@ def assert_initial_state_matters(rows, rest, first=0):
     """The tool's positions are micrometres from the run without the initial state."""
     n = min(len(rows), len(rest) - first)
     gap = np.abs(rows[:n, :3] - rest[first:first + n, :3]).max()
-    assert gap > 1e-6, gap  # m; measured 1.1e-5 m (simulate_ssp: 1.6e-5 m), tests/measure_export.py
+    assert gap > 1e-6, gap  # m; measured 1.1e-5 m (simulate_ssp: 1.6e-5 m), tests/interop/measure_export.py
 
 
 def ssd_root(ssp):
