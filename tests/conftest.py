@@ -50,6 +50,23 @@ def shared(relative: str) -> Path:
     return path
 
 
+# Markers every test of a folder carries (the markers themselves are registered in pyproject.toml;
+# elsewhere `slow` and `windows` are set per file with pytestmark or per test).
+FOLDER_MARKERS = {"interop": ("interop", "slow")}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Adds :data:`FOLDER_MARKERS` to the tests of those folders of tests/."""
+    here = Path(__file__).resolve().parent
+    for item in items:
+        try:
+            folder = item.path.resolve().relative_to(here).parts[0]
+        except ValueError:
+            continue  # a test outside tests/ (a scratch repository's)
+        for name in FOLDER_MARKERS.get(folder, ()):
+            item.add_marker(name)
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item):
     """Checks every ``needs_shared`` path before any fixture of the test is set up."""
