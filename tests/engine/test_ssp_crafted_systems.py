@@ -1,4 +1,4 @@
-"""Hardening of the SSP loader against crafted systems, through the real `tapmp run`: element
+"""The SSP loader against crafted systems, through the real `tapmp run`: element
 names and FMU sources are not trusted as paths, every FMU input is driven or declared open."""
 
 import json

@@ -1,4 +1,4 @@
-"""Hardening of the output folders, through the real `tapmp` in child processes: one writer per
+"""The output folders are safe to share, through the real `tapmp` in child processes: one writer per
 folder, whole rows only, nothing stale left behind by signals or a full disk."""
 
 import csv
