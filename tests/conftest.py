@@ -53,12 +53,20 @@ def shared(relative: str) -> Path:
 # Markers every test of a folder carries (the markers themselves are registered in pyproject.toml;
 # elsewhere `slow` and `windows` are set per file with pytestmark or per test).
 FOLDER_MARKERS = {"interop": ("interop", "slow")}
+# Markers every test using a fixture carries: native_built compiles every family for every
+# platform (about a minute), faulty_ssps builds three plant FMUs of their own.
+FIXTURE_MARKERS = {"native_built": ("slow",), "faulty_ssps": ("slow",)}
 
 
 def pytest_collection_modifyitems(config, items):
-    """Adds :data:`FOLDER_MARKERS` to the tests of those folders of tests/."""
+    """Adds :data:`FOLDER_MARKERS` and :data:`FIXTURE_MARKERS` to the tests they name."""
     here = Path(__file__).resolve().parent
     for item in items:
+        names = set(getattr(item, "fixturenames", ()))
+        for fixture, markers in FIXTURE_MARKERS.items():
+            if fixture in names:
+                for name in markers:
+                    item.add_marker(name)
         try:
             folder = item.path.resolve().relative_to(here).parts[0]
         except ValueError:

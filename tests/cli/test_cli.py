@@ -39,6 +39,7 @@ def test_existing_results_are_not_overwritten_without_flag(built, tmp_path, caps
     assert main(args + ["--overwrite"]) == 0
 
 
+@pytest.mark.slow
 def test_compare_writes_three_runs_comparison_and_figures(built, tmp_path, capsys):
     out = tmp_path / "cmp"
     assert main(["compare", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.05",
@@ -70,12 +71,14 @@ def _subcommands():
     return sorted(parser()._subparsers._group_actions[0].choices)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cmd", [[]] + [[c] for c in _subcommands()])
 def test_every_command_has_help(cmd):
     res = subprocess.run([sys.executable, "-m", "orchestrator", *cmd, "--help"], capture_output=True, text=True)
     assert res.returncode == 0 and f"usage: tapmp {' '.join(cmd)}".rstrip() in res.stdout
 
 
+@pytest.mark.slow
 def test_the_help_lists_every_subcommand():
     res = subprocess.run([sys.executable, "-m", "orchestrator", "--help"], capture_output=True, text=True)
     assert set(_subcommands()) == {"build", "run", "check", "analyze", "compare", "reproduce", "study", "export", "plot"}

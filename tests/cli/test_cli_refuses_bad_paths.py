@@ -9,6 +9,8 @@ import pytest
 
 from conftest import PAPER, ROOT
 
+pytestmark = pytest.mark.slow  # every case runs the CLI in a child process
+
 
 def tapmp(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "orchestrator", *args], capture_output=True, text=True,

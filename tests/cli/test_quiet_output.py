@@ -13,6 +13,8 @@ from conftest import PAPER
 from orchestrator.experiments.baselines import BASELINES
 from orchestrator.experiments.results import Progress
 
+pytestmark = pytest.mark.slow  # tapmp compare in a child process
+
 
 def _mean(v):
     return sum(v) / len(v)

@@ -14,6 +14,8 @@ from orchestrator.engine.ssp import ROLES, SCENARIO_TABLES
 from orchestrator.experiments.scenario import _TABLES
 from tapmp.errors import allowed_are, suggestion
 
+pytestmark = pytest.mark.slow  # every case runs the CLI in a child process
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = (ROOT / "scenarios" / "paper_simulation.toml").as_posix()
 

@@ -27,6 +27,8 @@ import pytest
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY
 from test_native_hosts import HEADERS, compile_host, host_args, outputs, parse, run_linux_host, unzip
 
+pytestmark = pytest.mark.slow  # aarch64 binaries under qemu, every platform's binaries
+
 FAMILIES = ("fmi2", "fmi3")
 QEMU = "qemu-aarch64"
 SYSROOT = Path("/usr/aarch64-linux-gnu")  # Debian's libc6-arm64-cross
@@ -119,6 +121,7 @@ def test_linux_binaries_export_only_the_fmi_functions_and_need_glibc_2_17_at_mos
 
 # -- Windows -----------------------------------------------------------------------------------
 
+@pytest.mark.windows
 @pytest.mark.parametrize("platform,machine", [("x86_64-windows", lief.PE.Header.MACHINE_TYPES.AMD64),
                                               ("x86-windows", lief.PE.Header.MACHINE_TYPES.I386)])
 @pytest.mark.parametrize("family", FAMILIES)

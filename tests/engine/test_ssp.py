@@ -127,6 +127,7 @@ def test_tapmp_run_with_a_bad_ssp_prints_one_line_and_exits_2(broken, tmp_path, 
     assert not (out / "results.csv").exists()  # rejected before any step
 
 
+@pytest.mark.slow
 def test_tapmp_run_debug_shows_the_traceback(broken, tmp_path):
     path, _ = broken["unknown output"]
     proc = subprocess.run([sys.executable, "-m", "orchestrator", "--debug", "run", PAPER, "--ssp", str(path),

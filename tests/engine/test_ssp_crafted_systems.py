@@ -13,6 +13,8 @@ import pytest
 
 from faults import faulty_plant_fmu, faulty_ssp
 
+pytestmark = pytest.mark.slow  # every case runs tapmp run in a child process
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 SSD = "SystemStructure.ssd"

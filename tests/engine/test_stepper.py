@@ -121,6 +121,7 @@ def test_a_stop_request_ends_both_at_the_same_block_with_the_same_rows(built, mo
     assert csv_c == csv_py and len(csv_c.decode().splitlines()) == 1 + 1000
 
 
+@pytest.mark.slow
 def test_the_core_is_built_once_into_the_cache_folder(tmp_path, monkeypatch):
     """A fresh cache: built on first use under the lock, then found; the library is outside the package."""
     monkeypatch.setenv("TAPMP_CACHE", str(tmp_path / "cache"))
@@ -176,6 +177,7 @@ def test_csv_rows_read_back_to_the_same_doubles_at_every_magnitude():
     assert format_csv_rows(block[:2]).decode().splitlines()[1].split(",")[3] == "inf"
 
 
+@pytest.mark.slow
 def test_tapmp_build_builds_the_core_into_the_cache(tmp_path):
     env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), TMPDIR=str(tmp_path))
     res = subprocess.run([sys.executable, "-m", "orchestrator", "build", "--out", str(tmp_path / "build")],

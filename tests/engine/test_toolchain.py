@@ -15,6 +15,8 @@ from orchestrator.engine.build_native import PLATFORM_DIRS
 from orchestrator.engine.toolchain import PLATFORMS
 from tapmp.interface import FMU_NAMES
 
+pytestmark = pytest.mark.slow  # builds every family for every platform with zig cc
+
 ROOT = Path(__file__).resolve().parents[2]
 VENV_BIN = Path(sys.executable).parent
 # Every name under which a system C compiler or linker could be called.

@@ -44,6 +44,7 @@ def scaled_radius(scenario, v, k: float) -> float:
     return float(max(abs(linalg.eigvals(T.T @ m.jacobian(x0) @ T))))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("law,ordering", [("sc-dc", "gauss-seidel"), ("apd-dc", "gauss-seidel"), ("sc-dc", "jacobi")])
 def test_gain_margin_of_every_break_point_is_where_the_spectral_radius_crosses_one(law, ordering):
     sc = load(PAPER, [f'law="{law}"', f'ordering="{ordering}"'])
@@ -172,6 +173,7 @@ def phasor(t, x, f):
     return a - 1j * b
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("point,f", [("motor 1", 20.0), ("diff. B", 200.0), ("common", 1000.0),
                                      ("diff. Z", 50.0)])
 def test_frequency_response_equals_a_cosimulation_through_the_fmus(native_fmi2, tmp_path, point, f):
@@ -190,6 +192,7 @@ def test_frequency_response_equals_a_cosimulation_through_the_fmus(native_fmi2, 
     assert abs(E_sim - E) <= 0.02 * abs(E), (E_sim, E)
 
 
+@pytest.mark.slow
 def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     out = tmp_path / "an"
     code = main(["analyze", str(PAPER), "--out", str(out), "--points", "60", "--f-min", "1", "--responses"])
@@ -247,6 +250,7 @@ def test_frequency_grid_reaches_nyquist_exactly():
         frequency_grid(1e-4, 1.0, 5000.1, 5)
 
 
+@pytest.mark.slow
 def test_an_unstable_loop_gets_no_margins():
     sc = load(PAPER, ['gains="paper_simulation"'])  # Eq. 40 at 0.1 ms: unstable (docs/stability.md)
     r = analyze(sc, None, f_min=1.0, points=5, runs={"sc-dc": sc})["runs"]["sc-dc"]

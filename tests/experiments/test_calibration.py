@@ -79,6 +79,7 @@ def test_calibrated_scenario_files_carry_the_fit_and_pass_the_stability_precheck
 # Simulation: the full 2.5 s horizon of the fit, through the pythonfmu FMUs (bit-identical to the
 # native ones the fit ran): the record's numbers to round-off. Experiment: its first B period
 # (5.5556 s of the 11.1 s), within a factor 1.5 of the record's full-horizon APD-DC errors.
+@pytest.mark.slow
 @pytest.mark.parametrize("target,stop,factor", [("simulation", None, 1.0 + 1e-9), ("experiment", 5.5556, 1.5)])
 def test_a_short_run_of_each_calibrated_scenario_gives_the_fits_apddc_errors(built, tmp_path, target, stop, factor):
     rec = cal.read_fit_record(cal.calibrated_file(target))

@@ -16,6 +16,8 @@ from orchestrator.experiments.baselines import BASELINES, compare_runs, differen
 from orchestrator.experiments.scenario import load
 from orchestrator.experiments.stability import check
 
+pytestmark = pytest.mark.slow  # tapmp compare through the real CLI
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 # default preset: Lambda_v = 0.36, D = 900, Lambda_p = 300, b = 50 on every motor

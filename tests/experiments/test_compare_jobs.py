@@ -15,6 +15,8 @@ from orchestrator.experiments.plots import COLUMNS, decimate
 from orchestrator.experiments.pool import cores, parse_jobs
 from conftest import PAPER
 
+pytestmark = pytest.mark.slow  # tapmp compare on a process pool
+
 
 def tapmp(*args, tmp_path):
     return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True, text=True,

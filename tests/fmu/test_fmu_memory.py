@@ -29,6 +29,8 @@ from fmpy.fmi3 import FMU3Slave
 from ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT
 
+pytestmark = pytest.mark.slow  # sanitizer builds of every FMU, call sequences under AddressSanitizer
+
 ROOT = Path(__file__).resolve().parents[2]
 C_HOST = ROOT / "tests" / "fmu" / "c_host"
 FAMILIES = ("fmi2", "fmi3")

@@ -21,6 +21,8 @@ import pytest
 from ctools import compile_c, extract_sources
 from tapmp.interface import FMU_NAMES
 
+pytestmark = pytest.mark.slow  # libFuzzer runs each target for TAPMP_FUZZ_SECONDS (60 s by default)
+
 FUZZ = Path(__file__).parent / "fuzz"
 REGRESSIONS = FUZZ / "regressions"
 FAMILIES = ("fmi2", "fmi3")

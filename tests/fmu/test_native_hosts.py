@@ -177,6 +177,7 @@ def windows_path(path: Path) -> str:
     return "Z:" + str(path).replace("/", "\\")
 
 
+@pytest.mark.windows
 @pytest.mark.parametrize("family", FAMILIES)
 def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_built, family, tmp_path):
     steps = 2000
@@ -211,6 +212,7 @@ def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_
                                       for m, (lx, w) in results.items()})
 
 
+@pytest.mark.windows
 @pytest.mark.parametrize("family", FAMILIES)
 def test_windows_dlls_import_only_windows_system_dlls(native_built, family, tmp_path):
     imports = {}

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # a fresh clone, the README's tour as typed
+
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ("paper_simulation", "paper_experiment", "paper_simulation_calibrated", "paper_experiment_calibrated")
 

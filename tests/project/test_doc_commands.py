@@ -31,6 +31,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # every documented command in a fresh clone
+
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ["README.md"] + sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md"))
 SHORT = 0.05  # [s] horizon of the shortened runs

@@ -10,7 +10,11 @@ import sys
 import zipfile
 from pathlib import Path
 
+import pytest
+
 from test_toolchain import EXPECTED_BINARIES, shim_path
+
+pytestmark = pytest.mark.slow  # builds a wheel and installs it into a fresh venv
 
 ROOT = Path(__file__).resolve().parents[2]
 SKIP = shutil.ignore_patterns(".git", ".venv", "build", "results", "__pycache__", "*.egg-info", ".pytest_cache",

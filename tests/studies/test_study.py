@@ -13,6 +13,8 @@ from orchestrator.studies.run import run_study
 from orchestrator.studies.study import (StudyError, cases, close_client, load_study, open_client,
                                         read_study_csv)
 
+pytestmark = pytest.mark.slow  # studies on a real Dask LocalCluster
+
 ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
 

@@ -17,6 +17,8 @@ import pytest
 
 from orchestrator.studies.study import StudyError, StudyTable
 
+pytestmark = pytest.mark.slow  # tapmp study in child processes on a Dask LocalCluster
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 

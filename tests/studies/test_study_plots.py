@@ -10,6 +10,8 @@ from orchestrator.studies.run import run_study
 from orchestrator.studies.study import close_client, load_study, open_client, read_study_csv
 from orchestrator.studies.study_plots import key_label, study_figures
 
+pytestmark = pytest.mark.slow  # a grid study on a Dask LocalCluster
+
 ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
 

@@ -55,6 +55,7 @@ def test_orderings_differ_by_the_extra_sample_of_delay(built):
     assert not np.array_equal(out["gauss-seidel"][1:, 7:], out["jacobi"][1:, 7:])
 
 
+@pytest.mark.slow
 def test_scdc_beats_apddc_on_every_motor(built, tmp_path):
     base = load(PAPER)  # the full 2.5 s circle: on q3 the margin is under 10 %, so no shortcut
     m = {law: run_scenario(base.with_changes(law=law), built["ssp"], tmp_path / law) for law in ("sc-dc", "apd-dc")}
@@ -113,6 +114,7 @@ BROKEN_STEP = """
 """
 
 
+@pytest.mark.slow
 def test_a_non_finite_output_of_any_fmu_stops_the_run(built, tmp_path):
     broken = faulty_plant_fmu(tmp_path, BROKEN_STEP, "The real plant, except that q2_true is NaN after the step "
                                                      "from t = 0.5 ms.")

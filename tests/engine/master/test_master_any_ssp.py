@@ -154,6 +154,7 @@ def test_renamed_elements_give_bit_identical_results(built, tmp_path, ordering):
     assert np.abs(rows0[-1, 1:]).max() > 0.0  # the loop moved: the comparison compares something
 
 
+@pytest.mark.slow
 def test_parameters_address_elements_by_ssp_name_or_role(built, tmp_path):
     renamed = rewrite_ssp(built["ssp"], tmp_path / "renamed.ssp", rename=RENAME)
     base = load(PAPER, ["stop_time=0.01"])
@@ -210,6 +211,7 @@ def test_a_delay_fmu_in_the_loop_delays_the_measurement_by_one_sample(built, tes
     assert np.array_equal(e_plain[1:], qd_plain[:-1] - q_plain[:-1])  # without it: the measurement of t_k
 
 
+@pytest.mark.slow
 def test_an_algebraic_loop_is_refused_naming_its_elements(built, test_fmus, tmp_path, capsys):
     ports = [("u", "input"), ("y", "output")]
     looped = rewrite_ssp(built["ssp"], tmp_path / "loop.ssp",

@@ -77,6 +77,7 @@ def warn_then_discard_ssp(built, tmp_path_factory):
     return faulty_ssp(root / "system.ssp", plant, built)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ordering", ORDERINGS)
 def test_a_warning_followed_by_a_discard_is_reported_as_discard(warn_then_discard_ssp, ordering):
     err, calls, t = run_with_nan_force(warn_then_discard_ssp, ordering)

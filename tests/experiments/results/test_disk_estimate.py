@@ -18,6 +18,8 @@ from orchestrator.experiments.results import (BYTES_PER_VALUE, RECORDED_COLUMNS,
                                               check_output_size, output_estimate, read_results, recorded_rows)
 from orchestrator.experiments.scenario import load
 
+pytestmark = pytest.mark.slow  # run, compare, study and reproduce in child processes
+
 
 def tapmp(*args, tmp_path):
     return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True, text=True,

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # concurrent tapmp processes, signals, a full disk
+
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 

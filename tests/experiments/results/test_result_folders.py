@@ -9,7 +9,11 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from orchestrator.cli import main
+
+pytestmark = pytest.mark.slow  # tapmp run, compare and plot in child processes
 
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")

@@ -29,6 +29,7 @@ def alone(ssp, scenario, steps):
         return sim.columns, np.array([sim.row()] + [sim.step() or sim.row() for _ in range(steps)])
 
 
+@pytest.mark.slow
 def test_csv_and_mat_hold_the_co_simulations_doubles_bit_for_bit(built, tmp_path):
     sc = load(PAPER, ["stop_time=0.25"])  # 2,501 rows: three blocks of 1,000 steps, the last one partial
     columns, rows = alone(built["ssp"], sc, 2500)
@@ -64,6 +65,7 @@ def test_record_every_thins_a_mat_file_like_a_csv_file(built, tmp_path):
     assert cc == mc and np.array_equal(c, m) and c.shape[0] == 1 + 200 // 7 + 1  # every 7th step and the last
 
 
+@pytest.mark.slow
 def test_format_flag_and_scenario_key(built, tmp_path, capsys):
     out = tmp_path / "r"
     assert main(["run", str(PAPER), "--ssp", str(built["ssp"]), "--out", str(out), "--format", "mat",
@@ -74,6 +76,7 @@ def test_format_flag_and_scenario_key(built, tmp_path, capsys):
         load(PAPER, ['format="parquet"'])
 
 
+@pytest.mark.slow
 def test_a_stopped_mat_run_leaves_a_consistent_mat_file(built, tmp_path):
     out = tmp_path / "r"
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", str(PAPER), "--ssp", str(built["ssp"]),
@@ -93,6 +96,7 @@ def test_a_stopped_mat_run_leaves_a_consistent_mat_file(built, tmp_path):
     assert run["status"] == "interrupted" and run["failed_at_s"] >= data[-1, 0]
 
 
+@pytest.mark.slow
 def test_a_killed_mat_run_leaves_a_loadable_part_file(built, tmp_path):
     out = tmp_path / "r"
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", str(PAPER), "--ssp", str(built["ssp"]),

@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from orchestrator.engine.master import CoSimulation
 from orchestrator.experiments.results import run_scenario
 from orchestrator.experiments.scenario import load
@@ -22,6 +24,7 @@ def read_csv(path: Path) -> list[list[str]]:
         return list(csv.reader(f))
 
 
+@pytest.mark.slow
 def test_sigint_stops_the_run_and_keeps_valid_partial_results(built, tmp_path):
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", str(PAPER), "--ssp", str(built["ssp"]),
@@ -55,6 +58,7 @@ def test_record_every_thins_the_file_but_not_the_dynamics_or_metrics(built, tmp_
     assert m_thin == m_all and m_all["samples"] == 201
 
 
+@pytest.mark.slow
 def test_the_same_scenario_twice_gives_a_bit_identical_results_csv(built, tmp_path):
     sc = load(PAPER, ["stop_time=0.03"])
     run_scenario(sc, built["ssp"], tmp_path / "a")
