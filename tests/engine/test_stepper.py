@@ -131,6 +131,7 @@ def test_the_core_is_built_once_into_the_cache_folder(tmp_path, monkeypatch):
     assert stepper.build() == path and path.stat().st_mtime_ns == mtime
 
 
+@pytest.mark.slow
 def test_a_core_that_cannot_be_built_is_one_line_and_the_run_steps_in_python(tmp_path, built):
     """No compiler: `tapmp run` says so in one line and completes with the Python loop."""
     env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), CC=str(tmp_path / "no-such-cc"),

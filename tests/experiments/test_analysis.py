@@ -59,6 +59,7 @@ def test_gain_margin_of_every_break_point_is_where_the_spectral_radius_crosses_o
             assert scaled_radius(sc, v, g * (1.0 + 1e-3)) < 1.0 < scaled_radius(sc, v, g * (1.0 - 1e-3)), name
 
 
+@pytest.mark.slow
 def test_margins_of_a_sampled_double_integrator_under_pd_match_the_hand_derivation():
     # Plant 1/(m s^2) behind a zero-order hold: P(z) = h^2 (z + 1) / (2 m (z - 1)^2). Controller
     # kp + kd (1 - 1/z) / h (backward difference), no extra delay. With alpha = kp h + kd,

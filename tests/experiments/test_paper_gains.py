@@ -59,6 +59,7 @@ def test_bad_arguments_are_named():
         run_paper_gains(workers=0)
 
 
+@pytest.mark.slow
 def test_eq40_at_1us_is_stable_with_nanometre_errors_and_chatters_at_10us():
     """Reading A, Eq. 40-41, exact measurement: at 1 us both laws are stable (rho < 1, no
     sample at the force limit) with tracking MAE below 10 nm over 20 ms; at 10 us the loop
@@ -125,6 +126,7 @@ def _static_error_estimate(k_p, k_pull, m_p, g, K_T, L1):
     return simple, e
 
 
+@pytest.mark.slow
 def test_reading_b_static_error_under_gravity_is_m_g_over_k_p():
     """Reading B, APD-DC with Eq. 41 (k_p = 8000, 8000, 8850 N/m, k_v = 150, 158.5, 108.5 N s/m),
     the reference held at the home pose, exact measurement, 10 us, 1.6 s (the slowest mode

@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from orchestrator.experiments.plausibility import USUAL, implausible
 from orchestrator.experiments.scenario import load
 
@@ -30,6 +32,7 @@ def test_each_implausible_value_is_one_line_naming_value_and_range():
     assert USUAL[("plant", "encoder_resolution")][1] == 1e-4  # the bound
 
 
+@pytest.mark.slow
 def test_the_cli_prints_one_warning_line_and_runs(built, tmp_path):
     res = subprocess.run([sys.executable, "-m", "orchestrator", "run", str(PAPER), "--ssp", str(built["ssp"]),
                           "--out", str(tmp_path / "r"), "--set", "stop_time=0.01", "--set",

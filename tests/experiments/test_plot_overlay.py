@@ -13,6 +13,8 @@ from orchestrator.experiments.plots import (COLUMNS, _load_run, decimate, error_
                                             resolve_signal, signals_figure)
 from orchestrator.experiments.results import read_results
 
+pytestmark = pytest.mark.slow  # tapmp plot over real run folders
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 STOP = 0.4  # [s]: 4001 samples at 0.1 ms, more than 4 per pixel column, so the figures decimate

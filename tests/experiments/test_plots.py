@@ -17,6 +17,8 @@ from orchestrator.cli import main
 from orchestrator.experiments.plots import (CHATTER_WINDOW, ZOOM_SAMPLES, figures, force_figure, load_folder,
                                             select_runs, sliding_mean_rms)
 
+pytestmark = pytest.mark.slow  # compare runs and figures drawn with matplotlib
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 

@@ -33,6 +33,7 @@ def test_the_experiment_gains_are_eq_42_scaled_to_the_default_damping():
     assert g["Lambda_p"] == [x * pr.EXPERIMENT_SCALE for x in GAIN_PRESETS["paper_experiment"]["Lambda_p"]]
 
 
+@pytest.mark.slow
 def test_every_extra_reduction_is_the_one_of_its_runs_metrics(extra):
     out, work = extra
     assert set(out) == {"uncalibrated", "experiment gains"}
@@ -58,6 +59,7 @@ def test_every_extra_reduction_is_the_one_of_its_runs_metrics(extra):
     assert len(out["uncalibrated"]["reductions"]) == 36 and len(out["experiment gains"]["reductions"]) == 18
 
 
+@pytest.mark.slow
 def test_the_section_scores_each_row_as_the_null_model_table_does(extra):
     out, _ = extra
     cal = {f"{n}_calibrated": {"apd-dc": out["uncalibrated"]["metrics"][f"{n} apd-dc"],

@@ -180,6 +180,7 @@ def edited_ssd(ssd: str, edits) -> str:
     return head + "\n".join(new) + tail
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(edits=connection_edits(18))
 def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path, edits):

@@ -21,6 +21,8 @@ from orchestrator.experiments.reproduction import PREDICT_PP, SAME
 from orchestrator.experiments.robustness import MODES, mode_peaks
 from orchestrator.experiments.scenario import load
 
+pytestmark = pytest.mark.slow  # tapmp reproduce through the real command line
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = "paper/000_bf22bca5a28cbbda.txt"  # ../shared/<PAPER>, relative to the repository root
 STOP = 0.02

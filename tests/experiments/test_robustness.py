@@ -26,6 +26,7 @@ def test_the_matched_pd_has_scdc_peak_sensitivity_on_every_mode_within_one_perce
         assert max(abs(mm[m_] - scdc[m_]) / scdc[m_] for m_ in MODES) > 0.02
 
 
+@pytest.mark.slow
 def test_the_peaks_equal_those_tapmp_analyze_reports():
     sc = load(ROOT / "scenarios" / "paper_simulation.toml")
     runs = compare_runs(sc)

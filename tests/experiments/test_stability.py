@@ -136,6 +136,7 @@ def test_check_command_prints_the_verdict_and_exits_1_when_unstable(capsys):
     assert "unstable: spectral radius 39." in out and "grows" in out
 
 
+@pytest.mark.slow
 def test_run_warns_on_one_stderr_line_before_running_an_unstable_scenario(built, tmp_path):
     cmd = [sys.executable, "-m", "orchestrator", "run", str(PAPER), "--set", EQ40, "--set", "stop_time=0.002",
            "--ssp", str(built["ssp"]), "--out", str(tmp_path / "run"), "--no-progress"]

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.linalg import expm
 
 from orchestrator.experiments import theorem1 as t1
@@ -71,6 +72,7 @@ def _check(tmp_path, law):
                           capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
+@pytest.mark.slow
 def test_tapmp_check_at_a_fine_step_agrees_with_the_continuous_eigenvalues(tmp_path):
     sc = _check(tmp_path, "sc-dc")
     assert sc.returncode == 1, sc.stdout + sc.stderr

@@ -1,6 +1,8 @@
 """fmu_common/binding.py: each FMU runs its own adapter code, even when two FMUs in one
 process have adapters of the same module name."""
 
+import pytest
+
 from orchestrator.engine.build import build_fmu
 from tapmp.interface import PLANT
 
@@ -21,6 +23,7 @@ class TAPMP_Plant(TapmpSlave):
 '''
 
 
+@pytest.mark.slow
 def test_two_fmus_with_the_same_adapter_name_run_their_own_code(built, load_fmu, tmp_path):
     script = tmp_path / "src" / "TAPMP_Plant.py"
     script.parent.mkdir()

@@ -12,6 +12,8 @@ import pytest
 from orchestrator.engine.toolchain import compile_c
 from tapmp.interface import CONTROLLER, PLANT
 
+pytestmark = pytest.mark.slow  # compiles a C host and runs the FMU in it
+
 HOST_SOURCE = Path(__file__).parent / "c_host" / "fmi2_host.c"
 RUNS = 20  # an exit-time crash showed up in about half of the runs with pythonfmu's binary
 

@@ -13,6 +13,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from fmpy import read_model_description
 
@@ -29,6 +30,7 @@ def fmpy_cli(*args, check=True):
     return proc
 
 
+@pytest.mark.slow
 def test_every_fmu_and_the_container_pass_fmpy_validate(built):
     for model in (*FMU_NAMES, CONTAINER):
         proc = fmpy_cli("validate", built[model])
@@ -56,6 +58,7 @@ def test_container_exposes_time_first_and_every_output_and_parameter_with_its_un
     assert {f"resources/{ELEMENT[m]}/binaries/linux64/{m}.so" for m in FMU_NAMES} <= set(names)
 
 
+@pytest.mark.slow
 def test_fmpy_simulate_runs_the_container_equal_to_the_orchestrator_jacobi_ordering(built, tmp_path):
     """`fmpy simulate` on the container, with the paper scenario's parameters as start
     values, equals the orchestrator's Jacobi ordering bit for bit at every 0.1 ms."""

@@ -53,6 +53,7 @@ def test_plant_refuses_to_leave_the_kinematic_domain():
         plant.step(0.0, 1e-3, 0.0, 0.0, 0.0)
 
 
+@pytest.mark.slow
 @given(X=finite.filter(lambda v: abs(v) < 0.05), Z=finite.filter(lambda v: abs(v) < 0.05),
        B=finite.filter(lambda v: abs(v) < 1.4), dX=finite.filter(lambda v: abs(v) < 2.0),
        dZ=finite.filter(lambda v: abs(v) < 2.0), dB=finite.filter(lambda v: abs(v) < 50.0),

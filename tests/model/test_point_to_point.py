@@ -106,6 +106,7 @@ def native_trajectory(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["cruise", "no cruise", "tiny"])
 def test_python_native_fmi2_fmi3_and_pythonfmu_give_the_same_move(name, native_trajectory, built, tmp_path):
     tp = MOVES[name]
@@ -226,6 +227,7 @@ def test_bad_limits_in_the_model():
         TrajectoryParams(profile=3, B_b=1.6).validated()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("family", ["fmi2", "fmi3", "python"])
 @pytest.mark.parametrize("name,value", [("v_max_X", 0.0), ("a_max_B", -1.0), ("j_max_Z", math.inf)])
 def test_an_fmu_refuses_a_bad_limit_with_an_error_and_a_message(family, name, value, native_trajectory, built,

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # pytest in child processes on a scratch repository
+
 ROOT = Path(__file__).resolve().parents[2]
 TEST = '''
 import pytest
