@@ -2,6 +2,7 @@
 one folder per concern, and the tests are laid out like the package."""
 
 import ast
+import functools
 import tomllib
 from pathlib import Path
 
@@ -39,6 +40,7 @@ def _in(module: str, package: str) -> bool:
     return module == package or module.startswith(package + ".")
 
 
+@functools.cache  # one parse of the package for every rule
 def _imports() -> dict:
     """{module: {imported project module or name: line}} for every module of PACKAGES,
     module- and function-level alike, relative imports resolved."""
