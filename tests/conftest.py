@@ -59,7 +59,8 @@ FIXTURE_MARKERS = {"native_built": ("slow",), "faulty_ssps": ("slow",)}
 
 
 def pytest_collection_modifyitems(config, items):
-    """Adds :data:`FOLDER_MARKERS` and :data:`FIXTURE_MARKERS` to the tests they name."""
+    """Adds :data:`FOLDER_MARKERS` and :data:`FIXTURE_MARKERS` to the tests they name, and
+    ``interop`` and ``slow`` to every test that needs a tool of ../shared/tools."""
     here = Path(__file__).resolve().parent
     for item in items:
         names = set(getattr(item, "fixturenames", ()))
@@ -67,6 +68,9 @@ def pytest_collection_modifyitems(config, items):
             if fixture in names:
                 for name in markers:
                     item.add_marker(name)
+        if any(str(path).startswith("tools/") for m in item.iter_markers("needs_shared") for path in m.args):
+            item.add_marker("interop")  # a third-party FMI tool of ../shared/tools, wherever the test is
+            item.add_marker("slow")
         try:
             folder = item.path.resolve().relative_to(here).parts[0]
         except ValueError:
