@@ -1,6 +1,6 @@
 """Write tests/data/reference_run.csv: motor positions of short paper-scenario runs through
 the FMUs, kept as the reference that optimizations must reproduce to 1e-12 m
-(tests/test_reference_run.py). Regenerate only when results are meant to change:
+(tests/engine/test_reference_run.py). Regenerate only when results are meant to change:
 
     .venv/bin/python benchmarks/reference_run.py
 """

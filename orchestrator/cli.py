@@ -10,21 +10,35 @@ import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
+from tapmp.errors import ModelInputError
+
 from .engine import build as build_mod
 from .engine.toolchain import PLATFORMS
+from .engine.build_native import NativeBuildError
 from .engine.master import CoSimulationError
-from .engine.tempdirs import remove_stale_folders
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)
+from .engine.schedule import ScheduleError
+from .engine.ssp import ParameterAddressError
+from .engine.tempdirs import remove_stale_folders
+from .errors import UsageError
 from .experiments.estimate import check_output_size
+from .experiments.export import ExportError
 from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, output_lock, prepare_output,
                                   write_comparison_status)
 from .experiments.progress import Progress
+from .experiments.reading import ResultFolderError
 from .experiments.results import one_line, run_scenario
 from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
 from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
 from .studies.study import StudyError
 
+# What `tapmp` prints as one line (exit code 2): bad input (an option, a file's content), a run or
+# build that failed for a reason it names, and OSError (a file or folder the user named, a full
+# disk, a scheduler address). Every other exception is a programming error and shows its traceback.
+USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
+               ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
+               ResultsWriteError, build_mod.BuildError, NativeBuildError, OSError)
 
 
 def _family(value: str) -> str:
@@ -89,7 +103,7 @@ def record_every(value) -> int:
     except ValueError:
         n = 0
     if n < 1:
-        raise ValueError(f"--record-every = {value!r} is invalid: allowed is an integer >= 1 "
+        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer >= 1 "
                                          "(keep every N-th step)")
     return n
 
@@ -130,16 +144,13 @@ def warn_if_implausible(scenario) -> None:
 
 
 def cmd_build(args) -> int:
-    from .engine.build_native import NativeBuildError, build_native
+    from .engine.build_native import build_native
     out = Path(args.out or default_build_dir())
     for p in args.platform or ():  # before building anything
         if p not in PLATFORMS:
-            raise ValueError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
-    try:
-        build_mod.build_all(out)
-        build_native(out / "native", platforms=args.platform)
-    except (build_mod.BuildError, NativeBuildError) as err:
-        raise ValueError(one_line(err)) from None
+            raise UsageError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
+    build_mod.build_all(out)
+    build_native(out / "native", platforms=args.platform)
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")
@@ -158,6 +169,10 @@ def warn_if_unstable(scenario) -> None:
 
 def cmd_check(args) -> int:
     from .experiments.stability import check
+    if args.fmus is not None:
+        raise UsageError(f"--fmus = {args.fmus!r} is not an option of check: the check linearizes the FMI-free model, "
+                         "which every FMU family reproduces bit for bit, so its verdict is the same for all "
+                         "(`tapmp run --fmus` runs one family)")
     scenario = load(scenario_file(args.scenario), args.set)
     report = check(scenario)
     print(f"{scenario.name}: {report.summary()}")
@@ -290,7 +305,7 @@ def cmd_compare(args) -> int:
     scenario = _load(args)
     warn_if_implausible(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / "compare"
-    command = "tapmp compare " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    command = args.command_line
     jobs = _jobs(args)
     show = _names(args.runs)
     if show:  # before any run starts
@@ -306,25 +321,25 @@ def cmd_compare(args) -> int:
 
 def cmd_reproduce(args) -> int:
     from .experiments.reproduction import reproduce
-    command = "tapmp reproduce " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    command = args.command_line
     jobs = _jobs(args)
 
     results = Path(args.results)
     page = Path(args.out) if args.out else results / "paper-reproduction.md"
     if not 0 < args.paper_gains_stop_time < float("inf"):
-        raise ValueError(f"--paper-gains-stop-time = {args.paper_gains_stop_time:g} is invalid: allowed is a "
+        raise UsageError(f"--paper-gains-stop-time = {args.paper_gains_stop_time:g} is invalid: allowed is a "
                          "finite horizon > 0 s")
     if args.workers < 1:
-        raise ValueError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+        raise UsageError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
     if page.suffix != ".md":
-        raise ValueError(f"--out = {str(page)!r} is invalid: allowed is a Markdown file ending in .md")
+        raise UsageError(f"--out = {str(page)!r} is invalid: allowed is a Markdown file ending in .md")
     if args.record_every is not None:
         record_every(args.record_every)
     from .experiments.reproduction import SCENARIOS
     files = [Path(args.scenarios) / f"{name}{suffix}.toml" for suffix in ("", "_calibrated") for name in SCENARIOS]
     for f in files[:len(SCENARIOS)]:
         if not f.is_file():
-            raise ValueError(f"--scenarios = {args.scenarios!r}: no {f.name} there: allowed is a folder with "
+            raise UsageError(f"--scenarios = {args.scenarios!r}: no {f.name} there: allowed is a folder with "
                              + " and ".join(f"{name}.toml" for name in SCENARIOS))
     runs = [sc for f in files if f.is_file() for sc in compare_runs(_recording(args, load(f))).values()]
     check_output_size(runs, results, "reproduce", jobs)  # every compare run, before the first starts
@@ -341,7 +356,7 @@ def cmd_reproduce(args) -> int:
     if args.write_docs:
         docs = Path("docs") / "paper-reproduction.md"
         if not docs.parent.is_dir():
-            raise ValueError(f"--write-docs: no folder {docs.parent.absolute()}: run it from the repository root")
+            raise UsageError(f"--write-docs: no folder {docs.parent.absolute()}: run it from the repository root")
         tmp = docs.with_suffix(".tmp")
         tmp.write_text(text)
         tmp.replace(docs)
@@ -374,7 +389,7 @@ def cmd_study(args) -> int:
         say(f"{study.name}: starting the Dask workers")
         client = open_client(args.scheduler, args.workers)
         try:
-            command = "tapmp study " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+            command = args.command_line
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
                           not args.no_progress, command, args.write_docs)
@@ -442,6 +457,23 @@ FMUS_DIR_HELP = (f"folder of the built FMUs, as `tapmp build --out DIR` writes i
                  "the repository's build/ in a checkout, else ./build)")
 
 
+def fmu_args(sp) -> None:
+    """--ssp, --fmus and --fmus-dir: the FMUs a command runs (run, compare, export, reproduce, study)."""
+    sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
+    sp.add_argument("--fmus", type=_family, metavar="{" + ",".join(FAMILIES) + "}", help="FMU family: native "
+                    "(default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
+                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
+                    "scenario's fmus; paths relative to --fmus-dir")
+    sp.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
+
+
+def scenario_arg(sp, example: str) -> None:
+    """The scenario file and its --set overrides (``example``: a KEY=VALUE shown in the help)."""
+    sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help=f"override a scenario value, e.g. {example}")
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="tapmp", description=(
         "Co-simulate the TAPMP (three-axis parallel motion platform) FMUs: build them, run "
@@ -464,15 +496,8 @@ def parser() -> argparse.ArgumentParser:
 
     def source_args(sp):
         """The scenario, its --set overrides and the SSP it runs on (run, compare, export)."""
-        sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
-        sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a scenario value, e.g. --set stop_time=0.5 --set plant.k_pull=0")
-        sp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
-        sp.add_argument("--fmus", type=_family, metavar="{" + ",".join(FAMILIES) + "}", help="FMU family: native (default: the C FMUs, FMI 2.0, "
-                        "build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, build/native/fmi3/TAPMP.ssp) or "
-                        "python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the scenario's fmus; paths "
-                        "relative to --fmus-dir")
-        sp.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
+        scenario_arg(sp, "--set stop_time=0.5 --set plant.k_pull=0")
+        fmu_args(sp)
 
     def recording_args(sp, format_too=False):
         """--record-every (and --format): what the result files keep."""
@@ -504,13 +529,9 @@ def parser() -> argparse.ArgumentParser:
                         description="Linearize the sampled closed loop (plant about the start pose, the "
                         "scenario's controller, step and ordering) and report the spectral radius of its "
                         "one-step map: stable if < 1 - 1e-6. Exit code 0 if stable, 1 if not.")
-    ck.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
-    ck.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="override a scenario value, e.g. --set gains='\"paper_simulation\"'")
+    scenario_arg(ck, "--set gains='\"paper_simulation\"'")
     ck.add_argument("--eigenvalues", action="store_true", help="list every eigenvalue")
-    ck.add_argument("--fmus", type=_family, metavar="{" + ",".join(FAMILIES) + "}", help="accepted for symmetry with run: the check linearizes "
-                    "the FMI-free model, which every FMU family reproduces bit for bit (tests), so the verdict "
-                    "is the same for all")
+    ck.add_argument("--fmus", help=argparse.SUPPRESS)  # refused with the reason (cmd_check), not "unrecognized"
     ck.set_defaults(func=cmd_check)
     an = sub.add_parser("analyze", help="frequency response, margins and poles of the sampled loop",
                         description="Linearize the sampled closed loop as `check` does, break it at the plant input "
@@ -520,9 +541,7 @@ def parser() -> argparse.ArgumentParser:
                         "phase margin, peak |S| and |T|, bandwidth; closed-loop poles as natural frequency and "
                         "damping; for SC-DC and every baseline of `compare`. See docs/analysis.md.",
                         epilog=PATHS_HELP)
-    an.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
-    an.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="override a scenario value, e.g. --set step=1e-5")
+    scenario_arg(an, "--set step=1e-5")
     an.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, then "
                     f"/analysis); {RELATIVE}")
     an.add_argument("--f-min", type=float, default=0.1, metavar="HZ", help="lowest frequency (default 0.1 Hz)")
@@ -560,11 +579,7 @@ def parser() -> argparse.ArgumentParser:
                     "paper_experiment.toml (default: the scenarios shipped with the package)")
     rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
                     f"overwritten; {RELATIVE}")
-    rp.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
-    rp.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
-                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
-                    "scenario's fmus; paths relative to --fmus-dir")
-    rp.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
+    fmu_args(rp)
     rp.add_argument("--paper-gains-stop-time", type=float, default=0.2, metavar="S",
                     help="horizon [s] of each run of the paper's gains at 1 us, 10 us and 0.1 ms (default 0.2)")
     rp.add_argument("--workers", type=int, default=2, help="processes for the paper-gain runs (default 2)")
@@ -580,11 +595,7 @@ def parser() -> argparse.ArgumentParser:
                     "(default: a LocalCluster on this machine)")
     st.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default: one per core)")
     st.add_argument("--out", help="output folder (overrides the study's 'output')")
-    st.add_argument("--ssp", help="SSP system file (default: the built SSP of --fmus)")
-    st.add_argument("--fmus", choices=list(FAMILIES), help="FMU family: native (default: the C FMUs, FMI 2.0, build/native/fmi2/TAPMP.ssp), fmi3 (the C FMUs, FMI 3.0, "
-                    "build/native/fmi3/TAPMP.ssp) or python (the pythonfmu FMUs, build/TAPMP.ssp); overrides the "
-                    "scenario's fmus; paths relative to --fmus-dir")
-    st.add_argument("--fmus-dir", metavar="DIR", help=FMUS_DIR_HELP)
+    fmu_args(st)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
     recording_args(st, format_too=True)
@@ -664,7 +675,9 @@ def _signals_interrupt():
 def main(argv=None) -> int:
     """The `tapmp` command; returns its exit code: 0, 1 (`check`: not stable), 2 (an error,
     one line on stderr) or 128 + N after signal N (SIGINT 130, SIGHUP 129, SIGTERM 143)."""
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     args = parser().parse_args(argv)
+    args.command_line = "tapmp " + shlex.join(argv)  # what was typed, as comparison.md and study.json record it
     try:
         with _signals_interrupt():
             return args.func(args)
@@ -672,8 +685,7 @@ def main(argv=None) -> int:
         print(f"{one_line(err) if str(err) else 'interrupted'}: the results so far are in the output folder",
               file=sys.stderr)
         return getattr(err, "exit_code", 130)
-    except (ScenarioError, StudyError, CoSimulationError, OutputExistsError, OutputInUseError, ResultsWriteError,
-            OSError, ValueError) as err:
+    except USER_ERRORS as err:
         if args.debug:
             traceback.print_exc()
         print(f"error: {one_line(err)}", file=sys.stderr)

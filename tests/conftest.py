@@ -50,6 +50,35 @@ def shared(relative: str) -> Path:
     return path
 
 
+# Markers every test of a folder carries (the markers themselves are registered in pyproject.toml;
+# elsewhere `slow` and `windows` are set per file with pytestmark or per test).
+FOLDER_MARKERS = {"interop": ("interop", "slow")}
+# Markers every test using a fixture carries: native_built compiles every family for every
+# platform (about a minute), faulty_ssps builds three plant FMUs of their own.
+FIXTURE_MARKERS = {"native_built": ("slow",), "faulty_ssps": ("slow",)}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Adds :data:`FOLDER_MARKERS` and :data:`FIXTURE_MARKERS` to the tests they name, and
+    ``interop`` and ``slow`` to every test that needs a tool of ../shared/tools."""
+    here = Path(__file__).resolve().parent
+    for item in items:
+        names = set(getattr(item, "fixturenames", ()))
+        for fixture, markers in FIXTURE_MARKERS.items():
+            if fixture in names:
+                for name in markers:
+                    item.add_marker(name)
+        if any(str(path).startswith("tools/") for m in item.iter_markers("needs_shared") for path in m.args):
+            item.add_marker("interop")  # a third-party FMI tool of ../shared/tools, wherever the test is
+            item.add_marker("slow")
+        try:
+            folder = item.path.resolve().relative_to(here).parts[0]
+        except ValueError:
+            continue  # a test outside tests/ (a scratch repository's)
+        for name in FOLDER_MARKERS.get(folder, ()):
+            item.add_marker(name)
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item):
     """Checks every ``needs_shared`` path before any fixture of the test is set up."""
@@ -83,6 +112,14 @@ def own_temp_folder(tmp_path_factory, monkeypatch):
 def built(tmp_path_factory):
     """Paths of the three FMUs and TAPMP.ssp, built into a temporary folder."""
     return build_all(tmp_path_factory.mktemp("fmus"), log=lambda *_: None)
+
+
+@pytest.fixture(scope="session")
+def faulty_ssps(built, tmp_path_factory):
+    """{fault: SSP path}: the real controller and trajectory with a plant FMU that misbehaves
+    from t = 0.5 ms on, one per fault of tests/faults.py's FAULTY ("status", "error_log", "info_log")."""
+    from faults import faulty_ssps as build
+    return build(built, tmp_path_factory.mktemp("faulty"))
 
 
 @pytest.fixture(scope="session")

@@ -1,37 +1,92 @@
-"""The orchestrator's layout: three concerns in three folders, imports one way only."""
+"""The layout: the package's layers import one way only (read with ``ast``), the orchestrator has
+one folder per concern, and the tests are laid out like the package."""
 
 import ast
+import functools
+import tomllib
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
+TESTS = ROOT / "tests"
 PKG = ROOT / "orchestrator"
+PACKAGES = ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator")
 # A layer may import from itself and from the layers before it, never from a later one.
 LAYERS = ("engine", "experiments", "studies")
 
+# {package: what it must not import}: the model knows no FMU and no master; the FMI runtime knows
+# only the model; the FMU adapters know the model and the runtime; the orchestrator's engine knows
+# no experiment, study or command line, experiments know no study or command line, studies no
+# command line. Standard library and third-party imports are free.
+FORBIDDEN = {
+    "tapmp": ("fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
+    "fmu_common": ("fmu_plant", "fmu_controller", "orchestrator"),
+    "fmu_plant": ("fmu_controller", "orchestrator"),
+    "fmu_controller": ("fmu_plant", "orchestrator"),
+    "orchestrator.engine": ("orchestrator.experiments", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.experiments": ("orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.studies": ("orchestrator.cli",),
+}
+
+# Test folders, named like the package's parts; "project" holds the checks of the repository as
+# a whole (docs, README commands, clean checkout, wheel, tests/run.sh, benchmarks).
+TEST_FOLDERS = ("model", "fmu", "engine", "experiments", "studies", "cli", "interop", "project")
+# What may sit at tests/'s root: the shared fixtures, the fault-injection helper, this file.
+TEST_ROOT_FILES = {"conftest.py", "faults.py", "test_layout.py"}
+
+
+def _in(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+@functools.cache  # one parse of the package for every rule
+def _imports() -> dict:
+    """{module: {imported project module or name: line}} for every module of PACKAGES,
+    module- and function-level alike, relative imports resolved."""
+    graph = {}
+    for top in PACKAGES:
+        for path in sorted((ROOT / top).rglob("*.py")):
+            rel = path.relative_to(ROOT).with_suffix("")
+            is_init = rel.name == "__init__"
+            parts = rel.parts[:-1] if is_init else rel.parts
+            package = list(parts) if is_init else list(parts[:-1])
+            deps = {}
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.ImportFrom):
+                    if node.level:
+                        base = package[:len(package) - node.level + 1]
+                        target = ".".join(base + ([node.module] if node.module else []))
+                    else:
+                        target = node.module or ""
+                    targets = [target, *(f"{target}.{a.name}" for a in node.names)]
+                elif isinstance(node, ast.Import):
+                    targets = [a.name for a in node.names]
+                else:
+                    continue
+                for t in targets:
+                    if t.split(".")[0] in PACKAGES:
+                        deps.setdefault(t, node.lineno)
+            graph[".".join(parts)] = deps
+    return graph
+
 
 def _module_imports():
-    """{module: set of orchestrator modules it imports}, module- and function-level alike."""
+    """{orchestrator module: set of orchestrator modules it imports}."""
     graph = {}
-    for path in PKG.rglob("*.py"):
-        rel = path.relative_to(ROOT).with_suffix("")
-        name = ".".join(rel.parts)
-        pkg_parts = rel.parts[:-1]
-        deps = set()
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom):
-                if node.level:
-                    base = list(pkg_parts[:len(pkg_parts) - node.level + 1])
-                    target = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    target = node.module or ""
-                names = [f"{target}.{a.name}" for a in node.names]
-                for t in [target, *names]:
-                    if t.startswith("orchestrator") and (ROOT / (t.replace(".", "/") + ".py")).exists():
-                        deps.add(t)
-            elif isinstance(node, ast.Import):
-                deps.update(a.name for a in node.names if a.name.startswith("orchestrator"))
-        graph[name] = deps - {name}
+    for module, deps in _imports().items():
+        if _in(module, "orchestrator"):
+            graph[module] = {d for d in deps if _in(d, "orchestrator")
+                             and (ROOT / (d.replace(".", "/") + ".py")).exists()} - {module}
     return graph
+
+
+@pytest.mark.parametrize("package", FORBIDDEN)
+def test_each_layer_imports_only_the_layers_below_it(package):
+    broken = [f"{module} imports {dep} (line {line})"
+              for module, deps in _imports().items() if _in(module, package)
+              for dep, line in deps.items() if any(_in(dep, f) for f in FORBIDDEN[package])]
+    assert not broken, f"{package} must not import {', '.join(FORBIDDEN[package])}: " + "; ".join(broken)
 
 
 def test_the_orchestrator_has_one_folder_per_concern():
@@ -69,3 +124,33 @@ def test_the_import_graph_has_no_cycle():
     for node in graph:
         if node not in state:
             visit(node, [])
+
+
+def _test_files():
+    return sorted(p for p in TESTS.rglob("test_*.py") if ".venv" not in p.parts)
+
+
+def test_every_test_file_is_in_the_folder_of_what_it_tests():
+    misplaced = [str(p.relative_to(TESTS)) for p in _test_files()
+                 if p.parent != TESTS and p.relative_to(TESTS).parts[0] not in TEST_FOLDERS]
+    at_root = sorted(p.name for p in TESTS.glob("*.py") if p.name not in TEST_ROOT_FILES)
+    assert not misplaced, f"test files outside {', '.join(TEST_FOLDERS)}: {misplaced}"
+    assert not at_root, f"move into one of tests/{{{','.join(TEST_FOLDERS)}}}/: {at_root}"
+    for folder in TEST_FOLDERS:
+        assert any((TESTS / folder).rglob("test_*.py")), f"tests/{folder} holds no test"
+
+
+def test_test_module_names_are_unique_and_every_test_folder_is_on_the_pythonpath():
+    # pytest imports test files by their name (no __init__.py), so two of one name would clash;
+    # and a helper imported by name from another folder needs that folder on the path.
+    names = [p.name for p in TESTS.rglob("*.py")]
+    assert len(names) == len(set(names)), sorted({n for n in names if names.count(n) > 1})
+    folders = {p.parent.relative_to(ROOT).as_posix() for p in TESTS.rglob("*.py")}
+    ini = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
+    assert set(ini["pythonpath"]) == folders
+
+
+def test_the_markers_are_registered_strictly():
+    ini = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
+    assert "--strict-markers" in ini["addopts"].split()
+    assert sorted(m.split(":")[0] for m in ini["markers"]) == ["interop", "slow", "windows"]

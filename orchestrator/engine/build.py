@@ -21,10 +21,11 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, UNITS, VARIABLES, dependencies, dependency_attributes
+from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES, dependencies
 
 from . import toolchain
 from .families import default_build_dir
+from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
 # The package's root: the repository in a checkout, site-packages in an installed wheel
 # (the adapters and the C sources are package data there).
@@ -54,13 +55,8 @@ def complete_model_description(xml: bytes, model: str) -> bytes:
     """
     root = ET.fromstring(xml)
     table = {v.name: v for v in VARIABLES[model]}
-    used = sorted({v.unit for v in table.values() if v.unit})
-    units = ET.Element("UnitDefinitions")
-    for name in used:
-        unit = ET.SubElement(units, "Unit", name=name)
-        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
     pos = list(root).index(root.find("CoSimulation")) + 1
-    root.insert(pos, units)
+    root.insert(pos, unit_definitions(v.unit for v in table.values() if v.unit))
     outputs, index = [], {}
     for i, sv in enumerate(root.find("ModelVariables"), start=1):
         var = table[sv.get("name")]
@@ -74,15 +70,8 @@ def complete_model_description(xml: bytes, model: str) -> bytes:
     for child in list(structure):
         structure.remove(child)
     if outputs:
-        deps = dependencies(model)
-        out = ET.SubElement(structure, "Outputs")
-        init = ET.SubElement(structure, "InitialUnknowns")
-        for i, name in outputs:
-            ET.SubElement(out, "Unknown", {"index": str(i), **dependency_attributes(deps[name].step, index)})
-        for i, name in outputs:
-            ET.SubElement(init, "Unknown", {"index": str(i), **dependency_attributes(deps[name].initial, index)})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+        fmi2_model_structure(structure, outputs, dependencies(model), index)
+    return to_bytes(root)
 
 
 class BuildError(RuntimeError):

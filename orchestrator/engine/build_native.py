@@ -31,11 +31,12 @@ from xml.etree import ElementTree as ET
 
 from concurrent.futures import ThreadPoolExecutor
 
-from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, UNITS, VARIABLES, Var,
+from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
                              dependencies, dependency_attributes)
 
 from . import toolchain
 from .families import default_build_dir
+from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 from .toolchain import CFLAGS, PLATFORMS, ToolchainError
 
 # The package's root: the repository in a checkout, site-packages in an installed wheel
@@ -165,14 +166,6 @@ def _number(x, integer: bool) -> str:
     return str(int(x)) if integer else repr(float(x))
 
 
-def _units_element(tag: str, used: set) -> ET.Element:
-    units = ET.Element(tag)
-    for name in sorted(used):
-        unit = ET.SubElement(units, "Unit", name=name)
-        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
-    return units
-
-
 def _categories_and_experiment(root: ET.Element, error_status: str) -> None:
     """LogCategories and DefaultExperiment, the same in both FMI versions."""
     cats = ET.SubElement(root, "LogCategories")
@@ -217,7 +210,7 @@ def model_description_fmi2(model: str) -> bytes:
     files = ET.SubElement(cs, "SourceFiles")
     for name in c_sources(model, "fmi2"):
         ET.SubElement(files, "File", name=name)
-    root.append(_units_element("UnitDefinitions", {v.unit for v in table if v.unit}))
+    root.append(unit_definitions(v.unit for v in table if v.unit))
     _categories_and_experiment(root, "fmi2Error")
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
@@ -228,19 +221,10 @@ def model_description_fmi2(model: str) -> bytes:
         ET.SubElement(sv, v.type, _common_attributes(v, v.type == "Integer"))
         if v.causality == "output":
             outputs.append(vr + 1)
-    structure = ET.SubElement(root, "ModelStructure")
-    out = ET.SubElement(structure, "Outputs")
-    init = ET.SubElement(structure, "InitialUnknowns")
     index = {v.name: vr + 1 for vr, v in enumerate(table)}  # FMI 2.0 declares no independent variable
-    deps = dependencies(model)
-    for i in outputs:
-        name = table[i - 1].name
-        ET.SubElement(out, "Unknown", {"index": str(i), **dependency_attributes(deps[name].step, index)})
-    for i in outputs:
-        name = table[i - 1].name
-        ET.SubElement(init, "Unknown", {"index": str(i), **dependency_attributes(deps[name].initial, index)})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    fmi2_model_structure(ET.SubElement(root, "ModelStructure"), [(i, table[i - 1].name) for i in outputs],
+                         dependencies(model), index)
+    return to_bytes(root)
 
 
 def model_description_fmi3(model: str) -> bytes:
@@ -257,7 +241,7 @@ def model_description_fmi3(model: str) -> bytes:
         "canHandleVariableCommunicationStepSize": "true", "maxOutputDerivativeOrder": "0",
         "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false",
         "hasEventMode": "false", "providesEvaluateDiscreteStates": "false"})
-    root.append(_units_element("UnitDefinitions", {v.unit for v in table if v.unit}))
+    root.append(unit_definitions(v.unit for v in table if v.unit))
     _categories_and_experiment(root, "fmi3Error")
     variables = ET.SubElement(root, "ModelVariables")
     ET.SubElement(variables, "Float64", name="time", valueReference=str(len(table)), causality="independent",
@@ -281,8 +265,7 @@ def model_description_fmi3(model: str) -> bytes:
     for vr in outputs:
         ET.SubElement(structure, "InitialUnknown", {"valueReference": str(vr),
                                                     **dependency_attributes(deps[table[vr].name].initial, refs, place)})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    return to_bytes(root)
 
 
 def build_description(model: str) -> bytes:
@@ -306,8 +289,7 @@ def build_description(model: str) -> bytes:
                             "the C runtime")
     files = ET.SubElement(windows, "SourceFileSet", language="C99")
     ET.SubElement(files, "SourceFile", name=UNITY)
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    return to_bytes(root)
 
 
 def compile_sources(sources_dir: Path, model: str, family: str, output: Path,

@@ -34,8 +34,9 @@ from xml.etree import ElementTree as ET
 
 from fmpy import read_model_description
 
-from tapmp.interface import (CONNECTIONS, ELEMENT, FMU_NAMES, TIME, UNITS, VARIABLES, Dependencies,
-                             dependencies, dependency_attributes)
+from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, TIME, VARIABLES, Dependencies, dependencies
+
+from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
 CONTAINER = "TAPMP_ClosedLoop"
 RUNTIME_ID = "container_fmu"         # model identifier = the runtime library's name
@@ -120,12 +121,7 @@ def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
         "canHandleVariableCommunicationStepSize": "true", "canBeInstantiatedOnlyOncePerProcess": "false",
         "canNotUseMemoryManagementFunctions": "true", "canGetAndSetFMUstate": "false",
         "canSerializeFMUstate": "false"})
-    units = dict(UNITS, s={"s": 1})
-    used = sorted({"s"} | {v["unit"] for v in variables if v["unit"]})
-    unit_defs = ET.SubElement(root, "UnitDefinitions")
-    for name in used:
-        ET.SubElement(ET.SubElement(unit_defs, "Unit", name=name), "BaseUnit",
-                      {k: str(e) for k, e in units[name].items()})
+    root.append(unit_definitions({"s"} | {v["unit"] for v in variables if v["unit"]}))  # "s": the time variable
     cats = ET.SubElement(root, "LogCategories")
     for name, text in (("logStatusError", "errors of the container"),
                        ("logNested", "messages of the nested FMUs"),
@@ -153,16 +149,9 @@ def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
         ET.SubElement(sv, mv.type, typed)
         if mv.causality == "output":
             outputs.append(v["name"])  # index: 1-based in ModelVariables; time is index 1
-    deps = container_dependencies()
-    structure = ET.SubElement(root, "ModelStructure")
-    out_el, init_el = ET.SubElement(structure, "Outputs"), ET.SubElement(structure, "InitialUnknowns")
-    for name in outputs:
-        ET.SubElement(out_el, "Unknown", {"index": str(index[name]), **dependency_attributes(deps[name].step, index)})
-    for name in outputs:
-        ET.SubElement(init_el, "Unknown", {"index": str(index[name]),
-                                           **dependency_attributes(deps[name].initial, index)})
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    fmi2_model_structure(ET.SubElement(root, "ModelStructure"), [(index[name], name) for name in outputs],
+                         container_dependencies(), index)
+    return to_bytes(root)
 
 
 def configuration(fmus: dict, guid: str, variables: list[dict]) -> dict:

@@ -15,6 +15,8 @@ from pathlib import Path
 
 from tapmp.errors import allowed_are
 
+from ..errors import UsageError
+
 # The package's root: the repository in a checkout, site-packages in an installed wheel.
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "TAPMP_FMUS_DIR"
@@ -65,7 +67,7 @@ def family_ssp(fmus: str, folder: str | Path | None = None) -> Path:
     try:
         return fmus_dir(folder) / FAMILIES[fmus]
     except KeyError:
-        raise ValueError(f"fmus = {fmus!r} is invalid: {allowed_are(fmus, FAMILIES)}") from None
+        raise UsageError(f"fmus = {fmus!r} is invalid: {allowed_are(fmus, FAMILIES)}") from None
 
 
 def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None) -> Path:

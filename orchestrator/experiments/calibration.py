@@ -53,9 +53,11 @@ from scipy.optimize import least_squares
 from tapmp.params import GAIN_PRESETS
 
 from ..engine.families import SCENARIOS_DIR
+from . import paper_tables
 from . import scenario as scenario_mod
 from . import stability
 from .folders import write_json
+from .paper_tables import METRIC_KEYS, TABLES, by_metric, tables_of, values
 from .results import run_scenario
 from .scenario import Scenario, ScenarioError
 
@@ -78,50 +80,20 @@ class Parameter:
     high: float
     start: float
     unit: str
-    why: str
 
 
 PARAMETERS = (
-    Parameter("F_c_outer", "plant", ("F_c1", "F_c3"), 0.0, 20.0, 2.0, "N",
-              "Coulomb friction of the outer movers' guides (equal: same blocks, same rails)"),
-    Parameter("F_c_middle", "plant", ("F_c2",), 0.0, 20.0, 2.0, "N",
-              "Coulomb friction of the middle mover (a lighter block, its own preload)"),
-    Parameter("k_pull", "plant", ("k_pull",), -3000.0, 0.0, -200.0, "N/m",
-              "adjacent-mover stiffness, negative: the small-signal attraction of the movers"),
-    Parameter("m_p_factor", "mismatch", ("m_p",), 0.5, 1.5, 1.0, "1",
-              "controller's payload mass / plant's (an unknown payload, identification error)"),
+    # Coulomb friction of the outer movers' guides (equal: same blocks, same rails)
+    Parameter("F_c_outer", "plant", ("F_c1", "F_c3"), 0.0, 20.0, 2.0, "N"),
+    # Coulomb friction of the middle mover (a lighter block, its own preload)
+    Parameter("F_c_middle", "plant", ("F_c2",), 0.0, 20.0, 2.0, "N"),
+    # adjacent-mover stiffness, negative: the small-signal attraction of the movers
+    Parameter("k_pull", "plant", ("k_pull",), -3000.0, 0.0, -200.0, "N/m"),
+    # controller's payload mass / plant's (an unknown payload, identification error)
+    Parameter("m_p_factor", "mismatch", ("m_p",), 0.5, 1.5, 1.0, "1"),
 )
 
-# The paper's rows, as printed (um; axis: X um, Z um, B urad). "apd" and "scdc" are the
-# APD-DC and "Proposed" rows, "reduction" the printed "Reduction (%)" rows.
-PAPER = {
-    "simulation": {
-        "tables": (1, 2, 3),
-        "apd": {"tracking_std_um": (7.83, 14.21, 6.69), "tracking_mae_um": (6.87, 12.53, 5.87),
-                "sync_std_um": (7.89, 8.20, 5.49), "sync_mae_um": (6.98, 7.26, 4.92),
-                "axis_std": (14.21, 4.75, 75.95), "axis_mae": (12.53, 4.26, 67.16)},
-        "scdc": {"tracking_std_um": (3.16, 3.28, 3.29), "tracking_mae_um": (2.74, 2.85, 2.89),
-                 "sync_std_um": (0.48, 0.52, 0.95), "sync_mae_um": (0.40, 0.46, 0.83),
-                 "axis_std": (3.28, 0.82, 3.18), "axis_mae": (2.85, 0.72, 1.62)},
-        "reduction": {"tracking_std_um": (59.64, 76.92, 50.82), "tracking_mae_um": (60.12, 77.25, 50.77),
-                      "sync_std_um": (93.92, 93.66, 82.7), "sync_mae_um": (94.27, 93.66, 83.13),
-                      "axis_std": (76.92, 82.74, 95.81), "axis_mae": (77.25, 83.1, 97.59)},
-    },
-    "experiment": {
-        "tables": (4, 5, 6),
-        "apd": {"tracking_std_um": (4.93, 5.98, 4.27), "tracking_mae_um": (4.16, 5.00, 3.62),
-                "sync_std_um": (2.17, 1.86, 2.16), "sync_mae_um": (1.89, 1.47, 1.89),
-                "axis_std": (5.98, 1.87, 33.01), "axis_mae": (5.00, 1.63, 26.55)},
-        "scdc": {"tracking_std_um": (1.59, 2.02, 1.54), "tracking_mae_um": (1.17, 1.43, 1.21),
-                 "sync_std_um": (0.65, 0.88, 0.46), "sync_mae_um": (0.51, 0.62, 0.37),
-                 "axis_std": (2.02, 0.39, 14.21), "axis_mae": (1.43, 0.32, 10.17)},
-        "reduction": {"tracking_std_um": (67.75, 66.22, 63.93), "tracking_mae_um": (71.88, 71.4, 66.57),
-                      "sync_std_um": (70.01, 52.69, 78.7), "sync_mae_um": (73.02, 57.82, 80.42),
-                      "axis_std": (66.22, 79.14, 56.95), "axis_mae": (71.4, 80.37, 61.69)},
-    },
-}
-TARGETS = tuple(PAPER)
-TABLE_KEYS = (("tracking_std_um", "tracking_mae_um"), ("sync_std_um", "sync_mae_um"), ("axis_std", "axis_mae"))
+TARGETS = paper_tables.TARGETS  # "simulation" (Tables 1-3), "experiment" (Tables 4-6)
 
 
 def base_file(target: str) -> Path:
@@ -136,7 +108,7 @@ def calibrated_file(target: str) -> Path:
 
 
 def _checked(target: str) -> str:
-    if target not in PAPER:
+    if target not in TARGETS:
         raise ValueError(f"target = {target!r} is invalid: allowed are {', '.join(TARGETS)}")
     return target
 
@@ -187,7 +159,7 @@ def calibrated_scenario(target: str, theta, law: str = "apd-dc", horizon: float 
 
 def residuals(metrics: dict, target: str) -> np.ndarray:
     """ln(ours / paper) of APD-DC's tracking MAE (q1..q3) then synchronization MAE (q1..q3)."""
-    paper = PAPER[_checked(target)]["apd"]
+    paper = by_metric(_checked(target), "apd_dc")
     return np.array([math.log(metrics[k][i] / paper[k][i]) for k in FIT_KEYS for i in range(3)])
 
 
@@ -269,11 +241,6 @@ def calibrate(target: str, ssp: Path, work: Path, horizon: float | None = None, 
             "wall_s": time.perf_counter() - t0, "history": ev.history}
 
 
-def reductions(apd: dict, scdc: dict) -> dict:
-    """100 (1 - SC-DC / APD-DC) [%] per metric and motor/axis, as the paper's rows."""
-    return {k: [100.0 * (1.0 - s / a) for a, s in zip(apd[k], scdc[k])] for pair in TABLE_KEYS for k in pair}
-
-
 def predict(target: str, theta, ssp: Path, work: Path) -> dict:
     """APD-DC (the calibrated law) and SC-DC (the prediction) on the full horizon of the base
     scenario with the calibrated plant: metrics, stability pre-check of both, reductions."""
@@ -285,7 +252,7 @@ def predict(target: str, theta, ssp: Path, work: Path) -> dict:
         m = run_metrics(sc, ssp, Path(work) / "full" / law)
         out[law] = {"metrics": m, "verdict": rep.verdict, "spectral_radius": rep.spectral_radius,
                     "stop_time_s": sc.stop_time, "wall_s": time.perf_counter() - t0}
-    out["reduction"] = reductions(out["apd-dc"]["metrics"], out["sc-dc"]["metrics"])
+    out["reduction"] = paper_tables.reductions(out["apd-dc"]["metrics"], out["sc-dc"]["metrics"])
     out["objective_full"] = objective(out["apd-dc"]["metrics"], target)
     out["residuals_full"] = residuals(out["apd-dc"]["metrics"], target).tolist()
     return out
@@ -312,11 +279,12 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
     plant and mismatch, law = "apd-dc"; comments state the fit, its residuals and the command;
     FIT_PREFIX lines hold the same record as TOML (read_fit_record)."""
     sc = calibrated_scenario(target, fit["theta"], "apd-dc")
-    paper = PAPER[target]
+    paper = by_metric(target, "apd_dc")
+    fitted = [name.split()[1] for name in tables_of(target)[:2]]  # the tracking and sync tables
     apd, scdc = pred["apd-dc"]["metrics"], pred["sc-dc"]["metrics"]
     lines = [
-        f"# Calibrated plant for the paper's {target}: APD-DC fitted to Tables "
-        f"{paper['tables'][0]}-{paper['tables'][1]}, SC-DC predicted.",
+        f"# Calibrated plant for the paper's {target}: APD-DC fitted to Tables {fitted[0]}-{fitted[1]}, "
+        "SC-DC predicted.",
         f"# Written by: .venv/bin/python -m orchestrator.experiments.calibration --target {target}",
         f"# Base: scenarios/{base_file(target).name} (trajectory, step, horizon); see docs/calibration.md.",
         f"# Gains: Eq. 40 with Lambda_p, Lambda_v x {GAIN_SCALE:g} (= 0.36 / 150); APD-DC reads them by Eq. 41.",
@@ -324,8 +292,8 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
         f"{fit['evaluations']} co-simulations of {fit['horizon_s']:g} s, {fit['wall_s']:.0f} s wall.",
         "#   fitted: " + ", ".join(f"{p.name} = {fit['values'][p.name]:.6g} {p.unit}" for p in PARAMETERS),
         f"#   J = {pred['objective_full']:.4f} on the full {sc.stop_time:g} s ({fit['objective']:.4f} on the fit horizon)",
-        f"#   APD-DC tracking MAE [um]: {_fmt(apd['tracking_mae_um'])}  (paper {_fmt(paper['apd']['tracking_mae_um'], 2)})",
-        f"#   APD-DC sync MAE [um]:     {_fmt(apd['sync_mae_um'])}  (paper {_fmt(paper['apd']['sync_mae_um'], 2)})",
+        f"#   APD-DC tracking MAE [um]: {_fmt(apd['tracking_mae_um'])}  (paper {_fmt(paper['tracking_mae_um'], 2)})",
+        f"#   APD-DC sync MAE [um]:     {_fmt(apd['sync_mae_um'])}  (paper {_fmt(paper['sync_mae_um'], 2)})",
         f"#   residuals ln(ours/paper): {_fmt(pred['residuals_full'])}",
         f"#   SC-DC (predicted, same plant and preset) tracking MAE [um]: {_fmt(scdc['tracking_mae_um'])}, "
         f"sync MAE: {_fmt(scdc['sync_mae_um'])}",
@@ -369,20 +337,20 @@ def _row(label, values, digits=2) -> str:
 def prediction_table(target: str, pred: dict) -> str:
     """Markdown: per table of the paper, the APD-DC and SC-DC rows and the reductions, ours
     (calibrated plant) beside the paper's printed values."""
-    paper = PAPER[target]
     apd, scdc = pred["apd-dc"]["metrics"], pred["sc-dc"]["metrics"]
-    heads = {"tracking": ("q1", "q2", "q3"), "sync": ("q1", "q2", "q3"), "axis": ("X um", "Z um", "B urad")}
     out = []
-    for table, (std, mae) in zip(paper["tables"], TABLE_KEYS):
-        cols = heads[std.split("_")[0]]
-        out += [f"Table {table} ({std.split('_')[0]}): STD {', '.join(cols)} | MAE {', '.join(cols)}", "",
+    for table in tables_of(target):
+        t = TABLES[table]
+        std, mae = METRIC_KEYS[t.quantity]
+        cols = t.columns if t.quantity != "axis" else tuple(f"{c} {u}" for c, u in zip(t.columns, t.units))
+        out += [f"{table} ({t.quantity}): STD {', '.join(cols)} | MAE {', '.join(cols)}", "",
                 "| row | " + " | ".join(f"STD {c}" for c in cols) + " | " + " | ".join(f"MAE {c}" for c in cols) + " |",
                 "|---|" + "---|" * 6,
-                _row("APD-DC paper", (*paper["apd"][std], *paper["apd"][mae])),
+                _row("APD-DC paper", values(table, "apd_dc")),
                 _row("APD-DC ours (fit)", (*apd[std], *apd[mae])),
-                _row("SC-DC paper", (*paper["scdc"][std], *paper["scdc"][mae])),
+                _row("SC-DC paper", values(table, "sc_dc")),
                 _row("SC-DC ours (predicted)", (*scdc[std], *scdc[mae])),
-                _row("reduction % paper (printed)", (*paper["reduction"][std], *paper["reduction"][mae]), 2),
+                _row("reduction % paper (printed)", values(table, "reduction"), 2),
                 _row("reduction % ours (predicted)", (*pred["reduction"][std], *pred["reduction"][mae]), 1), ""]
     return "\n".join(out)
 

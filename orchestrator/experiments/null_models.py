@@ -26,14 +26,11 @@ import numpy as np
 
 from tapmp.params import GAIN_PRESETS, scdc_mode_gains
 
-from .report import PRINTED
+from . import paper_tables
+from .paper_tables import TABLES, tables_of
 
 TOLERANCES = (15.0, 20.0)  # percentage points
-EXPERIMENT_TABLES = ("Table 4", "Table 5", "Table 6")
-_QUANTITIES = {"Table 1": ("q1", "q2", "q3"), "Table 2": ("q1", "q2", "q3"), "Table 3": ("X", "Z", "B"),
-               "Table 4": ("q1", "q2", "q3"), "Table 5": ("q1", "q2", "q3"), "Table 6": ("X", "Z", "B")}
-_KIND = {"Table 1": "tracking", "Table 2": "sync", "Table 3": "axis",
-         "Table 4": "tracking", "Table 5": "sync", "Table 6": "axis"}
+EXPERIMENT_TABLES = tables_of("experiment")  # Tables 4-6
 
 
 class Cell(NamedTuple):
@@ -48,10 +45,9 @@ class Cell(NamedTuple):
 def paper_cells() -> list[Cell]:
     """The 36 reductions of Tables 1-6 as printed, in table order, STD then MAE, [%]."""
     cells = []
-    for table, rows in PRINTED.items():
-        values = [float(x) for x in rows[2].split()]
-        for j, value in enumerate(values):
-            cells.append(Cell(table, _QUANTITIES[table][j % 3], ("STD", "MAE")[j // 3], value))
+    for table, t in TABLES.items():
+        for j, value in enumerate(paper_tables.values(table, "reduction")):
+            cells.append(Cell(table, t.columns[j % 3], ("STD", "MAE")[j // 3], value))
     return cells
 
 
@@ -62,7 +58,7 @@ def independent(cell: Cell) -> bool:
 
 def mode_of(cell: Cell) -> str:
     """'common' for tracking errors and the X, Z axes, 'differential' for sync errors and B."""
-    kind = _KIND[cell.table]
+    kind = TABLES[cell.table].quantity
     if kind == "sync" or (kind == "axis" and cell.quantity == "B"):
         return "differential"
     return "common"

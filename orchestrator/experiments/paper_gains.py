@@ -45,6 +45,7 @@ from tapmp.kinematics import inverse
 from tapmp.params import ModelParams
 
 from ..engine.families import SCENARIOS_DIR
+from ..errors import UsageError
 from . import stability
 from .metrics import ErrorStatistics
 from .scenario import Scenario, load, model_tuple
@@ -79,7 +80,7 @@ def reading_b(gains: Gains, controller: dict) -> tuple[dict, dict]:
     """
     kt = gains.K_T
     if not kt[0] == kt[1] == kt[2]:
-        raise ValueError(f"K_T = {kt!r} is invalid for reading B: allowed is one K_T on all three motors "
+        raise UsageError(f"K_T = {kt!r} is invalid for reading B: allowed is one K_T on all three motors "
                          "(the feedforward u_d mixes the motors)")
     k = kt[0]
     overrides = {"Lambda_p": [k * x for x in gains.Lambda_p], "Lambda_v": [k * x for x in gains.Lambda_v]}
@@ -98,7 +99,7 @@ def paper_scenario(case: str, law: str, step: float, stop_time: float, reading: 
     for name, value, allowed in (("case", case, CASES), ("law", law, LAWS), ("reading", reading, READINGS),
                                  ("plant", plant, PLANTS)):
         if value not in allowed:
-            raise ValueError(f"{name} = {value!r} is invalid: allowed are {', '.join(allowed)}")
+            raise UsageError(f"{name} = {value!r} is invalid: allowed are {', '.join(allowed)}")
     path, preset = CASES[case]
     sc = load(Path(root) / path)
     sc = sc.with_changes(gains=preset, law=law, step=step, stop_time=stop_time, gain_overrides={},
@@ -196,7 +197,7 @@ def run_paper_gains(steps=(1e-6, 1e-5, 1e-4), stop_time: float = 0.5, readings=(
     given, is called after each run, in the order of the rows. ValueError names a bad argument.
     """
     if not (isinstance(workers, int) and workers >= 1):
-        raise ValueError(f"workers = {workers!r} is invalid: allowed is an integer >= 1")
+        raise UsageError(f"workers = {workers!r} is invalid: allowed is an integer >= 1")
     specs = [{"case": c, "plant": p, "reading": r, "law": law, "step": float(h), "stop_time": float(stop_time),
               "root": str(root)}
              for c in cases for p in plants for r in readings for law in laws for h in steps]

@@ -1,4 +1,4 @@
-"""Plausibility of a scenario's parameters for this machine (not validity: see scenario.validate).
+"""Plausibility of a scenario's parameters for this machine (not validity: see scenario.Scenario).
 
 A value can be valid (finite, of the right sign) and still far from anything the TAPMP of
 the paper could have, usually a unit slip: ``encoder_resolution = 0.5`` (metres, not

@@ -23,6 +23,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from ..errors import UsageError  # noqa: E402
 from .metrics import error_signals  # noqa: E402
 from .folders import COMPARISON_JSON, folder_kind, read_json  # noqa: E402
 from .reading import ResultFolderError, read_results  # noqa: E402
@@ -118,9 +119,9 @@ def parse_window(text: str | None) -> tuple[float, float] | None:
         start = float(m[1]) if m[1].strip() else -math.inf
         stop = float(m[2]) if m[2].strip() else math.inf
     except ValueError:
-        raise ValueError(f"--window = {text!r} is invalid: {allowed}") from None
+        raise UsageError(f"--window = {text!r} is invalid: {allowed}") from None
     if math.isnan(start) or math.isnan(stop) or not start < stop:
-        raise ValueError(f"--window = {text!r} is invalid: {allowed}")
+        raise UsageError(f"--window = {text!r} is invalid: {allowed}")
     return start, stop
 
 
@@ -176,7 +177,7 @@ def select_runs(folder: Path, names: list[str], wanted: list[str] | None = None,
             return list(names)
         for w in wanted:
             if w not in names:
-                raise ValueError(f"--runs: {w!r} is not a run of {folder}{_suggest(w, names)}: allowed are "
+                raise UsageError(f"--runs: {w!r} is not a run of {folder}{_suggest(w, names)}: allowed are "
                                  f"{', '.join(names)} or all")
         return list(dict.fromkeys(wanted))
     fair = [n for n in FAIR_BASELINES if n in names]
@@ -197,7 +198,7 @@ def _load_run(path: Path, rows=None, window=None) -> dict:
         t = data[:, 0]
         data = data[(t >= window[0]) & (t <= window[1])]
         if len(data) < 2:
-            raise ValueError(f"--window = {window[0]:g}:{window[1]:g} s holds {len(data)} sample(s) of {path} "
+            raise UsageError(f"--window = {window[0]:g}:{window[1]:g} s holds {len(data)} sample(s) of {path} "
                              f"(its time runs {t[0]:g} to {t[-1]:g} s): allowed is a window with 2 or more samples")
     return error_signals(columns, data) | {"columns": columns, "data": data, "name": Path(path).name,
                                            "force_limit": force_limit(path), "horizon": horizon(path)}
@@ -440,7 +441,7 @@ def resolve_signal(name: str, columns: list[str]) -> tuple[str, str]:
     if key in columns and key != "time":
         return key, f"{key} [{_column_unit(key)}]"
     allowed = list(SIGNALS) + list(ALIASES) + [c for c in columns if c != "time"]
-    raise ValueError(f"--signals: {name!r} is not a signal{_suggest(name, allowed)}: allowed are {SIGNALS_HELP}")
+    raise UsageError(f"--signals: {name!r} is not a signal{_suggest(name, allowed)}: allowed are {SIGNALS_HELP}")
 
 
 def _column_unit(column: str) -> str:
@@ -549,7 +550,7 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
     checked before anything is written (ValueError / ResultFolderError, one line)."""
     folders = [Path(f) for f in folders]
     if labels and len(labels) != len(folders):
-        raise ValueError(f"--label given {len(labels)} time(s) for {len(folders)} folder(s): allowed is one "
+        raise UsageError(f"--label given {len(labels)} time(s) for {len(folders)} folder(s): allowed is one "
                          "--label per folder, or none (labels from the folder names)")
     for f in folders:
         if not f.is_dir():
@@ -563,11 +564,11 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
             raise ResultFolderError(f"result folder {f} is a comparison: overlay its run folders instead "
                                     f"(e.g. {f / 'sc-dc'}) or plot it alone")
     if show is not None and (len(folders) > 1 or folder_kind(folders[0]) != "comparison"):
-        raise ValueError("--runs selects the runs of one comparison folder: allowed only with a single "
+        raise UsageError("--runs selects the runs of one comparison folder: allowed only with a single "
                          "comparison folder")
     if len(folders) == 1 and folder_kind(folders[0]) == "comparison":
         if labels:
-            raise ValueError("--label names run folders: allowed only with run folders (a comparison's runs are "
+            raise UsageError("--label names run folders: allowed only with run folders (a comparison's runs are "
                              "labelled by their law)")
         kind, runs = load_folder(folders[0], None, select_runs(folders[0], _comparison_names(folders[0]), show),
                                  window)
@@ -579,7 +580,7 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
         runs = {}
         for name, f in zip(names, paths):
             if name in runs:
-                raise ValueError(f"--label {name!r} is given twice: allowed are distinct labels")
+                raise UsageError(f"--label {name!r} is given twice: allowed are distinct labels")
             runs[name] = _load_run(f, None, window)
         if not labels and len(folders) == 1:
             runs = {label(folders[0].name, _run_info(folders[0]).get("law")): runs[names[0]]}
@@ -589,12 +590,12 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
         columns = next(iter(runs.values()))["columns"]
         keys = [resolve_signal(s.strip(), columns) for s in signals if s.strip()]
         if not keys:
-            raise ValueError("--signals is empty: allowed are " + SIGNALS_HELP)
+            raise UsageError("--signals is empty: allowed are " + SIGNALS_HELP)
         for name, run in runs.items():
             for key, _ in keys:
                 src = SIGNALS[key][3] if key in SIGNALS else key
                 if isinstance(src, str) and src not in run["columns"]:
-                    raise ValueError(f"--signals: {key!r} needs the column {src}, which run {name} did not record")
+                    raise UsageError(f"--signals: {key!r} needs the column {src}, which run {name} did not record")
     figs = {"signals": signals_figure(runs, keys)} if keys else figures(runs)
     if out is None:
         out = folders[0] if len(folders) == 1 else default_out(folders, list(runs))
@@ -638,5 +639,5 @@ def _check_horizons(paths: list[Path], allow: bool) -> None:
     distinct = {h for h in found.values() if h is not None}
     if len(distinct) > 1 and not allow:
         text = "; ".join(f"{p}: {h[0]:g} to {h[1]:g} s, step {h[2]:g} s" for p, h in found.items() if h)
-        raise ValueError(f"the runs have different horizons ({text}): allowed are runs of the same start, stop and "
+        raise UsageError(f"the runs have different horizons ({text}): allowed are runs of the same start, stop and "
                          "step, or pass --allow-different-horizons")

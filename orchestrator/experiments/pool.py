@@ -15,6 +15,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from ..engine.master import CoSimulationError
+from ..errors import UsageError
 from .folders import OutputExistsError, OutputInUseError, ResultsWriteError, output_lock
 from .results import one_line
 from .stops import Interrupted
@@ -37,15 +38,17 @@ def parse_jobs(value) -> int:
         return n
     text = str(value).strip()
     if not text.isdigit() or not 1 <= int(text) <= n:
-        raise ValueError(f"--jobs = {value!r} is invalid: allowed is a positive integer up to the {n} "
+        raise UsageError(f"--jobs = {value!r} is invalid: allowed is a positive integer up to the {n} "
                          f"core{'s' if n > 1 else ''} of this machine")
     return int(text)
 
 
 # Errors a run raises, rebuilt from their message in the parent (exceptions with more
 # arguments than a message do not pickle back into their class).
+# A ValueError of a subclass (ScenarioError, ModelInputError, ...) is bad input and comes back as
+# UsageError (one line); a plain ValueError comes back as ValueError, a programming error.
 _ERRORS = {cls.__name__: cls for cls in (CoSimulationError, ResultsWriteError, OutputExistsError,
-                                         OutputInUseError, ValueError, OSError)}
+                                         OutputInUseError, UsageError, ValueError, OSError)}
 
 
 def _error_record(err: BaseException) -> dict:
@@ -55,7 +58,8 @@ def _error_record(err: BaseException) -> dict:
     elif isinstance(err, KeyboardInterrupt):
         record["signum"] = int(signal.SIGINT)
     else:
-        record["type"] = next((c.__name__ for c in type(err).__mro__ if c.__name__ in _ERRORS), "CoSimulationError")
+        kind = UsageError if isinstance(err, ValueError) and type(err) is not ValueError else type(err)
+        record["type"] = next((c.__name__ for c in kind.__mro__ if c.__name__ in _ERRORS), "CoSimulationError")
         for key in ("element", "time"):
             record[key] = getattr(err, key, None)
     return record

@@ -19,6 +19,7 @@ from pathlib import Path
 from tapmp.params import GAIN_PRESETS
 
 from . import calibration, stability
+from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, TABLES, reductions
 from .null_models import Cell, paper_cells, score, TOLERANCES, EXPERIMENT_TABLES, null_model_table
 from .scenario import load
 
@@ -26,7 +27,6 @@ DEFAULT_FORCE_DAMPING = GAIN_PRESETS["default"]["Lambda_v"][0] / GAIN_PRESETS["d
 EXPERIMENT_PRESET = "paper_experiment"  # Eq. 42-43
 EXPERIMENT_SCALE = (DEFAULT_FORCE_DAMPING * GAIN_PRESETS[EXPERIMENT_PRESET]["K_T"][0]
                     / GAIN_PRESETS[EXPERIMENT_PRESET]["Lambda_v"][0])
-_TARGET = {"paper_simulation": "simulation", "paper_experiment": "experiment"}
 
 
 def experiment_gains() -> dict:
@@ -38,19 +38,15 @@ def experiment_gains() -> dict:
 def cell_reductions(apd: dict, scdc: dict, tables: tuple[str, ...]) -> dict[tuple, float]:
     """{(table, quantity, stat): reduction [%]} of SC-DC against APD-DC from two metrics.json
     dicts, for the paper's ``tables`` of one scenario (three consecutive tables)."""
-    red = calibration.reductions(apd, scdc)
+    red = reductions(apd, scdc)
     out = {}
-    for table, (std, mae) in zip(tables, calibration.TABLE_KEYS):
+    for table in tables:
+        std, mae = METRIC_KEYS[TABLES[table].quantity]
         for cell in paper_cells():
             if cell.table == table:
                 key = std if cell.stat == "STD" else mae
-                out[(cell.table, cell.quantity, cell.stat)] = red[key][("q1", "q2", "q3", "X", "Z", "B").index(
-                    cell.quantity) % 3]
+                out[(cell.table, cell.quantity, cell.stat)] = red[key][TABLES[table].columns.index(cell.quantity)]
     return out
-
-
-def _tables(scenario: str) -> tuple[str, ...]:
-    return ("Table 1", "Table 2", "Table 3") if scenario == "paper_simulation" else ("Table 4", "Table 5", "Table 6")
 
 
 def values_for(reductions: dict[tuple, float]) -> list[float]:
@@ -64,7 +60,7 @@ def run_extra(scenarios_dir: Path, work: Path, ssp: Path, horizon: float | None 
     "metrics": {law: metrics}}}."""
     scenarios_dir, work = Path(scenarios_dir), Path(work)
     jobs = {}
-    for name in _TARGET:
+    for name in SCENARIO_TABLES:
         base = load(scenarios_dir / f"{name}.toml")
         jobs[("uncalibrated", name)] = base.with_changes(
             gains=calibration.GAIN_PRESET, gain_overrides=calibration.scaled_gains(), name=f"{name}_uncalibrated",
@@ -84,7 +80,7 @@ def run_extra(scenarios_dir: Path, work: Path, ssp: Path, horizon: float | None 
             entry["checks"][f"{name} {law}"] = stability.check(run).verdict
             metrics[law] = calibration.run_metrics(run, ssp, work / label.replace(" ", "_") / name / law)
             entry["metrics"][f"{name} {law}"] = metrics[law]
-        entry["reductions"].update(cell_reductions(metrics["apd-dc"], metrics["sc-dc"], _tables(name)))
+        entry["reductions"].update(cell_reductions(metrics["apd-dc"], metrics["sc-dc"], SCENARIO_TABLES[name]))
     return out
 
 
@@ -95,10 +91,10 @@ def prediction_lines(calibrated: dict, extra: dict) -> list[str]:
     ``calibrated`` maps "paper_simulation_calibrated" / "paper_experiment_calibrated" to their
     compare results {run: metrics}; ``extra`` is run_extra's result."""
     predicted = {}
-    for name in _TARGET:
+    for name in SCENARIO_TABLES:
         res = calibrated.get(f"{name}_calibrated")
         if res and "apd-dc" in res and "sc-dc" in res:
-            predicted.update(cell_reductions(res["apd-dc"], res["sc-dc"], _tables(name)))
+            predicted.update(cell_reductions(res["apd-dc"], res["sc-dc"], SCENARIO_TABLES[name]))
     cells = paper_cells()
     paper_exp = [c.paper for c in cells if c.table in EXPERIMENT_TABLES]
     rows = {"SC-DC predicted on the calibrated plants": values_for(predicted),

@@ -3,60 +3,12 @@
 from pathlib import Path
 
 from .baselines import BASELINES, BY_NAME, robustness_matched, run_gains_text, scdc_modal
+from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, TABLES, printed, reduction, tables_of
 
-# The paper's Tables 1-6 as printed (Zhou et al. 2024, Section 5.2 and 6.2): per table the rows
-# APD-DC, proposed (SC-DC) and "Reduction (%)", each STD q1..q3 (or X, Z, B) then MAE. The
-# strings are the paper's own digits (e.g. "82.7", "5.00"); its reduction rows are copied, not
-# recomputed (recomputing gives e.g. 70.05 for Table 5 STD q1 where the paper prints 70.01).
-PRINTED = {
-    "Table 1": ("7.83 14.21 6.69 6.87 12.53 5.87", "3.16 3.28 3.29 2.74 2.85 2.89",
-                "59.64 76.92 50.82 60.12 77.25 50.77"),
-    "Table 2": ("7.89 8.20 5.49 6.98 7.26 4.92", "0.48 0.52 0.95 0.40 0.46 0.83",
-                "93.92 93.66 82.7 94.27 93.66 83.13"),
-    "Table 3": ("14.21 4.75 75.95 12.53 4.26 67.16", "3.28 0.82 3.18 2.85 0.72 1.62",
-                "76.92 82.74 95.81 77.25 83.1 97.59"),
-    "Table 4": ("4.93 5.98 4.27 4.16 5.00 3.62", "1.59 2.02 1.54 1.17 1.43 1.21",
-                "67.75 66.22 63.93 71.88 71.4 66.57"),
-    "Table 5": ("2.17 1.86 2.16 1.89 1.47 1.89", "0.65 0.88 0.46 0.51 0.62 0.37",
-                "70.01 52.69 78.7 73.02 57.82 80.42"),
-    "Table 6": ("5.98 1.87 33.01 5.00 1.63 26.55", "2.02 0.39 14.21 1.43 0.32 10.17",
-                "66.22 79.14 56.95 71.4 80.37 61.69"),
-}
-_TABLE_OF = {"paper_simulation": ("Table 1", "Table 2", "Table 3"),
-             "paper_experiment": ("Table 4", "Table 5", "Table 6")}
-
-
-def printed(table: str, row: int) -> list[str]:
-    """The six cells of ``row`` (0 APD-DC, 1 SC-DC, 2 reduction %) of the paper's ``table``, as printed."""
-    return PRINTED[table][row].split()
-
-
-def _paper_values(tables) -> dict:
-    """{kind: {"APD-DC": (STD, MAE), "SC-DC": ..., "reduction": ...}} as floats [um, urad, %]."""
-    out = {}
-    for kind, table in zip(("tracking", "sync", "axis"), tables):
-        rows = [[float(x) for x in printed(table, r)] for r in range(3)]
-        out[kind] = {name: (v[:3], v[3:]) for name, v in zip(("APD-DC", "SC-DC", "reduction"), rows)}
-    return out
-
-
-# The paper's values as numbers: {scenario: {"tables": names, kind: {row: (STD q1..q3, MAE q1..q3)}}}.
-PAPER = {name: {"tables": tables, **_paper_values(tables)} for name, tables in _TABLE_OF.items()}
-
-_KIND = {"tracking": ("tracking error of each motor", "um", ("q1", "q2", "q3"), "tracking"),
-         "sync": ("synchronization error of each motor", "um", ("q1", "q2", "q3"), "sync"),
-         "axis": ("tracking error of each drive axis", "um, um, urad", ("X", "Z", "B"), "axis")}
+_TITLE = {"tracking": "tracking error of each motor", "sync": "synchronization error of each motor",
+          "axis": "tracking error of each drive axis"}
 # Runs whose reduction of SC-DC is shown in the tables (the paper's baseline and the fair ones).
 REDUCTION_AGAINST = ("apd-dc", "apd-dc-diff-stiffness", "apd-dc-mode-matched")
-
-
-def reduction(base: float, new: float) -> float:
-    """Reduction of ``new`` relative to ``base`` in percent."""
-    return 100.0 * (base - new) / base if base else float("nan")
-
-
-def _keys(kind: str) -> tuple[str, str]:
-    return (f"{kind}_std_um", f"{kind}_mae_um") if kind != "axis" else ("axis_std", "axis_mae")
 
 
 def _label(run: str) -> str:
@@ -71,16 +23,18 @@ def comparison_tables(scenario_name: str, results: dict) -> str:
     paper's three rows as printed (its reduction row copied, not recomputed). Values in um
     (B in urad), three decimals.
     """
-    paper = _TABLE_OF.get(scenario_name)
+    paper = SCENARIO_TABLES.get(scenario_name)
     order = [b.name for b in BASELINES if b.name in results] + [r for r in results if r not in BY_NAME]
     lines = []
-    for n, (kind, (title, unit, labels, _)) in enumerate(_KIND.items()):
+    for n, table in enumerate(tables_of("simulation")):  # the layout of Tables 1-3, the same for every scenario
+        kind, labels, units = TABLES[table].quantity, TABLES[table].columns, TABLES[table].units
+        unit = units[0] if len(set(units)) == 1 else ", ".join(units)
         ref = f" (paper: {paper[n]})" if paper else ""
-        lines += [f"### Comparison of the {title} [{unit}]{ref}", "",
+        lines += [f"### Comparison of the {_TITLE[kind]} [{unit}]{ref}", "",
                   "| Control strategy | " + " | ".join(f"STD {x}" for x in labels) + " | "
                   + " | ".join(f"MAE {x}" for x in labels) + " |",
                   "|---" * 7 + "|"]
-        std_key, mae_key = _keys(kind)
+        std_key, mae_key = METRIC_KEYS[kind]
 
         def row(label, std, mae):
             return f"| {label} | " + " | ".join(f"{v:.3f}" for v in (*std, *mae)) + " |"

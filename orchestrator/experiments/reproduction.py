@@ -17,7 +17,8 @@ from .baselines import scdc_modal
 from .paper_gains import paper_gains_table, run_paper_gains
 from .predictors import prediction_lines, run_extra
 from .robustness import MODES, mode_peaks
-from .report import PAPER, comparison_tables, modal_note, printed, reduction, runs_table, summary_table
+from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, printed, reduction
+from .report import comparison_tables, modal_note, runs_table, summary_table
 from .scenario import load
 
 SCENARIOS = ("paper_simulation", "paper_experiment")
@@ -97,7 +98,7 @@ def _scenario_claims(name: str, results: dict, exact: bool, peaks: dict) -> list
     """Generated sentences for one scenario's compare runs (module thresholds); exact: the
     PID-DC rows are SC-DC's exact modal image (uniform gains); peaks: run_peaks of the runs."""
     base = name.removesuffix("_calibrated")
-    tables = PAPER[base]["tables"] if base in PAPER else None
+    tables = SCENARIO_TABLES.get(base)
     sc = results["sc-dc"]
     t = {k: _mean(m["tracking_mae_um"]) for k, m in results.items()}
     y = {k: _mean(m["sync_mae_um"]) for k, m in results.items()}
@@ -204,14 +205,12 @@ def _reduction_note(comparisons: dict, source: str) -> list[str]:
              "paper's.".format(PREDICT_PP), "",
              "| table | quantity | ours: STD 1, 2, 3 | paper: STD | ours: MAE 1, 2, 3 | paper: MAE "
              "| cells within {:g} pp |".format(PREDICT_PP), "|---" * 7 + "|"]
-    keys = {"tracking": ("tracking_std_um", "tracking_mae_um"), "sync": ("sync_std_um", "sync_mae_um"),
-            "axis": ("axis_std", "axis_mae")}
     total = within = 0
     for name, (_, _, results, _) in comparisons.items():
         base = name.removesuffix("_calibrated")
         for n, kind in enumerate(("tracking", "sync", "axis")):
-            table = PAPER[base]["tables"][n]
-            ours = [reduction(a, s) for key in keys[kind] for a, s in zip(results["apd-dc"][key], results["sc-dc"][key])]
+            table = SCENARIO_TABLES[base][n]
+            ours = [reduction(a, s) for key in METRIC_KEYS[kind] for a, s in zip(results["apd-dc"][key], results["sc-dc"][key])]
             paper = [float(x) for x in printed(table, 2)]
             close = sum(abs(o - p) <= PREDICT_PP for o, p in zip(ours, paper))
             total, within = total + 6, within + close

@@ -17,6 +17,7 @@ from scipy.optimize import brentq
 
 from tapmp.control import ModalGains
 
+from ..errors import UsageError
 from . import analysis
 from .scenario import model_tuple
 
@@ -99,7 +100,7 @@ def ms_matched(scdc_run, pd_run) -> Matched:
                 break
             lo, step = hi, step * 1.5
         else:
-            raise ValueError(f"{field}: no value within reach of {k0:g} gives Ms = {goal:.4g}")
+            raise UsageError(f"{field}: no value within reach of {k0:g} gives Ms = {goal:.4g}")
         a, b = sorted((lo, hi))
         return float(np.exp(brentq(f, a, b, rtol=RTOL * 1e-2)))
 

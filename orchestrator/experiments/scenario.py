@@ -24,20 +24,27 @@ error, see MISMATCH_RANGE and docs/disturbances.md).
 """
 
 import copy
+import dataclasses
 import math
 import re
+from dataclasses import field
 import sys
-from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated
+
+from pydantic import BeforeValidator, model_validator
+from pydantic.dataclasses import dataclass
 
 from tapmp.control import Gains, ModalGains
-from tapmp.errors import ModelInputError, allowed_are, suggestion
+from tapmp.errors import ModelInputError, suggestion
 from tapmp.interface import CONNECTION_STARTS, CONTROLLER, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
-from tapmp.trajectory import TrajectoryParams, reference
+from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
 from ..engine.clocks import CLOCKS
+from ..engine.families import FAMILIES
+from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -49,12 +56,13 @@ LAWS = {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}  # PID-DC: modal gains in [control
 # field of tapmp.params.ModelParams the controller gets (plant value) x factor; the plant
 # keeps its own. A factor within MISMATCH_RANGE; not together with [controller] NAME.
 MISMATCH_RANGE = (0.01, 100.0)
-_TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
-        "start_time": float, "step": float, "ordering": str, "output": str,
-        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-        "open_inputs": list, "fmus": str, "format": str, "settling_bands": list}
+# The top-level keys of a scenario file and their TOML types (checked strictly when read).
+TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
+       "start_time": float, "step": float, "ordering": str, "output": str,
+       "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
+       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
-_TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
+TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
 # needs 20 mm of travel and 5 deg; a breach means the loop is running away.
@@ -62,7 +70,7 @@ LIMITS = {"motor_travel": (0.05, "m", "largest |q1|, |q2|, |q3| (true motor posi
           "platform_angle": (0.35, "rad", "largest |B| of the platform")}
 # Parameters a scenario may set per section; the controller's gains, law and the
 # plant's initial state are set through the scenario's own keys instead.
-_SECTION_PARAMS = {
+SECTION_PARAMS = {
     "trajectory": {v.name: v for v in VARIABLES[TRAJECTORY] if v.causality == "parameter"},
     "plant": {v.name: v for v in VARIABLES[PLANT] if v.causality == "parameter"},
     "controller": {v.name: v for v in VARIABLES[CONTROLLER] if v.causality == "parameter"
@@ -70,6 +78,8 @@ _SECTION_PARAMS = {
 }
 # Set from the scenario's own keys, never in [controller]: the controller samples once per step.
 _FROM_SCENARIO = {"law": "law", "T_s": "step"}
+STEP_TOLERANCE = 1e-9  # relative: how far (stop_time - start_time) / step may be from a whole number
+_OPEN_INPUT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.[^\s.][^\s]*")
 
 
 def model_tuple(kind, table: dict):
@@ -81,18 +91,6 @@ class ScenarioError(ValueError):
     """A scenario file or value is invalid; the message names the key and what is allowed."""
 
 
-def read_toml(path: Path, subject: str, error=None, allowed: str = "") -> dict:
-    """Parse a TOML file; a missing or malformed file raises ``error`` (ScenarioError by
-    default) as "<subject> does not exist<allowed>" or "<subject> is not valid TOML: ..."."""
-    error = error or ScenarioError
-    try:
-        return tomllib.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise error(f"{subject} does not exist{allowed}") from None
-    except tomllib.TOMLDecodeError as err:
-        raise error(f"{subject} is not valid TOML: {err}") from None
-
-
 def load_gain_file(path) -> dict:
     """Read a gain preset file: a TOML table [gains] with Lambda_p, Lambda_v, b, D, K_T,
     each a number or a list of three (per motor; units as in tapmp.control.Gains).
@@ -101,24 +99,18 @@ def load_gain_file(path) -> dict:
     Returns {name: (motor 1, motor 2, motor 3)}; ScenarioError names what is wrong.
     """
     path = Path(path)
-    data = read_toml(path, f"gains_file = {str(path)!r}",
+    data = read_toml(path, f"gains_file = {str(path)!r}", ScenarioError,
                      allowed=": allowed is a TOML gain preset file with a [gains] table")
     table = data.get("gains")
-    if not isinstance(table, dict):
-        raise ScenarioError(f"gains_file = {str(path)!r} has no [gains] table: allowed is a table with "
-                            f"{', '.join(GAIN_NAMES)}")
-    preset = {}
+    require(isinstance(table, dict), f"gains_file = {str(path)!r} has no [gains] table: allowed is a table with "
+            f"{', '.join(GAIN_NAMES)}", ScenarioError)
     for name in GAIN_NAMES:
-        if name not in table:
-            raise ScenarioError(f"gains_file {path}: gains.{name} is missing: allowed is a number or a list of 3 numbers")
+        require(name in table, f"gains_file {path}: gains.{name} is missing: allowed is a number or a list of 3 "
+                "numbers", ScenarioError)
+    preset = {}
     for name, v in table.items():
-        if name not in GAIN_NAMES:
-            raise ScenarioError(f"gains_file {path}: gains.{name} is unknown: {allowed_are(name, GAIN_NAMES)}")
-        vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
-        if not (isinstance(vals, list) and len(vals) == 3):
-            raise ScenarioError(f"gains_file {path}: gains.{name} = {v!r} is invalid: allowed is a number "
-                                "or a list of 3 numbers")
-        preset[name] = tuple(_check_type(f"gains_file {path}: gains.{name}", x, float) for x in vals)
+        known(name, GAIN_NAMES, f"gains_file {path}: gains.", ScenarioError)
+        preset[name] = tuple(three_numbers(f"gains_file {path}: gains.{name}", v, ScenarioError))
     try:
         Gains.from_preset(preset).validated()
     except ModelInputError as err:
@@ -126,39 +118,150 @@ def load_gain_file(path) -> dict:
     return preset
 
 
+# Field rules: each returns the checked value (a new table or list, numbers as their FMU type)
+# or raises ValueError with the one-line message.
+
+def _gain_overrides(table: dict) -> dict:
+    out = {}
+    for k, v in table.items():
+        known(k, GAIN_NAMES, "gain_overrides.")
+        out[k] = three_numbers(f"gain_overrides.{k}", v)
+    return out
+
+
+def _section(table: dict, info) -> dict:
+    """[trajectory], [plant], [controller]: parameters of that FMU, as its Real or Integer."""
+    section, allowed, out = info.field_name, SECTION_PARAMS[info.field_name], {}
+    for k, v in table.items():
+        if section == "controller" and k in _FROM_SCENARIO:
+            key = _FROM_SCENARIO[k]
+            raise ValueError(f"controller.{k} is set by the scenario's {key} = {info.data.get(key)!r}: "
+                             f"allowed is to set {key}")
+        known(k, allowed, f"{section}.")
+        out[k] = check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
+    return out
+
+
+def _mismatch(table: dict, info) -> dict:
+    """[mismatch] names ModelParams fields with a factor in MISMATCH_RANGE, none also set in [controller]."""
+    lo, hi = MISMATCH_RANGE
+    controller, out = info.data.get("controller", {}), {}
+    for k, v in table.items():
+        known(k, ModelParams._fields, "mismatch.")
+        v = out[k] = check_type(f"mismatch.{k}", v, float)
+        require(math.isfinite(v) and lo <= v <= hi, f"mismatch.{k} = {v!r} is invalid: allowed is a factor in "
+                f"[{lo:g}, {hi:g}] (controller value = plant value x factor)")
+        require(k not in controller, f"mismatch.{k} = {v!r} conflicts with controller.{k} = {controller.get(k)!r}: "
+                "allowed is one of them (the factor sets the controller's value)")
+    return out
+
+
+def _limits(table: dict) -> dict:
+    out = {}
+    for k, v in table.items():
+        known(k, LIMITS, "limits.")
+        v = out[k] = check_type(f"limits.{k}", v, float)
+        require(math.isfinite(v) and v >= 0.0, f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
+                f"[{LIMITS[k][1]}] (0 = no limit)")
+    return out
+
+
+def _open_inputs(entries) -> list:
+    """open_inputs is a list of distinct "element.variable" strings (whether each is an
+    input of the system is checked by the master against the SSP)."""
+    require(isinstance(entries, list), f"open_inputs = {entries!r} is invalid: allowed is a list of "
+            "\"element.variable\" strings, e.g. [\"controller.dq1\"]")
+    for i, entry in enumerate(entries):
+        require(isinstance(entry, str) and _OPEN_INPUT.fullmatch(entry), f"open_inputs[{i}] = {entry!r} is "
+                "invalid: allowed is \"element.variable\", an FMU input of the system, e.g. \"controller.dq1\"")
+        require(entry not in entries[:i], f"open_inputs[{i}] = {entry!r} is listed twice: allowed is each input once")
+    return list(entries)
+
+
+def _order(order):
+    """``order`` is a list of distinct element names (whether it names every element of the
+    SSP exactly once is checked by the master)."""
+    if order is None:
+        return None
+    require(isinstance(order, list) and order and all(isinstance(e, str) for e in order),
+            f"order = {order!r} is invalid: allowed is a list of the SSP element names in the order they step, "
+            "e.g. [\"controller\", \"plant\", \"trajectory\"]")
+    twice = sorted({e for e in order if order.count(e) > 1})
+    require(not twice, f"order = {order!r} names {', '.join(twice)} more than once: allowed is every element "
+            "exactly once")
+    return list(order)
+
+
+def _elements(tables: dict) -> dict:
+    """Every [ELEMENT] table is named like an SSP element and holds numbers or booleans
+    (whether each is a parameter of that element's FMU is checked by the master)."""
+    for element, table in tables.items():
+        require(_OPEN_INPUT.fullmatch(f"{element}.x") and isinstance(table, dict), f"[{element}] is invalid: "
+                "allowed is a table of FMU parameters named after an SSP element ([A-Za-z_][A-Za-z0-9_]*)")
+        for k, v in table.items():
+            if not isinstance(v, (int, float, bool)) or isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"{element}.{k} = {v!r} is invalid: allowed is a finite number, an integer or a "
+                                 f"boolean (a parameter of the FMU of SSP element {element})"
+                                 f"{suggestion(element, sorted(TABLES))}")
+    return copy.deepcopy(tables)
+
+
+def _settling_bands(bands) -> list:
+    require(isinstance(bands, list) and bands, f"settling_bands = {bands!r} is invalid: allowed is a non-empty "
+            "list of numbers > 0 [m; rad for B], e.g. [1e-6, 1e-7]")
+    out = [check_type(f"settling_bands[{i}]", b, float) for i, b in enumerate(bands)]
+    for i, b in enumerate(out):
+        require(math.isfinite(b) and b > 0.0, f"settling_bands[{i}] = {b!r} is invalid: allowed is a finite "
+                "number > 0 [m; rad for B]")
+    return out
+
+
 @dataclass
 class Scenario:
-    """A validated scenario."""
+    """A validated scenario: every field is checked by its rule when the scenario is made,
+    then the rules that relate fields (_CROSS_CHECKS). Make one with create, from_dict or load
+    (they report the first error as ScenarioError and read the gains_file)."""
 
     name: str
     description: str = ""
-    law: str = "sc-dc"
-    gains: str = "default"
+    law: Annotated[str, one_of(LAWS)] = "sc-dc"
+    gains: Annotated[str, one_of(sorted(GAIN_PRESETS))] = "default"
     gains_file: str = ""
-    gain_overrides: dict = field(default_factory=dict)
+    gain_overrides: Annotated[dict, BeforeValidator(_gain_overrides)] = field(default_factory=dict)
     start_time: float = 0.0
     stop_time: float = 2.5
-    step: float = 1e-4
-    ordering: str = "gauss-seidel"
+    step: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v) and v > 0.0, "a number > 0 [s]")] = 1e-4
+    ordering: Annotated[str, one_of(ORDERINGS)] = "gauss-seidel"
     output: str = ""  # "" = results/<name>
     start_on_trajectory: bool = True
-    clock: str = "exact"
-    connection_start: str = "propagated"
-    trajectory: dict = field(default_factory=dict)
-    plant: dict = field(default_factory=dict)
-    controller: dict = field(default_factory=dict)
-    limits: dict = field(default_factory=dict)
-    mismatch: dict = field(default_factory=dict)  # ModelParams field -> controller/plant factor
-    record_every: int = 1
-    open_inputs: list = field(default_factory=list)  # "element.variable" inputs left undriven on purpose
-    order: list | None = None  # explicit Gauss-Seidel step order: every SSP element name once
-    elements: dict = field(default_factory=dict)  # [ELEMENT] tables: FMU parameters by SSP element name
-    fmus: str = "native"  # FMU family: python, native or fmi3 (orchestrator.engine.families)
-    format: str = "csv"   # result file: csv or mat (RESULT_FORMATS)
+    clock: Annotated[str, one_of(CLOCKS)] = "exact"
+    connection_start: Annotated[str, one_of(CONNECTION_STARTS)] = "propagated"
+    trajectory: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
+    plant: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
+    controller: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
+    limits: Annotated[dict, BeforeValidator(_limits)] = field(default_factory=dict)
+    # ModelParams field -> controller/plant factor
+    mismatch: Annotated[dict, BeforeValidator(_mismatch)] = field(default_factory=dict)
+    record_every: Annotated[int, rule(lambda v: is_number(v) and v >= 1, "an integer >= 1")] = 1
+    # "element.variable" inputs left undriven on purpose
+    open_inputs: Annotated[list, BeforeValidator(_open_inputs)] = field(default_factory=list)
+    # explicit Gauss-Seidel step order: every SSP element name once
+    order: Annotated[list | None, BeforeValidator(_order)] = None
+    # [ELEMENT] tables: FMU parameters by SSP element name
+    elements: Annotated[dict, BeforeValidator(_elements)] = field(default_factory=dict)
+    fmus: Annotated[str, one_of(FAMILIES)] = "native"  # FMU family: python, native or fmi3 (engine.families)
+    format: Annotated[str, one_of(RESULT_FORMATS)] = "csv"   # result file: csv or mat (RESULT_FORMATS)
     # point-to-point runs: settling bands [m for X, Z and the motors, rad for B] of the move metrics
-    settling_bands: list = field(default_factory=lambda: [1e-6, 1e-7])
+    settling_bands: Annotated[list, BeforeValidator(_settling_bands)] = field(default_factory=lambda: [1e-6, 1e-7])
     source: str = ""
-    gain_file_values: dict = field(default_factory=dict, repr=False)  # filled from gains_file by validate
+    # the gains_file's preset, filled by read_gains_file after validation
+    gain_file_values: dict = field(default_factory=dict, repr=False)
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> "Scenario":
+        for check in _CROSS_CHECKS:
+            check(self)
+        return self
 
     @property
     def n_steps(self) -> int:
@@ -177,11 +280,8 @@ class Scenario:
         return Gains.from_preset(preset)
 
     def with_changes(self, **changes) -> "Scenario":
-        """A copy with top-level fields replaced (and validated again)."""
-        new = copy.deepcopy(self)
-        for k, v in changes.items():
-            setattr(new, k, v)
-        return validate(new)
+        """A copy with top-level fields replaced (validated again, its gains_file read again)."""
+        return create(**{**dataclasses.asdict(self), "gain_file_values": {}, **changes})
 
     def parameters(self) -> dict:
         """FMU parameters by SSP element name, ready for the master algorithm."""
@@ -231,227 +331,123 @@ class Scenario:
         return d
 
 
-def _check_type(key: str, value, kind):
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if kind is int and isinstance(value, float) and value.is_integer():
-        return int(value)
-    if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-        raise ScenarioError(f"{key} = {value!r} has the wrong type: allowed is {kind.__name__}")
-    return value
 
+# Rules that relate fields, in the order they are checked (after every field passed its own).
 
-_OPEN_INPUT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.[^\s.][^\s]*")
-
-
-def _check_open_inputs(entries) -> None:
-    """open_inputs is a list of distinct "element.variable" strings (whether each is an
-    input of the system is checked by the master against the SSP)."""
-    if not isinstance(entries, list):
-        raise ScenarioError(f"open_inputs = {entries!r} is invalid: allowed is a list of \"element.variable\" "
-                            "strings, e.g. [\"controller.dq1\"]")
-    for i, entry in enumerate(entries):
-        if not isinstance(entry, str) or not _OPEN_INPUT.fullmatch(entry):
-            raise ScenarioError(f"open_inputs[{i}] = {entry!r} is invalid: allowed is \"element.variable\", an "
-                                "FMU input of the system, e.g. \"controller.dq1\"")
-        if entry in entries[:i]:
-            raise ScenarioError(f"open_inputs[{i}] = {entry!r} is listed twice: allowed is each input once")
-
-
-STEP_TOLERANCE = 1e-9  # relative: how far (stop_time - start_time) / step may be from a whole number
-
-
-def _check_whole_steps(s: Scenario) -> None:
-    """stop_time - start_time must be a whole number (>= 1) of steps: a run never goes past
-    stop_time and never completes zero steps; otherwise the nearest valid stop times are named."""
+def _check_times(s: Scenario) -> None:
+    """stop_time > start_time, and stop_time - start_time a whole number (>= 1) of steps: a run
+    never goes past stop_time and never completes zero steps; otherwise the nearest valid stop
+    times are named."""
+    require(math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time,
+            f"stop_time = {s.stop_time!r} is invalid: allowed is a number > start_time = {s.start_time!r} [s]")
     n = (s.stop_time - s.start_time) / s.step
     k = round(n)
     if k >= 1 and abs(n - k) <= STEP_TOLERANCE * max(1.0, k):
         return
     lo, hi = max(1, math.floor(n)), max(1, math.ceil(n))
     nearest = sorted({s.start_time + lo * s.step, s.start_time + hi * s.step})
-    raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: stop_time - start_time = "
-                        f"{s.stop_time - s.start_time!r} s is not a whole number of steps of {s.step!r} s: "
-                        f"allowed are e.g. {' or '.join(f'{t:.12g}' for t in nearest)}")
-
-
-def _check_mismatch(s: Scenario) -> None:
-    """[mismatch] names ModelParams fields with a factor in MISMATCH_RANGE, none also set in [controller]."""
-    lo, hi = MISMATCH_RANGE
-    for k, v in s.mismatch.items():
-        if k not in ModelParams._fields:
-            raise ScenarioError(f"mismatch.{k} is unknown: {allowed_are(k, ModelParams._fields)}")
-        v = s.mismatch[k] = _check_type(f"mismatch.{k}", v, float)
-        if not (math.isfinite(v) and lo <= v <= hi):
-            raise ScenarioError(f"mismatch.{k} = {v!r} is invalid: allowed is a factor in [{lo:g}, {hi:g}] "
-                                "(controller value = plant value x factor)")
-        if k in s.controller:
-            raise ScenarioError(f"mismatch.{k} = {v!r} conflicts with controller.{k} = {s.controller[k]!r}: "
-                                "allowed is one of them (the factor sets the controller's value)")
+    raise ValueError(f"stop_time = {s.stop_time!r} is invalid: stop_time - start_time = "
+                     f"{s.stop_time - s.start_time!r} s is not a whole number of steps of {s.step!r} s: "
+                     f"allowed are e.g. {' or '.join(f'{t:.12g}' for t in nearest)}")
 
 
 def _check_disturbance(s: Scenario) -> None:
     """A force step (any plant.disturbance_force_i != 0) starts within the run."""
     if any(s.plant.get(f"disturbance_force{i}", 0.0) for i in (1, 2, 3)):
         t = s.plant.get("disturbance_time", 0.0)
-        if not (s.start_time <= t < s.stop_time):
-            raise ScenarioError(f"plant.disturbance_time = {t!r} is invalid: allowed is a time in [start_time, "
-                                f"stop_time) = [{s.start_time:g}, {s.stop_time:g}) s (the force step must start "
-                                "within the run)")
+        require(s.start_time <= t < s.stop_time, f"plant.disturbance_time = {t!r} is invalid: allowed is a time in "
+                f"[start_time, stop_time) = [{s.start_time:g}, {s.stop_time:g}) s (the force step must start "
+                "within the run)")
 
 
-def _check_addressing(s: Scenario) -> None:
-    """``order`` is a list of distinct element names, for Gauss-Seidel only (whether it names
-    every element of the SSP exactly once is checked by the master); every [ELEMENT] table is
-    named like an SSP element and holds numbers or booleans (whether each is a parameter of
-    that element's FMU is checked by the master against the SSP)."""
-    if s.order is not None:
-        if not (isinstance(s.order, list) and s.order and all(isinstance(e, str) for e in s.order)):
-            raise ScenarioError(f"order = {s.order!r} is invalid: allowed is a list of the SSP element names "
-                                "in the order they step, e.g. [\"controller\", \"plant\", \"trajectory\"]")
-        twice = sorted({e for e in s.order if s.order.count(e) > 1})
-        if twice:
-            raise ScenarioError(f"order = {s.order!r} names {', '.join(twice)} more than once: allowed is "
-                                "every element exactly once")
-        if s.ordering != "gauss-seidel":
-            raise ScenarioError(f"order = {s.order!r} is invalid with ordering = {s.ordering!r}: allowed is an "
-                                "order only with ordering = \"gauss-seidel\" (Jacobi steps all at once)")
-    for element, table in s.elements.items():
-        if not _OPEN_INPUT.fullmatch(f"{element}.x") or not isinstance(table, dict):
-            raise ScenarioError(f"[{element}] is invalid: allowed is a table of FMU parameters named after an "
-                                "SSP element ([A-Za-z_][A-Za-z0-9_]*)")
-        for k, v in table.items():
-            if isinstance(v, float) and not math.isfinite(v) or not isinstance(v, (int, float, bool)):
-                raise ScenarioError(f"{element}.{k} = {v!r} is invalid: allowed is a finite number, an integer "
-                                    "or a boolean (a parameter of the FMU of SSP element "
-                                    f"{element}){suggestion(element, sorted(_TABLES))}")
+# The model's own checks of what a scenario gives each FMU: (section, the checked value).
+# The gains of a gains_file are checked once read_gains_file has read them.
+_MODEL_CHECKS = (
+    ("gain_overrides", lambda s: s.gain_values() if s.gain_file_values or not s.gains_file else None),
+    ("controller", lambda s: model_tuple(ModalGains, s.controller)),
+    ("controller", lambda s: model_tuple(ModelParams, {**s.controller, **s.mismatched_params()})),
+    ("plant", lambda s: model_tuple(ModelParams, s.plant)),
+    ("plant", lambda s: model_tuple(PlantConfig, s.plant)),
+    ("trajectory", lambda s: model_tuple(TrajectoryParams, s.trajectory)),
+)
+
+
+def _check_models(s: Scenario) -> None:
+    for section, value in _MODEL_CHECKS:
+        try:
+            checked = value(s)
+            if checked is not None:
+                checked.validated()
+        except ModelInputError as err:
+            raise ValueError(f"{section}.{err}") from None
 
 
 def _check_move(s: Scenario) -> None:
-    """settling_bands: numbers > 0; a point-to-point move (trajectory.profile 1-3) ends before
-    stop_time, so that the run sees it end and settle."""
-    bands = s.settling_bands
-    if not (isinstance(bands, list) and bands):
-        raise ScenarioError(f"settling_bands = {bands!r} is invalid: allowed is a non-empty list of numbers > 0 "
-                            "[m; rad for B], e.g. [1e-6, 1e-7]")
-    for i, b in enumerate(bands):
-        b = bands[i] = _check_type(f"settling_bands[{i}]", b, float)
-        if not (math.isfinite(b) and b > 0.0):
-            raise ScenarioError(f"settling_bands[{i}] = {b!r} is invalid: allowed is a finite number > 0 "
-                                "[m; rad for B]")
-    from tapmp.trajectory import PROFILES, move_duration
+    """A point-to-point move (trajectory.profile 1-3) ends before stop_time, so that the run
+    sees it end and settle."""
     tp = model_tuple(TrajectoryParams, s.trajectory)
     if not tp.profile:
         return
     end = tp.t_move + move_duration(tp)
-    if not end < s.stop_time:
-        name = {v: k for k, v in PROFILES.items()}[tp.profile]
-        raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: the {name} move from t_move = {tp.t_move:g} s "
-                            f"ends at t = {end:.6g} s: allowed is a stop_time after the move's end (or raise the "
-                            "trajectory's v_max_*, a_max_*, j_max_*)")
+    name = {v: k for k, v in PROFILES.items()}[tp.profile]
+    require(end < s.stop_time, f"stop_time = {s.stop_time!r} is invalid: the {name} move from t_move = "
+            f"{tp.t_move:g} s ends at t = {end:.6g} s: allowed is a stop_time after the move's end (or raise the "
+            "trajectory's v_max_*, a_max_*, j_max_*)")
 
 
-def validate(s: Scenario) -> Scenario:
-    """Check every value of a scenario; raise ScenarioError naming the key."""
-    if s.law not in LAWS:
-        raise ScenarioError(f"law = {s.law!r} is invalid: {allowed_are(s.law, LAWS)}")
-    if s.gains not in GAIN_PRESETS:
-        raise ScenarioError(f"gains = {s.gains!r} is invalid: {allowed_are(s.gains, sorted(GAIN_PRESETS))}")
-    if s.gains_file:
-        s.gain_file_values = load_gain_file(s.gains_file)
-    if s.ordering not in ORDERINGS:
-        raise ScenarioError(f"ordering = {s.ordering!r} is invalid: {allowed_are(s.ordering, ORDERINGS)}")
-    if s.clock not in CLOCKS:
-        raise ScenarioError(f"clock = {s.clock!r} is invalid: {allowed_are(s.clock, CLOCKS)}")
-    if s.connection_start not in CONNECTION_STARTS:
-        raise ScenarioError(f"connection_start = {s.connection_start!r} is invalid: "
-                            f"{allowed_are(s.connection_start, CONNECTION_STARTS)}")
-    if not (math.isfinite(s.step) and s.step > 0.0):
-        raise ScenarioError(f"step = {s.step!r} is invalid: allowed is a number > 0 [s]")
-    if not (math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time):
-        raise ScenarioError(f"stop_time = {s.stop_time!r} is invalid: allowed is a number > start_time "
-                            f"= {s.start_time!r} [s]")
-    _check_whole_steps(s)
-    for k, v in s.gain_overrides.items():
-        if k not in GAIN_NAMES:
-            raise ScenarioError(f"gain_overrides.{k} is unknown: {allowed_are(k, GAIN_NAMES)}")
-        vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
-        if not (isinstance(vals, list) and len(vals) == 3):
-            raise ScenarioError(f"gain_overrides.{k} = {v!r} is invalid: allowed is a number or a list of 3 numbers")
-        s.gain_overrides[k] = [_check_type(f"gain_overrides.{k}", x, float) for x in vals]
-    for section in ("trajectory", "plant", "controller"):
-        table = getattr(s, section)
-        allowed = _SECTION_PARAMS[section]
-        for k, v in table.items():
-            if section == "controller" and k in _FROM_SCENARIO:
-                raise ScenarioError(f"controller.{k} is set by the scenario's {_FROM_SCENARIO[k]} = "
-                                    f"{getattr(s, _FROM_SCENARIO[k])!r}: allowed is to set {_FROM_SCENARIO[k]}")
-            if k not in allowed:
-                raise ScenarioError(f"{section}.{k} is unknown: {allowed_are(k, allowed)}")
-            table[k] = _check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
-    _check_mismatch(s)
-    _check_disturbance(s)
-    checks = (("gain_overrides", lambda: s.gain_values().validated()),
-              ("controller", lambda: model_tuple(ModalGains, s.controller).validated()),
-              ("controller", lambda: model_tuple(ModelParams, {**s.controller,
-                                                              **s.mismatched_params()}).validated()),
-              ("plant", lambda: model_tuple(ModelParams, s.plant).validated()),
-              ("plant", lambda: model_tuple(PlantConfig, s.plant).validated()),
-              ("trajectory", lambda: model_tuple(TrajectoryParams, s.trajectory).validated()))
-    for section, check in checks:
-        try:
-            check()
-        except ModelInputError as err:
-            raise ScenarioError(f"{section}.{err}") from None
-    _check_move(s)
-    for k, v in s.limits.items():
-        if k not in LIMITS:
-            raise ScenarioError(f"limits.{k} is unknown: {allowed_are(k, LIMITS)}")
-        v = s.limits[k] = _check_type(f"limits.{k}", v, float)
-        if not (math.isfinite(v) and v >= 0.0):
-            raise ScenarioError(f"limits.{k} = {v!r} is invalid: allowed is a number >= 0 "
-                                f"[{LIMITS[k][1]}] (0 = no limit)")
-    _check_open_inputs(s.open_inputs)
-    _check_addressing(s)
-    from ..engine.families import FAMILIES
-    if s.fmus not in FAMILIES:
-        raise ScenarioError(f"fmus = {s.fmus!r} is invalid: {allowed_are(s.fmus, FAMILIES)}")
-    if s.format not in RESULT_FORMATS:
-        raise ScenarioError(f"format = {s.format!r} is invalid: {allowed_are(s.format, RESULT_FORMATS)}")
-    if s.record_every < 1:
-        raise ScenarioError(f"record_every = {s.record_every!r} is invalid: allowed is an integer >= 1")
+def _check_order(s: Scenario) -> None:
+    """An explicit ``order`` is for Gauss-Seidel only."""
+    require(s.order is None or s.ordering == "gauss-seidel", f"order = {s.order!r} is invalid with ordering = "
+            f"{s.ordering!r}: allowed is an order only with ordering = \"gauss-seidel\" (Jacobi steps all at once)")
+
+
+def _check_controller(s: Scenario) -> None:
     vs = s.controller.get("velocity_source", 0)
-    if vs not in (0, 1):
-        raise ScenarioError(f"controller.velocity_source = {vs!r} is invalid: allowed are 0 or 1")
-    if s.controller.get("force_limit", 0.0) < 0.0:
-        raise ScenarioError(f"controller.force_limit = {s.controller['force_limit']!r} is invalid: "
-                            "allowed is a number >= 0")
-    return s
+    require(vs in (0, 1), f"controller.velocity_source = {vs!r} is invalid: allowed are 0 or 1")
+    require(s.controller.get("force_limit", 0.0) >= 0.0, f"controller.force_limit = "
+            f"{s.controller.get('force_limit')!r} is invalid: allowed is a number >= 0")
+
+
+_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_move, _check_order, _check_controller)
+
+
+def read_gains_file(s: Scenario) -> Scenario:
+    """The explicit step after validation: a scenario with a gains_file gets the file's preset
+    (gain_file_values, see load_gain_file) and is checked again with it (its gain_overrides
+    apply on top); without a gains_file the scenario itself. ScenarioError names what is wrong."""
+    if not s.gains_file:
+        return s
+    return build(dataclasses.replace, ScenarioError, s, gain_file_values=load_gain_file(s.gains_file))
+
+
+def create(**fields) -> Scenario:
+    """A scenario from its fields (as in Scenario), validated, with its gains_file read;
+    ScenarioError names the first invalid value and what is allowed."""
+    return read_gains_file(build(Scenario, ScenarioError, **fields))
 
 
 def from_dict(data: dict, source: str = "") -> Scenario:
-    """Build and validate a scenario from parsed TOML data."""
+    """Build and validate a scenario from parsed TOML data (not changed)."""
     kwargs = {"source": source}
     for key, value in data.items():
-        if key in _TOP:
-            kwargs[key] = _check_type(key, value, _TOP[key])
-        elif key in _TABLES:
-            if not isinstance(value, dict):
-                raise ScenarioError(f"{key} must be a table ([{key}])")
+        if key in TOP:
+            kwargs[key] = check_type(key, value, TOP[key], ScenarioError)
+        elif key in TABLES:
+            require(isinstance(value, dict), f"{key} must be a table ([{key}])", ScenarioError)
             kwargs[key] = dict(value)
         elif key == "order":
             kwargs[key] = value
         elif isinstance(value, dict):  # a table named after an SSP element (checked by the master)
             kwargs.setdefault("elements", {})[key] = dict(value)
         else:
-            names = [*_TOP, *sorted(_TABLES), "order"]
+            names = [*TOP, *sorted(TABLES), "order"]
             raise ScenarioError(f"{key} is unknown: allowed are {', '.join(names[:-1])}, order, or a table "
                                 f"named after an SSP element{suggestion(key, names)}")
     if "name" not in kwargs:
         kwargs["name"] = Path(source).stem if source else "scenario"
     if kwargs.get("gains_file") and source and not Path(kwargs["gains_file"]).is_absolute():
         kwargs["gains_file"] = str(Path(source).parent / kwargs["gains_file"])  # relative to the scenario file
-    return validate(Scenario(**kwargs))
+    return create(**kwargs)
 
 
 def parse_override(text: str) -> tuple[list[str], object]:
@@ -469,7 +465,7 @@ def parse_override(text: str) -> tuple[list[str], object]:
 def load(path, overrides: list[str] = ()) -> Scenario:
     """Read, override (``--set`` strings) and validate a scenario TOML file."""
     path = Path(path)
-    data = read_toml(path, f"scenario file {path}")
+    data = read_toml(path, f"scenario file {path}", ScenarioError)
     for text in overrides:
         keys, value = parse_override(text)
         node = data

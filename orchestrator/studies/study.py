@@ -1,6 +1,7 @@
 """Studies: many independent co-simulations of one base scenario, run on Dask.
 
-A study file (TOML) names a base scenario and what varies:
+A study file (TOML; its models and loading are in orchestrator.studies.study_file) names a base
+scenario and what varies:
 
 * ``[grid]``: dotted scenario keys with a list of values each; every combination is a case;
 * ``[monte_carlo]``: ``samples`` draws of the factors in ``[monte_carlo.vary.NAME]`` from
@@ -24,23 +25,20 @@ import dataclasses
 import hashlib
 import itertools
 import json
-import math
 import os
 import shutil
 import signal
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
 from multiprocessing import resource_tracker
 from pathlib import Path
 
 import numpy as np
 
-from tapmp.errors import allowed_are, suggestion
-from tapmp.params import GAIN_NAMES
-
-from ..experiments.scenario import _SECTION_PARAMS, Scenario, ScenarioError, load, read_toml, validate
+from ..experiments.config import require
+from ..experiments.scenario import Scenario, create
+from .study_file import Study, StudyError, apply_changes, base_value, load_study
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -50,224 +48,11 @@ METRIC_COLUMNS = ("objective", "tracking_mae_um_mean", "sync_mae_um_mean",
                   "sync_mae_um_1", "sync_mae_um_2", "sync_mae_um_3", "saturation_fraction_max")
 TAIL_COLUMNS = ("spectral_radius", "flag", "wall_time_s", "worker", "error")
 SATURATION_FLAG = 0.01  # a case whose force commands sit at the limit in > 1 % of samples is "saturated"
-DISTRIBUTIONS = ("uniform", "loguniform", "normal")
-_SECTIONS = ("plant", "controller", "trajectory")
-
-
-class StudyError(ValueError):
-    """A study file or value is invalid, or its output folder is in the way; the message says which."""
-
-
-@dataclass
-class Factor:
-    """A Monte Carlo factor: one draw per sample, applied to every target.
-
-    distribution "uniform" / "loguniform" take low, high; "normal" takes mean, std.
-    relative = true multiplies each target's base value by the draw.
-    """
-
-    name: str
-    targets: list
-    distribution: str
-    low: float = 0.0
-    high: float = 0.0
-    mean: float = 0.0
-    std: float = 0.0
-    relative: bool = False
-
-    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """n draws from the distribution."""
-        if self.distribution == "uniform":
-            return rng.uniform(self.low, self.high, n)
-        if self.distribution == "loguniform":
-            return np.exp(rng.uniform(math.log(self.low), math.log(self.high), n))
-        return rng.normal(self.mean, self.std, n)
-
-
-@dataclass
-class Study:
-    """A validated study file."""
-
-    name: str
-    source: str
-    base: str                      # the base scenario file (absolute)
-    output: str
-    description: str = ""
-    keep_results: bool = False     # keep each case's results.csv (else run.json + metrics.json only)
-    set: dict = field(default_factory=dict)
-    grid: dict = field(default_factory=dict)
-    samples: int = 0
-    seed: int = 0
-    factors: list = field(default_factory=list)
-    tune: dict = field(default_factory=dict)
-
-    @property
-    def kind(self) -> str:
-        """"tune", or "grid", "monte_carlo" or "grid+monte_carlo"."""
-        if self.tune:
-            return "tune"
-        return "+".join(k for k, on in (("grid", self.grid), ("monte_carlo", self.samples)) if on)
-
-    def base_scenario(self) -> Scenario:
-        """The base scenario with the study's [set] changes."""
-        return apply_changes(load(self.base), self.set, "set")
-
-
 def _require(cond: bool, message: str) -> None:
-    if not cond:
-        raise StudyError(message)
+    require(cond, message, StudyError)
 
 
-def _number(where: str, v) -> float:
-    _require(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
-             f"{where} = {v!r} is invalid: allowed is a finite number")
-    return float(v)
-
-
-def base_value(scenario: Scenario, key: str):
-    """The value a dotted key has in a scenario (the FMU default if the scenario does not set it)."""
-    section, _, name = key.partition(".")
-    if section == "gain_overrides":
-        return list(getattr(scenario.gain_values(), name))
-    if section in _SECTIONS:
-        table = getattr(scenario, section)
-        return table[name] if name in table else _SECTION_PARAMS[section][name].start
-    return getattr(scenario, key)
-
-
-def check_key(key: str, where: str) -> None:
-    """Raise StudyError unless ``key`` is a dotted scenario key a study may vary."""
-    section, dot, name = key.partition(".")
-    if not dot:
-        _require(key in ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file",
-                         "start_on_trajectory"),
-                 f"{where}: {key} is not a scenario key a study may set: allowed are law, ordering, step, "
-                 "stop_time, start_time, gains, gains_file, start_on_trajectory or SECTION.NAME "
-                 "(gain_overrides, plant, controller, trajectory)"
-                 + suggestion(key, ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file",
-                                    "start_on_trajectory")))
-    elif section == "gain_overrides":
-        _require(name in GAIN_NAMES, f"{where}: {key} is unknown: "
-                 + allowed_are(key, [f"gain_overrides.{g}" for g in GAIN_NAMES]))
-    else:
-        _require(section in _SECTIONS and name in _SECTION_PARAMS[section],
-                 f"{where}: {key} is unknown: allowed are gain_overrides.NAME, "
-                 + ", ".join(f"{s}.NAME" for s in _SECTIONS) + " with NAME a parameter of that FMU"
-                 + (f" ({', '.join(_SECTION_PARAMS[section])})" if section in _SECTIONS else "")
-                 + (suggestion(name, _SECTION_PARAMS[section]) if section in _SECTIONS
-                    else suggestion(section, ("gain_overrides", *_SECTIONS))))
-
-
-def apply_changes(scenario: Scenario, changes: dict, where: str = "case") -> Scenario:
-    """A copy of ``scenario`` with dotted-key changes applied (validated; ScenarioError names the key)."""
-    top = {}
-    for key, value in changes.items():
-        section, dot, name = key.partition(".")
-        if not dot:
-            top[key] = value
-            continue
-        table = dict(top.get(section, getattr(scenario, section)))
-        table[name] = list(value) if isinstance(value, (list, tuple)) else value
-        top[section] = table
-    try:
-        return scenario.with_changes(**top)
-    except ScenarioError as err:
-        raise ScenarioError(f"{where}: {err}") from None
-
-
-def load_study(path) -> Study:
-    """Read and validate a study file; StudyError names the key and what is allowed."""
-    path = Path(path)
-    data = read_toml(path, f"study file {path}", StudyError)
-    allowed = ("study", "set", "grid", "monte_carlo", "tune")
-    for key in data:
-        _require(key in allowed, f"{path}: [{key}] is unknown: allowed are " + ", ".join(f"[{k}]" for k in allowed)
-                 + suggestion(key, allowed))
-    head = data.get("study", {})
-    for key in head:
-        _require(key in ("name", "description", "base", "output", "keep_results"),
-                 f"{path}: study.{key} is unknown: "
-                 + allowed_are(key, ("name", "description", "base", "output", "keep_results")))
-    _require(isinstance(head.get("base"), str), f"{path}: study.base is missing: allowed is the path of a "
-             "scenario TOML file, relative to the study file")
-    base = (path.parent / head["base"]).resolve()
-    _require(base.exists(), f"{path}: study.base = {head['base']!r} does not exist (looked for {base})")
-    name = head.get("name", path.stem)
-    study = Study(name=name, source=str(path.resolve()), base=str(base),
-                  output=str(head.get("output", f"results/studies/{name}")),
-                  description=str(head.get("description", "")), keep_results=bool(head.get("keep_results", False)))
-    for key, value in data.get("set", {}).items():
-        check_key(key, f"{path}: set")
-        study.set[key] = _resolve_path(key, value, path)
-    for key, values in data.get("grid", {}).items():
-        check_key(key, f"{path}: grid")
-        _require(isinstance(values, list) and len(values) >= 1,
-                 f"{path}: grid.{key} = {values!r} is invalid: allowed is a non-empty list of values")
-        study.grid[key] = [_resolve_path(key, v, path) for v in values]
-    mc = data.get("monte_carlo")
-    if mc is not None:
-        for key in mc:
-            _require(key in ("samples", "seed", "vary"),
-                     f"{path}: monte_carlo.{key} is unknown: " + allowed_are(key, ("samples", "seed", "vary")))
-        samples = mc.get("samples")
-        _require(isinstance(samples, int) and not isinstance(samples, bool) and samples >= 1,
-                 f"{path}: monte_carlo.samples = {samples!r} is invalid: allowed is an integer >= 1")
-        seed = mc.get("seed")
-        _require(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
-                 f"{path}: monte_carlo.seed = {seed!r} is invalid: allowed is an integer >= 0 (stated, "
-                 "so the draws can be repeated)")
-        vary = mc.get("vary", {})
-        _require(isinstance(vary, dict) and vary, f"{path}: [monte_carlo.vary.NAME] tables are missing: "
-                 "allowed is at least one factor")
-        study.samples, study.seed = samples, seed
-        study.factors = [_factor(f"{path}: monte_carlo.vary.{n}", n, t) for n, t in vary.items()]
-    if "tune" in data:
-        _require(not study.grid and not study.samples,
-                 f"{path}: [tune] cannot be combined with [grid] or [monte_carlo]: use separate studies")
-        study.tune = validate_tune(data["tune"], path)
-    _require(study.grid or study.samples or study.tune,
-             f"{path}: nothing varies: allowed is a [grid], a [monte_carlo] or a [tune] table")
-    try:
-        study.base_scenario()
-    except ScenarioError as err:
-        raise StudyError(f"{path}: {err}") from None
-    return study
-
-
-def _resolve_path(key: str, value, study_path: Path):
-    """gains_file values in a study are relative to the study file."""
-    if key == "gains_file" and isinstance(value, str) and value and not Path(value).is_absolute():
-        return str((study_path.parent / value).resolve())
-    return value
-
-
-def _factor(where: str, name: str, table) -> Factor:
-    _require(isinstance(table, dict), f"{where} must be a table")
-    for key in table:
-        _require(key in ("targets", "distribution", "low", "high", "mean", "std", "relative"),
-                 f"{where}.{key} is unknown: " + allowed_are(key, ("targets", "distribution", "low", "high", "mean",
-                                                                  "std", "relative")))
-    targets = table.get("targets", [name])
-    _require(isinstance(targets, list) and targets and all(isinstance(t, str) for t in targets),
-             f"{where}.targets = {targets!r} is invalid: allowed is a list of dotted scenario keys")
-    for t in targets:
-        check_key(t, f"{where}.targets")
-        _require(t.partition(".")[0] in (*_SECTIONS, "gain_overrides"),
-                 f"{where}.targets: {t} is invalid: a sampled target must be a number in "
-                 "gain_overrides, plant, controller or trajectory")
-    dist = table.get("distribution")
-    _require(dist in DISTRIBUTIONS, f"{where}.distribution = {dist!r} is invalid: "
-             + allowed_are(dist, DISTRIBUTIONS))
-    f = Factor(name=name, targets=targets, distribution=dist, relative=bool(table.get("relative", False)))
-    if dist == "normal":
-        f.mean, f.std = _number(f"{where}.mean", table.get("mean")), _number(f"{where}.std", table.get("std"))
-        _require(f.std >= 0.0, f"{where}.std = {f.std!r} is invalid: allowed is a number >= 0")
-    else:
-        f.low, f.high = _number(f"{where}.low", table.get("low")), _number(f"{where}.high", table.get("high"))
-        _require(f.high >= f.low, f"{where}.high = {f.high!r} is invalid: allowed is a number >= low = {f.low!r}")
-        _require(dist != "loguniform" or f.low > 0.0,
-                 f"{where}.low = {f.low!r} is invalid for loguniform: allowed is a number > 0")
-    return f
+PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
 
 
 def cases(study: Study) -> list[dict]:
@@ -307,56 +92,6 @@ def objective(metrics: dict) -> float:
     return 0.5 * (float(np.mean(metrics["tracking_mae_um"])) + float(np.mean(metrics["sync_mae_um"])))
 
 
-PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
-_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
-_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
-
-
-def validate_tune(table, path) -> dict:
-    """Check a study's [tune] table; returns it as plain data. StudyError names the key."""
-    where = f"{path}: tune"
-    _require(isinstance(table, dict), f"{where} must be a table")
-    for key in table:
-        _require(key in _KEYS, f"{where}.{key} is unknown: {allowed_are(key, _KEYS)}")
-    laws = table.get("laws", list(_TUNABLE))  # the laws tuned on Gains (not PID-DC's modal gains)
-    _require(isinstance(laws, list) and laws and all(law in _TUNABLE for law in laws),
-             f"{where}.laws = {laws!r} is invalid: allowed is a list of {', '.join(_TUNABLE)}"
-             + next((suggestion(law, _TUNABLE) for law in (laws if isinstance(laws, list) else [])
-                     if law not in _TUNABLE), ""))
-    bounds = table.get("bounds", {})
-    out_bounds = {}
-    for law in laws:
-        b = bounds.get(law)
-        _require(isinstance(b, dict) and b, f"{where}.bounds.{law} is missing: allowed is a table of "
-                 f"gain = [low, high] for {', '.join(_TUNABLE[law])}")
-        out_bounds[law] = {}
-        for gain, lim in b.items():
-            _require(gain in _TUNABLE[law], f"{where}.bounds.{law}.{gain} is invalid: allowed are "
-                     f"{', '.join(_TUNABLE[law])} ({law} " + ("does not use b or D; " if law == "apd-dc" else "")
-                     + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
-            ok = (isinstance(lim, list) and len(lim) == 2
-                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim)
-                  and 0.0 < lim[0] < lim[1])
-            _require(ok, f"{where}.bounds.{law}.{gain} = {lim!r} is invalid: allowed is [low, high] with "
-                     "0 < low < high (searched on a log scale)")
-            out_bounds[law][gain] = [float(lim[0]), float(lim[1])]
-    spec = {"laws": laws, "bounds": out_bounds}
-    for key, default, lo in (("population", 6, 2), ("generations", 5, 1), ("seed", 0, 0)):
-        v = table.get(key, default)
-        _require(isinstance(v, int) and not isinstance(v, bool) and v >= lo,
-                 f"{where}.{key} = {v!r} is invalid: allowed is an integer >= {lo}")
-        spec[key] = v
-    w = table.get("write_to")
-    _require(isinstance(w, str) and w, f"{where}.write_to is missing: allowed is a folder for the preset "
-             "files, comparison.md and objective.png (relative to the working directory)")
-    spec["write_to"] = w
-    cst = table.get("compare_stop_time", 2.5)
-    _require(isinstance(cst, (int, float)) and not isinstance(cst, bool) and cst > 0,
-             f"{where}.compare_stop_time = {cst!r} is invalid: allowed is a number > 0 [s]")
-    spec["compare_stop_time"] = float(cst)
-    return spec
-
-
 def case_value(row) -> float:
     """Objective of a study.csv row [um]; PENALTY_UM for a case that did not complete."""
     v = row.get("objective")
@@ -385,7 +120,7 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
     if stop_requested(stop_token):
         return dict(row, status="interrupted", error="not run: the study was stopped", wall_time_s=0.0)
     try:
-        scenario = apply_changes(validate(Scenario(**base)), changes)
+        scenario = apply_changes(create(**base), changes)
         report = check(scenario)
         row["spectral_radius"] = report.spectral_radius
         if reject_unstable and not report.stable:
@@ -432,7 +167,7 @@ def _metric_columns(m: dict) -> dict:
 
 
 def scenario_data(scenario: Scenario) -> dict:
-    """A scenario as plain data that crosses process boundaries (Scenario(**data) rebuilds it)."""
+    """A scenario as plain data that crosses process boundaries (scenario.create(**data) rebuilds it)."""
     return dataclasses.asdict(scenario)
 
 

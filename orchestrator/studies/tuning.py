@@ -29,9 +29,10 @@ from scipy.optimize import differential_evolution
 
 from tapmp.params import GAIN_NAMES
 
+from ..experiments.config import require
 from ..experiments.scenario import load_gain_file
-from .study import (PENALTY_UM, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, _require, apply_changes,
-                    case_value, fingerprint, prepare)
+from .study import PENALTY_UM, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, case_value, fingerprint, prepare
+from .study_file import StudyError, apply_changes
 
 class TuneObjective:
     """The objective of one law's candidates x = log10(gains), evaluated as study cases."""
@@ -52,8 +53,8 @@ class TuneObjective:
         old = self.runner.table.rows.get(case["case"])
         if old is not None:  # resumed: the optimizer must be asking for the same candidate
             same = all(math.isclose(float(old[n]), gains[n], rel_tol=1e-9) for n in self.names)
-            _require(same, f"--resume: evaluation {case['case']} in {self.runner.table.path} had other gains "
-                     "than the optimizer asks for now; the study changed: use --overwrite")
+            require(same, f"--resume: evaluation {case['case']} in {self.runner.table.path} had other gains "
+                    "than the optimizer asks for now; the study changed: use --overwrite", StudyError)
         self.cases.append(case)
         return case
 

@@ -1,0 +1,72 @@
+"""Terminal output: `tapmp compare` into a log (not a terminal) prints a short summary whose
+rows are the runs' metrics.json values, no long line and no carriage-return progress; the
+progress of a long task off a terminal is one line per 10 %."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from conftest import PAPER
+from orchestrator.experiments.baselines import BASELINES
+from orchestrator.experiments.progress import Progress
+
+pytestmark = pytest.mark.slow  # tapmp compare in a child process
+
+
+def _mean(v):
+    return sum(v) / len(v)
+
+
+def test_compare_into_a_log_prints_a_summary_of_the_metrics_and_no_long_or_progress_lines(built, tmp_path):
+    out = tmp_path / "cmp"
+    # with progress on (no --no-progress): off a terminal it must not draw a bar
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "compare", str(PAPER), "--ssp", str(built["ssp"]),
+                          "--out", str(out), "--set", "stop_time=0.05", "--jobs", "1"], capture_output=True,
+                         text=True, timeout=600, env=dict(os.environ, TMPDIR=str(tmp_path)))
+    assert res.returncode == 0, res.stderr
+    for stream in (res.stdout, res.stderr):
+        assert "\r" not in stream
+        assert all(len(line) <= 200 for line in stream.splitlines())
+    assert res.stderr.splitlines()[0] == (f"paper_simulation: 9 runs of 0.05 s (500 steps, csv) on 1 process(es) "
+                                          f"-> {out}")
+    assert "paper_simulation: figures" in res.stderr.splitlines()
+    lines = res.stdout.splitlines()
+    assert len(lines) == 3 + len(BASELINES)
+    assert lines[-1] == f"results, figures and the full tables (comparison.md) in {out}"
+    assert lines[1].split() == ["run", "tracking", "MAE", "[um]", "sync", "MAE", "[um]", "vs", "APD-DC:", "tracking",
+                                "sync"]
+    metrics = {b.name: json.loads((out / b.name / "metrics.json").read_text()) for b in BASELINES}
+    base_t, base_y = _mean(metrics["apd-dc"]["tracking_mae_um"]), _mean(metrics["apd-dc"]["sync_mae_um"])
+    rows = {r.split()[0]: r.split()[1:] for r in lines[2:-1]}
+    assert list(rows) == [b.name for b in BASELINES]
+    for name, (t, y, rt, ry) in rows.items():
+        mt, my = _mean(metrics[name]["tracking_mae_um"]), _mean(metrics[name]["sync_mae_um"])
+        assert float(t) == pytest.approx(mt, abs=5e-5) and float(y) == pytest.approx(my, abs=5e-5)
+        assert float(rt.rstrip("%")) == pytest.approx(100 * (base_t - mt) / base_t, abs=0.05)
+        assert float(ry.rstrip("%")) == pytest.approx(100 * (base_y - my) / base_y, abs=0.05)
+    assert rows["apd-dc"][2:] == ["+0.0%", "+0.0%"]
+    # the full Markdown is in comparison.md, not on the terminal
+    md = (out / "comparison.md").read_text()
+    assert "| `sc-dc` | SC-DC |" in md and "|" not in res.stdout
+
+
+def test_progress_off_a_terminal_is_one_line_per_tenth_of_a_long_task(capsys):
+    bar = Progress("paper_experiment sc-dc", "step", quiet_s=0.0)
+    for done in range(0, 111113, 100):
+        bar(done, 111112)
+    bar(111112, 111112)
+    bar.close()
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"paper_experiment sc-dc: {p} % ({d}/111112 steps)" for p, d in
+                   zip(range(10, 101, 10), (11200, 22300, 33400, 44500, 55600, 66700, 77800, 88900, 100100, 111112))]
+
+
+def test_progress_of_a_short_task_off_a_terminal_prints_nothing(capsys):
+    bar = Progress("short", "run", total=9)  # quiet for its first two seconds
+    for _ in range(9):
+        bar.update()
+    bar.close()
+    assert capsys.readouterr().err == ""

@@ -1,0 +1,151 @@
+/* libFuzzer target: one native FMI 3.0 FMU (its sources/all.c, included below, so the
+ * target is the FMU's own single translation unit) driven through arbitrary sequences of
+ * FMI 3.0 calls: instantiation with odd arguments, get/set with arbitrary value references
+ * and counts (value arrays of exactly the count given, so a read or write past them is
+ * caught), doStep with any t and h, FMU states got, set, freed, serialized and deserialized
+ * from fuzzed bytes, also after their instance was freed, reset, terminate and free twice.
+ * Built by tests/fmu/test_fuzz.py with clang -fsanitize=fuzzer,address,undefined. */
+#include "all.c"
+#include "fuzz_input.h"
+
+#define SLOTS 3
+#define STATES 4
+
+static void fuzz_logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category, fmi3String message)
+{
+    char buf[4096];
+    (void)env, (void)status;
+    snprintf(buf, sizeof buf, "%s %s", category ? category : "", message ? message : "");
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    fuzz_input in = {data, size};
+    fmi3Instance slot[SLOTS] = {0};  /* kept after a free: a stale instance pointer */
+    int live[SLOTS] = {0};
+    fmi3FMUState states[STATES] = {0};  /* kept after any free: stale state pointers */
+    double t[SLOTS] = {0};
+    char name[64], token[128];
+    int ops = 0;
+    while (in.n && ops++ < 200) {
+        unsigned op = fuzz_byte(&in) % 22, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
+        fmi3Instance c = slot[s];
+        switch (op) {
+        case 0: {  /* instantiate, odd arguments included */
+            const char *nm = fuzz_string(&in, name, sizeof name, "fuzz");
+            const char *tok = fuzz_string(&in, token, sizeof token, INSTANTIATION_TOKEN);
+            unsigned flags = fuzz_byte(&in);
+            if (live[s]) { fmi3FreeInstance(slot[s]); live[s] = 0; }
+            slot[s] = fmi3InstantiateCoSimulation(nm, tok, NULL, flags & 1, (flags >> 1) & 1, (flags >> 2) & 1,
+                                                  (flags >> 3) & 1, NULL, 0, NULL,
+                                                  (flags >> 4) & 1 ? NULL : fuzz_logger, NULL);
+            live[s] = slot[s] != NULL;
+            t[s] = 0.0;
+            break;
+        }
+        case 1:  /* free, maybe a second time */
+            fmi3FreeInstance(c);
+            live[s] = 0;
+            break;
+        case 2: t[s] = fuzz_double(&in);
+            fmi3EnterInitializationMode(c, fuzz_byte(&in) & 1, fuzz_double(&in), t[s], fuzz_byte(&in) & 1,
+                                        fuzz_double(&in));
+            break;
+        case 3: fmi3ExitInitializationMode(c); break;
+        case 4: case 5: case 6: case 7: {  /* Float64 / Int32 get and set */
+            size_t n = fuzz_count(&in), nv = fuzz_count(&in);
+            if (fuzz_byte(&in) & 1) nv = n;
+            fmi3ValueReference *vr = malloc((n ? n : 1) * sizeof *vr);
+            for (size_t i = 0; i < n; i++) vr[i] = fuzz_vr(&in, N_VARS);
+            if (op < 6) {
+                fmi3Float64 *v = malloc((nv ? nv : 1) * sizeof *v);
+                for (size_t i = 0; i < nv; i++) v[i] = fuzz_double(&in);
+                if (op == 4) fmi3SetFloat64(c, vr, n, v, nv);
+                else fmi3GetFloat64(c, vr, n, v, nv);
+                free(v);
+            } else {
+                fmi3Int32 *v = malloc((nv ? nv : 1) * sizeof *v);
+                for (size_t i = 0; i < nv; i++) v[i] = (fmi3Int32)fuzz_u32(&in);
+                if (op == 6) fmi3SetInt32(c, vr, n, v, nv);
+                else fmi3GetInt32(c, vr, n, v, nv);
+                free(v);
+            }
+            free(vr);
+            break;
+        }
+        case 8: case 9: {  /* doStep: continuing the last step, or any t */
+            double h = fuzz_double(&in), at = op == 8 ? t[s] : fuzz_double(&in);
+            fmi3Boolean event, terminate, early;
+            fmi3Float64 last = 0.0;
+            if (fmi3DoStep(c, at, h, fuzz_byte(&in) & 1, &event, &terminate, &early, &last) == fmi3OK) t[s] = last;
+            break;
+        }
+        case 10: fmi3GetFMUState(c, fuzz_byte(&in) & 1 ? &states[k] : NULL); break;
+        case 11: fmi3SetFMUState(c, states[k]); break;
+        case 12: fmi3FreeFMUState(c, fuzz_byte(&in) & 1 ? &states[k] : NULL); break;
+        case 13: {  /* serialize into a buffer of the size given */
+            size_t need = 0, n = fuzz_byte(&in) & 1 ? 0 : (size_t)fuzz_u32(&in) % 200000;
+            if (fmi3SerializedFMUStateSize(c, states[k], &need) == fmi3OK && fuzz_byte(&in) & 1) n = need;
+            fmi3Byte *bytes = malloc(n ? n : 1);
+            if (fmi3SerializeFMUState(c, states[k], bytes, n) == fmi3OK && n && (fuzz_byte(&in) & 1)) {
+                size_t at = fuzz_u32(&in) % n;  /* one byte changed, then read back */
+                bytes[at] ^= (fmi3Byte)(fuzz_byte(&in) | 1);
+                fmi3DeserializeFMUState(c, bytes, n, &states[(k + 1) % STATES]);
+            }
+            free(bytes);
+            break;
+        }
+        case 14: {  /* deserialize the fuzzer's own bytes */
+            size_t n = fuzz_byte(&in) & 1 ? in.n : fuzz_count(&in);
+            if (n > in.n) n = in.n;
+            fmi3Byte *bytes = malloc(n ? n : 1);
+            memcpy(bytes, in.p, n);
+            fmi3DeserializeFMUState(c, n || (fuzz_byte(&in) & 1) ? bytes : NULL, n,
+                                    fuzz_byte(&in) & 1 ? &states[k] : NULL);
+            free(bytes);
+            break;
+        }
+        case 15: fmi3Reset(c); t[s] = 0.0; break;
+        case 16: fmi3Terminate(c); break;
+        case 17: fmi3SetDebugLogging(c, fuzz_byte(&in) & 1, 0, NULL); break;
+        case 18: {  /* types this FMU has none of, and interfaces it does not provide */
+            fmi3ValueReference vr = fuzz_vr(&in, N_VARS);
+            fmi3Boolean b = 0;
+            fmi3Float64 x = 0.0;
+            size_t n = fuzz_byte(&in) & 1;
+            fmi3GetBoolean(c, &vr, n, &b, n);
+            fmi3SetFloat32(c, &vr, 0, NULL, 0);
+            fmi3GetDirectionalDerivative(c, &vr, n, &vr, n, &x, n, &x, n);
+            fmi3EnterEventMode(c);
+            fmi3GetClock(c, &vr, n, &b);
+            break;
+        }
+        case 19: {  /* the other instantiation functions */
+            const char *tok = fuzz_string(&in, token, sizeof token, INSTANTIATION_TOKEN);
+            fmi3Instance other = fuzz_byte(&in) & 1
+                ? fmi3InstantiateModelExchange("me", tok, NULL, 0, 0, NULL, fuzz_logger)
+                : fmi3InstantiateScheduledExecution("se", tok, NULL, 0, 0, NULL, fuzz_logger, NULL, NULL, NULL);
+            fmi3FreeInstance(other);
+            break;
+        }
+        case 20: {  /* a state of one instance handed to another */
+            fmi3Instance d = slot[(s + 1) % SLOTS];
+            fmi3SetFMUState(d, states[k]);
+            size_t need;
+            fmi3SerializedFMUStateSize(d, states[k], &need);
+            break;
+        }
+        default: {  /* the time variable and an output in one get */
+            fmi3ValueReference vr[2] = {N_VARS, fuzz_vr(&in, N_VARS)};
+            fmi3Float64 v[2];
+            fmi3GetFloat64(c, vr, 2, v, 2);
+            break;
+        }
+        }
+    }
+    for (int s = 0; s < SLOTS; s++)  /* the instances free whatever states they still hold */
+        if (live[s]) fmi3FreeInstance(slot[s]);
+    return 0;
+}

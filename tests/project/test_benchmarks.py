@@ -1,0 +1,133 @@
+"""Every script in benchmarks/ runs, in a smoke mode (a tiny horizon, one repeat), and prints
+the figures it promises: the benchmarks cannot rot between the measurements in
+docs/performance.md. The numbers themselves are not judged (a shared machine); their
+presence, form and the invariants between them are."""
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow  # every benchmark script in its smoke mode
+
+ROOT = Path(__file__).resolve().parents[2]
+NUMBER = r"\d+(?:\.\d+)?"
+
+
+def bench(script, *args, tmp_path, timeout=900):
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *map(str, args)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=timeout, env=dict(os.environ, TMPDIR=str(tmp_path)))
+    assert res.returncode == 0, res.stderr[-3000:]
+    return res.stdout
+
+
+def table(text: str, header: str) -> list[list[str]]:
+    """The rows (split on runs of 2+ spaces) after the line starting with ``header``, up to a blank line
+    or a line with another number of fields."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(header)) + 1
+    rows = []
+    for line in lines[start:]:
+        parts = re.split(r"\s{2,}", line.strip())
+        if not line.strip() or len(parts) < 2 or (rows and len(parts) != len(rows[0])):
+            break
+        rows.append(parts)
+    return rows
+
+
+def test_every_script_in_benchmarks_has_a_smoke_test():
+    tested = set(re.findall(r'bench\("(\w+\.py)"', Path(__file__).read_text()))
+    scripts = {p.name for p in (ROOT / "benchmarks").glob("*.py")}
+    assert scripts == tested
+
+
+def test_bench_cosim_prints_every_configuration(built, tmp_path):
+    out = bench("bench_cosim.py", "--stop-time", "0.005", "--repeat", "1", "--json", tmp_path / "c.json",
+                tmp_path=tmp_path)
+    rows = table(out, "configuration")
+    configs = {(r[0], r[1]) for r in rows}
+    kinds = ["full", "floor", "floor-pythonfmu", "full-native", "floor-native", "full-fmi3", "floor-fmi3",
+             "full compiled", "full-native compiled", "full-fmi3 compiled", "plain", "c-master"]
+    assert configs == {(k, o) for k in kinds for o in ("gauss-seidel", "jacobi")} | {("tapmp run (csv)",
+                                                                                      "gauss-seidel")}
+    for r in rows:
+        us, wall, rtf = map(float, r[2:5])
+        # 50 steps in 0.005 s simulated: wall = 50 us, RTF = wall / 0.005 (each printed rounded)
+        assert us > 0 and rtf == pytest.approx(us * 50e-6 / 0.005, rel=0.01, abs=6e-4)
+        assert wall == pytest.approx(us * 50e-6, abs=6e-4)
+    report = json.loads((tmp_path / "c.json").read_text())
+    assert report["steps"] == 50 and len(report["rows"]) == len(rows)
+    assert re.search(rf"peak memory \(max RSS of this process\): {NUMBER} MiB", out)
+
+
+def test_bench_peers_prints_tapmp_ecos_libcosim_and_the_c_loop(native_built, tmp_path):
+    out = bench("bench_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.01", "--repeat", "1",
+                tmp_path=tmp_path)
+    rows = table(out, "master")
+    assert [r[0] for r in rows] == ["tapmp (Python loop)", "tapmp (compiled core)", "Ecos (ecospy)",
+                                    "libcosim (libcosimpy)", "C loop, all outputs", "C loop (c_master.c)"]
+    assert all(float(r[1]) > 0 for r in rows) and rows[-1][2] == "1.00"
+    assert re.search(rf"^tapmp compiled core / Ecos: {NUMBER}$", out, re.M)
+
+
+def test_bench_run_prints_the_cost_of_writing_each_format(native_built, tmp_path):
+    out = bench("bench_run.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.05", "--repeat", "1",
+                tmp_path=tmp_path)
+    rows = table(out, "configuration")
+    assert [r[0] for r in rows] == ["cosim", "run csv", "run mat"]
+    assert rows[0][3] == "1.00"
+    for r in rows[1:]:
+        assert float(r[1]) > 0 and re.fullmatch(rf"results\.(csv|mat): {NUMBER} MB", r[4])
+
+
+def test_bench_memory_prints_the_peak_of_two_runs(built, tmp_path):
+    out = bench("bench_memory.py", "--ssp", built["ssp"], "--times", "0.02", "0.04", "--json", tmp_path / "m.json",
+                tmp_path=tmp_path)
+    rows = table(out, "simulated s")
+    assert [(r[0], r[1]) for r in rows] == [("0.02", "200"), ("0.04", "400")]
+    assert all(float(r[2]) > 10 for r in rows)  # MiB of a Python process with numpy
+    assert re.search(rf"^peak memory 0.04 s / 0.02 s: {NUMBER}$", out, re.M)
+    assert json.loads((tmp_path / "m.json").read_text())["runs"][1]["steps"] == 400
+
+
+def test_throughput_prints_cases_per_minute(built, tmp_path):
+    study = tmp_path / "tiny.toml"
+    study.write_text(f'[study]\nname = "tiny"\nbase = "{ROOT / "scenarios" / "paper_simulation.toml"}"\n'
+                     f'output = "{tmp_path / "out"}"\n[set]\nstop_time = 0.01\n'
+                     '[grid]\n"gain_overrides.D" = [450.0, 900.0]\n')
+    out = bench("throughput.py", "--study", study, "--ssp", built["ssp"], "--workers", "1", tmp_path=tmp_path)
+    m = re.search(rf"^1 worker\(s\): 2 cases in ({NUMBER}) s = ({NUMBER}) cases/min, speedup x1.00 \(a case takes "
+                  rf"({NUMBER}) s on its worker; load average before the run {NUMBER}\)$", out, re.M)
+    assert m, out
+    wall, rate = float(m.group(1)), float(m.group(2))
+    # rate = 2 cases / the wall time, which is printed rounded to 0.1 s
+    assert 120 / (wall + 0.05) <= rate * 1.001 and (wall <= 0.05 or rate <= 120 / (wall - 0.05) * 1.001)
+
+
+def test_reference_run_regenerates_the_stored_reference_bit_for_bit(tmp_path):
+    out = bench("reference_run.py", "--out", tmp_path / "ref.csv", tmp_path=tmp_path)
+    assert out.strip() == f"wrote {tmp_path / 'ref.csv'}"
+    assert (tmp_path / "ref.csv").read_bytes() == (ROOT / "tests" / "data" / "reference_run.csv").read_bytes()
+
+
+def test_bench_compare_prints_compare_against_one_run(native_built, tmp_path):
+    out = bench("bench_compare.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02", "--repeat", "1",
+                tmp_path=tmp_path)
+    rows = table(out, "command")
+    assert [r[0] for r in rows] == ["tapmp run", "tapmp compare"] and all(float(r[1]) > 0 for r in rows)
+    m = re.search(rf"^compare / run: ({NUMBER})$", out, re.M)
+    # the ratio of the printed (rounded) times: as close as their last digits allow
+    assert m and float(m.group(1)) == pytest.approx(float(rows[1][1]) / float(rows[0][1]), rel=0.03)
+
+
+def test_bench_compare_times_the_stages_of_a_comparison(native_built, tmp_path):
+    out = bench("bench_compare.py", "--stages", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02",
+                "--jobs", "1", tmp_path=tmp_path)
+    rows = dict(table(out, "stage"))
+    assert list(rows) == ["imports", "stability checks", "runs", "figures", "whole comparison"]
+    parts = sum(float(rows[k]) for k in ("stability checks", "runs", "figures"))
+    assert 0 < parts <= float(rows["whole comparison"]) + 0.02
