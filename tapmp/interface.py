@@ -127,7 +127,7 @@ PLANT_VARS: tuple[Var, ...] = tuple(
 )
 
 # Gains act on the command u (command units, K_T F = u); "{i}" is the motor number.
-_GAIN_DOC = {
+GAIN_DOC = {
     "Lambda_p": ("1/m", "SC-DC Lambda_p on c (Eq. 25), APD-DC k_p on e (Eq. 38) of motor {i}, in command "
                  "units per m: the force gain is Lambda_p{i}/K_T{i} N/m"),
     "Lambda_v": ("s/m", "SC-DC Lambda_v on n (Eq. 25), APD-DC k_v on de (Eq. 38) of motor {i}, in command "
@@ -156,7 +156,7 @@ CONTROLLER_VARS: tuple[Var, ...] = tuple(
            f"units, K_T{i} F{i} = u{i}") for i in (1, 2, 3)]
     + [Var(f"e{i}", "output", "m", f"tracking error e = q_d - q of motor {i} (Eq. 15)") for i in (1, 2, 3)]
     + [Var(f"es{i}", "output", "m", f"synchronization error of motor {i} (Eq. 18)") for i in (1, 2, 3)]
-    + [Var(f"{n}{i}", "parameter", _GAIN_DOC[n][0], _GAIN_DOC[n][1].format(i=i),
+    + [Var(f"{n}{i}", "parameter", GAIN_DOC[n][0], GAIN_DOC[n][1].format(i=i),
            _DEFAULT_GAINS[n][i - 1], variability="tunable") for n in GAIN_NAMES for i in (1, 2, 3)]
     + [Var("law", "parameter", "", "control law: 0 = SC-DC (Eq. 25), 1 = APD-DC (Eq. 38), "
            "2 = PID-DC (modal PID on e)", 0, type="Integer", variability="tunable"),

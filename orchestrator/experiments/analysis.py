@@ -61,7 +61,7 @@ from scipy import linalg
 from tapmp.modal import MODES
 
 from .scenario import ScenarioError
-from .stability import OneStepMap, _invariant_basis, verdict_for
+from .stability import OneStepMap, invariant_basis, verdict_for
 
 F_SCALE = 1e-3  # [N] finite-difference step of the plant-input force (as stability's F_held)
 BREAK_POINTS = ("motor 1", "motor 2", "motor 3", "common", "diff. Z", "diff. B")
@@ -118,7 +118,7 @@ class SplitLoop:
             m.plant.state = [float(v) for v in x0[:6] - d]
             qm = np.array(m.plant.joint_positions())
             Ce[:, j] = -(qp - qm) / 2.0
-        T = _invariant_basis(m)
+        T = invariant_basis(m)
         self.A, self.B, self.C, self.D = T.T @ A @ T, T.T @ B, C @ T, D
         self.Ce = Ce @ T
         self.names = m.names

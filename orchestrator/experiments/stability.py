@@ -256,7 +256,7 @@ def _removed_directions(m: OneStepMap) -> list:
             + ([(1.0, -1.0, 0.0), (1.0, 1.0, -2.0)] if mg.ki_d == 0.0 else []))
 
 
-def _invariant_basis(m: OneStepMap) -> np.ndarray:
+def invariant_basis(m: OneStepMap) -> np.ndarray:
     """Orthonormal basis (scaled coordinates) of the complement of the removed directions."""
     n = len(m.names)
     removed = _removed_directions(m)
@@ -283,7 +283,7 @@ def check(scenario: Scenario) -> StabilityReport:
     m = OneStepMap(scenario, linear=True)
     x0 = m.start_state()
     A = m.jacobian(x0)
-    T = _invariant_basis(m)
+    T = invariant_basis(m)
     eig = linalg.eigvals(T.T @ A @ T)
     eig = sorted(eig, key=lambda z: -abs(z))
     rho = float(abs(eig[0])) if eig else 0.0

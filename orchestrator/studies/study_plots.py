@@ -38,7 +38,7 @@ def key_label(key: str) -> str:
     """Axis label of a swept scenario key: its quantity and unit, e.g. "gain_overrides.D" ->
     "D, error-filter gain (all motors) [1/s]", "plant.k_pull" -> "k_pull, mutual pulling
     stiffness ... [N/m]"; the unit from tapmp/interface.py ("-" for a number without unit)."""
-    from tapmp.interface import _GAIN_DOC, ELEMENT, VARIABLES
+    from tapmp.interface import GAIN_DOC, ELEMENT, VARIABLES
     head, _, name = key.partition(".")
     if not name:
         if key in _TOP_KEYS:
@@ -46,11 +46,11 @@ def key_label(key: str) -> str:
             return f"{what} [{unit}]"
         return f"{key} [-]"
     if head == "gain_overrides":
-        base = name.rstrip("123") if name not in _GAIN_DOC else name
-        if base in _GAIN_DOC:
+        base = name.rstrip("123") if name not in GAIN_DOC else name
+        if base in GAIN_DOC:
             motor = name[len(base):]
             where = f"motor {motor}" if motor else "all motors"
-            return f"{_GAIN_NAMES.get(base, base)} ({where}) [{_GAIN_DOC[base][0] or '-'}]"
+            return f"{_GAIN_NAMES.get(base, base)} ({where}) [{GAIN_DOC[base][0] or '-'}]"
         head = "controller"
     for fmu, element in ELEMENT.items():
         if element == head:

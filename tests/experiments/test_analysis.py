@@ -16,7 +16,7 @@ from orchestrator.cli import main
 from orchestrator.experiments.analysis import (BREAK_POINTS, SplitLoop, analyze, break_directions, frequency_grid,
                                                margins)
 from orchestrator.experiments.scenario import ScenarioError, load
-from orchestrator.experiments.stability import OneStepMap, _invariant_basis, check
+from orchestrator.experiments.stability import OneStepMap, invariant_basis, check
 
 from conftest import PAPER
 
@@ -40,7 +40,7 @@ def scaled_radius(scenario, v, k: float) -> float:
     F0 = seen[0]
     P = np.eye(3) + (k - 1.0) * np.outer(v, v)
     m.plant.step = lambda t, h, *F: step(t, h, *(F0 + P @ (np.array(F) - F0)))
-    T = _invariant_basis(m)
+    T = invariant_basis(m)
     return float(max(abs(linalg.eigvals(T.T @ m.jacobian(x0) @ T))))
 
 

@@ -10,7 +10,7 @@ import pytest
 from orchestrator import cli
 from orchestrator.cli import main
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 
 

@@ -9,7 +9,7 @@ from orchestrator.experiments.config import build
 from orchestrator.experiments.scenario import Scenario, ScenarioError, create, from_dict, read_gains_file
 from orchestrator.studies.study import StudyError, load_study
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 SC_DC = ROOT / "docs" / "tuning" / "sc-dc.toml"
 
