@@ -21,7 +21,7 @@ import hashlib
 import os
 import sys
 import tempfile
-from ctypes import POINTER, Structure, c_double, c_int32, c_int64, c_uint32, c_void_p
+from ctypes import POINTER, Structure, c_double, c_int32, c_int64, c_void_p
 from pathlib import Path
 
 SOURCE = Path(__file__).with_name("stepper.c")
