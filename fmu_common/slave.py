@@ -152,7 +152,9 @@ class TapmpSlave(Fmi2Slave):
             return str(err)  # the runtime adds the time
         return None
 
-    def fmi2_step(self, t, h):
+    def fmi2_do_step(self, t, h):
+        """The step from t to t + h [s]: None, the message of a bad value, or a status (int) the
+        model answers with (nothing is published or logged then)."""
         try:
             self.step(t, h)
         except ModelInputError as err:
@@ -162,7 +164,7 @@ class TapmpSlave(Fmi2Slave):
     def fmi2_retune_step(self, t, h):
         """The step at which tunable parameters set since the last one take effect."""
         self.retune = True
-        return self.fmi2_step(t, h)
+        return self.fmi2_do_step(t, h)
 
     def fmi2_hidden(self) -> str:
         # json keeps floats exact (the shortest repr round-trips) and, unlike pickle, is safe to load.
@@ -180,5 +182,10 @@ class TapmpSlave(Fmi2Slave):
     def get_integer(self, vrs):
         return [self.ints[vr] for vr in vrs]
 
-    def do_step(self, current_time, step_size):  # Fmi2Slave's abstract method; the runtime calls fmi2_step
-        return self.fmi2_step(current_time, step_size) is None
+    def fmi2_reject_input(self, vr, value):
+        """A non-finite value for input ``vr``: None (the runtime refuses it with an error), or
+        a status (int) the model answers with, the value being ignored."""
+        return None
+
+    def do_step(self, current_time, step_size):  # Fmi2Slave's abstract method; the runtime calls fmi2_do_step
+        return self.fmi2_do_step(current_time, step_size) is None

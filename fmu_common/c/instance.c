@@ -319,6 +319,10 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     }
     int stepped = model_step(inst, t, h, out, msg, sizeof msg);
     inst->retune = 0;  /* after model_step, which may read it (the Python models rebuild on it) */
+    if (stepped < 0) {  /* a status the model answered with: nothing published, nothing logged */
+        inst->m = before;
+        return -stepped;
+    }
     if (!stepped) {
         inst->m = before;
         return tapmp_fail(inst, "%s", msg);
@@ -478,6 +482,7 @@ static int check_tunable(tapmp_instance *inst, unsigned vr, double old_real, int
 int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[], size_t nv)
 {
     char text[40];
+    int worst = ST_OK;
     const char *call = call_name(inst, 1, 'R');
     int status = check_arrays(inst, call, vr, n, v, nv);
     if (status != ST_OK) return status;
@@ -485,13 +490,20 @@ int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const do
         if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, call, vr[i], 'R');
         status = settable(inst, vr[i], v[i], call);
         if (status != ST_OK) return status;
-        if (!isfinite(v[i])) return tapmp_invalid(inst, VARS[vr[i]].name, tapmp_repr(v[i], text), "a finite number", 1);
+        if (!isfinite(v[i])) {
+            int answer = model_input_status(inst, vr[i], v[i]);  /* a status the model answers with, or -1 */
+            if (answer >= 0) {  /* the value is ignored */
+                if (answer > worst) worst = answer;
+                continue;
+            }
+            return tapmp_invalid(inst, VARS[vr[i]].name, tapmp_repr(v[i], text), "a finite number", 1);
+        }
         double old = inst->reals[vr[i]];
         inst->reals[vr[i]] = v[i];
         inst->dirty |= inst->mode == MODE_INITIALIZATION;
         if ((status = check_tunable(inst, vr[i], old, inst->ints[vr[i]])) != ST_OK) return status;
     }
-    return ST_OK;
+    return worst;
 }
 
 int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[], size_t nv)

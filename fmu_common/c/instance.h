@@ -123,7 +123,8 @@ TAPMP_LINKAGE void model_setup(tapmp_instance *inst);
 /* Outputs that depend on inputs at the end of initialization (controller); 0 + msg on error. */
 TAPMP_LINKAGE int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size);
 /* Advance from t to t + h [s]; compute the outputs into out (MODEL_N_OUT values, in the
- * order of the output block) without publishing; 0 + msg on error. */
+ * order of the output block) without publishing; 1, or 0 + msg on error, or -status for a
+ * status the model answers with itself (nothing published or logged: a Python model may). */
 TAPMP_LINKAGE int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
 /* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. */
 TAPMP_LINKAGE void model_get_hidden(const tapmp_instance *inst, double hidden[]);
@@ -139,7 +140,10 @@ TAPMP_LINKAGE int model_prepare(const char *resource_location, char *why, size_t
 TAPMP_LINKAGE int model_instantiate(tapmp_instance *inst, const char *resource_location, int visible);
 TAPMP_LINKAGE void model_capture(tapmp_instance *inst);
 TAPMP_LINKAGE void model_free(tapmp_instance *inst);
+/* A non-finite value for input vr: -1 (refused with the error), or a status the model answers with. */
+TAPMP_LINKAGE int model_input_status(tapmp_instance *inst, unsigned vr, double value);
 #else
+#define model_input_status(inst, vr, value) ((void)(inst), (void)(vr), (void)(value), -1)
 #define model_prepare(resource_location, why, size) ((void)(resource_location), (void)(why), (void)(size), 1)
 #define model_instantiate(inst, resource_location, visible) ((void)(resource_location), (void)(visible), 1)
 #define model_capture(inst) ((void)(inst))

@@ -391,14 +391,16 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
     py_backend *B = begin(inst, &gil);
     if (!B) return snprintf(msg, size, "%s", inst->error), 0;
     PyObject *args[3] = {B->slave, PyFloat_FromDouble(t), PyFloat_FromDouble(h)};
-    PyObject *name = PyUnicode_FromString(inst->retune ? "fmi2_retune_step" : "fmi2_step");
+    PyObject *name = PyUnicode_FromString(inst->retune ? "fmi2_retune_step" : "fmi2_do_step");
     PyObject *r = args[1] && args[2] && name ?
                   PyObject_VectorcallMethod(name, args, 3 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL) : NULL;
     Py_XDECREF(name);
     Py_XDECREF(args[1]);
     Py_XDECREF(args[2]);
-    int ok = checked(inst, r, "step", msg, size);
-    if (ok) outputs_from(B, out);
+    long answer = r && PyLong_Check(r) ? PyLong_AsLong(r) : 0;  /* a status the model answers with */
+    if (answer > 0) Py_CLEAR(r);
+    int ok = answer > 0 ? -(int)answer : checked(inst, r, "step", msg, size);
+    if (ok == 1) outputs_from(B, out);
     changed(inst, B);
     end(inst, B, gil);
     return ok;
@@ -447,4 +449,17 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
         return;
     }
     end(inst, B, gil);
+}
+
+int model_input_status(tapmp_instance *inst, unsigned vr, double value)
+{
+    PyGILState_STATE gil;
+    py_backend *B = begin(inst, &gil);
+    if (!B) return -1;
+    PyObject *r = PyObject_CallMethod(B->slave, "fmi2_reject_input", "Id", vr, value);
+    long answer = r && PyLong_Check(r) ? PyLong_AsLong(r) : -1;
+    if (!r) log_exception(inst, "fmi2_reject_input");
+    Py_XDECREF(r);
+    end(inst, B, gil);
+    return answer >= 0 && answer <= ST_FATAL ? (int)answer : -1;
 }
