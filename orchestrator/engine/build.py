@@ -7,9 +7,10 @@ adds them from the variable tables in ``tapmp.interface`` (one source of truth).
 
 pythonfmu 0.7's binary cannot return fmi2Error (a Python exception becomes fmi2Fatal and
 corrupts the host interpreter), needs libpython already in the host process, and costs
-a Python call per getReal/setReal. So the FMUs ship the binary in ``fmu_common/native``
-instead, compiled here by the project's C compiler (zig cc from the ziglang package, or $CC;
-orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
+a Python call per getReal/setReal. So the FMUs ship their own binary instead: the native
+FMUs' runtime (``fmu_common/c``) with model operations that call Python
+(``fmu_common/native``), compiled here by the project's C compiler (zig cc from the ziglang
+package, or $CC; orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
 """
 
 import shutil
