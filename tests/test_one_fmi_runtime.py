@@ -98,4 +98,4 @@ def test_the_pythonfmu_and_native_fmi2_binaries_answer_bad_calls_alike(model, bu
     assert by_call["doStep of the freed instance"] == (3, -1.0, [])  # refused without touching it
     assert by_call["doStep of a foreign instance"] == (3, -1.0, [])
     assert any("FMUstate is invalid" in m for _, m in by_call["setFMUstate of a foreign state"][2])
-    assert len(python) == len(native) == 25 and [s for _, s, _, _ in native].count(3) >= 13
+    assert len(python) == len(native) == 26 and [s for _, s, _, _ in native].count(3) >= 13
