@@ -1,7 +1,7 @@
 /* FMI 2.0 co-simulation interface of a TAPMP FMU, native or pythonfmu: maps every fmi2
- * function onto the version-neutral instance (instance.c). Functions a co-simulation FMU of this kind does
- * not support (Boolean/String variables, derivatives, asynchronous steps) return
- * fmi2Error with a message. */
+ * function onto the version-neutral instance (instance.c). Functions a co-simulation FMU
+ * of this kind does not support (Boolean/String variables, derivatives, asynchronous
+ * steps) return fmi2Error with a message. */
 #include <stdlib.h>
 #include <string.h>
 
