@@ -1,7 +1,7 @@
-/* FMI 2.0 co-simulation interface of a native TAPMP FMU: maps every fmi2 function onto the
- * version-neutral instance (instance.c). Functions a co-simulation FMU of this kind does
- * not support (Boolean/String variables, derivatives, asynchronous steps) return
- * fmi2Error with a message. */
+/* FMI 2.0 co-simulation interface of a TAPMP FMU, native or pythonfmu: maps every fmi2
+ * function onto the version-neutral instance (instance.c). Functions a co-simulation FMU
+ * of this kind does not support (Boolean/String variables, derivatives, asynchronous
+ * steps) return fmi2Error with a message. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -38,7 +38,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    (void)fmuResourceLocation, (void)visible;
     fmi2_env *env = calloc(1, sizeof *env);
     if (!env) return NULL;
     if (functions) {
@@ -53,7 +52,19 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free(env);
         return NULL;
     }
+    char why[1024];
+    if (!model_prepare(fmuResourceLocation, why, sizeof why)) {
+        if (env->cb.logger)
+            env->cb.logger(env->cb.componentEnvironment, instanceName, fmi2Error, "logStatusError",
+                           "fmi2Instantiate: %s", why);
+        free(env);
+        return NULL;
+    }
     tapmp_instance *inst = tapmp_new(instanceName, "fmi2", logger, env, loggingOn, fmuGUID);
+    if (inst && !model_instantiate(inst, fmuResourceLocation, visible)) {
+        tapmp_free(inst);
+        inst = NULL;
+    }
     if (!inst) free(env);
     return inst;
 }
@@ -63,6 +74,7 @@ void fmi2FreeInstance(fmi2Component c)
     tapmp_instance *inst = (tapmp_instance *)c;
     if (!tapmp_alive(inst)) return;  /* a second free, or not ours: ignored */
     void *env = inst->env;
+    model_free(inst);
     tapmp_free(inst);
     free(env);
 }

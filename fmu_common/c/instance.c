@@ -1,5 +1,5 @@
-/* Version-neutral FMU instance; see instance.h. The rules it enforces, the same as the
- * pythonfmu family's (fmu_common/slave.py):
+/* Version-neutral FMU instance; see instance.h. The rules it enforces, for every family
+ * (the native models and the pythonfmu backend supply only the model operations):
  * - bad input is an error status at the call that receives it, with one logged message
  *   naming the variable, the value, the time and what is allowed; after an error every
  *   doStep is refused, so no stale or non-finite value travels on;
@@ -242,6 +242,7 @@ static int setup(tapmp_instance *inst)
     memcpy(saved, inst->reals + MODEL_OUT_FIRST, sizeof saved);
     model_setup(inst);
     inst->has_model = 1;
+    if (inst->failed) return ST_ERROR;  /* model_setup logged an error (the Python backend can) */
     if (!outputs_finite(inst, saved, inst->time, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
     return ST_OK;
 }
@@ -311,11 +312,18 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     double out[MODEL_N_OUT];
     ModelData before = inst->m;
     if (inst->retune) {  /* new tunable values take effect at this sample */
-        inst->retune = 0;
-        if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg))
+        if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg)) {
+            inst->retune = 0;
             return tapmp_fail(inst, "%s (at t = %.6g s)", msg, t);
+        }
     }
-    if (!model_step(inst, t, h, out, msg, sizeof msg)) {
+    int stepped = model_step(inst, t, h, out, msg, sizeof msg);
+    inst->retune = 0;  /* after model_step, which may read it (the Python models rebuild on it) */
+    if (stepped < 0) {  /* a status the model answered with: nothing published, nothing logged */
+        inst->m = before;
+        return -stepped;
+    }
+    if (!stepped) {
         inst->m = before;
         return tapmp_fail(inst, "%s", msg);
     }
@@ -474,6 +482,7 @@ static int check_tunable(tapmp_instance *inst, unsigned vr, double old_real, int
 int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const double v[], size_t nv)
 {
     char text[40];
+    int worst = ST_OK;
     const char *call = call_name(inst, 1, 'R');
     int status = check_arrays(inst, call, vr, n, v, nv);
     if (status != ST_OK) return status;
@@ -481,13 +490,20 @@ int tapmp_set_real(tapmp_instance *inst, const unsigned vr[], size_t n, const do
         if (vr[i] >= N_VARS || VARS[vr[i]].type != 'R') return bad_vr(inst, call, vr[i], 'R');
         status = settable(inst, vr[i], v[i], call);
         if (status != ST_OK) return status;
-        if (!isfinite(v[i])) return tapmp_invalid(inst, VARS[vr[i]].name, tapmp_repr(v[i], text), "a finite number", 1);
+        if (!isfinite(v[i])) {
+            int answer = model_input_status(inst, vr[i], v[i]);  /* a status the model answers with, or -1 */
+            if (answer >= 0) {  /* the value is ignored */
+                if (answer > worst) worst = answer;
+                continue;
+            }
+            return tapmp_invalid(inst, VARS[vr[i]].name, tapmp_repr(v[i], text), "a finite number", 1);
+        }
         double old = inst->reals[vr[i]];
         inst->reals[vr[i]] = v[i];
         inst->dirty |= inst->mode == MODE_INITIALIZATION;
         if ((status = check_tunable(inst, vr[i], old, inst->ints[vr[i]])) != ST_OK) return status;
     }
-    return ST_OK;
+    return worst;
 }
 
 int tapmp_set_integer(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[], size_t nv)
@@ -595,6 +611,7 @@ int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
             return tapmp_fail(inst, "%s: out of memory", state_call(inst, GET_STATE));
         s->magic = STATE_MAGIC;
     }
+    if (inst->has_model) model_capture(inst);
     s->copy = *inst;
     *state = s;
     return ST_OK;

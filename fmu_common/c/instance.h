@@ -1,7 +1,9 @@
-/* The FMI-version-neutral part of a native TAPMP FMU: one instance's values, the
+/* The FMI-version-neutral part of every TAPMP FMU: one instance's values, the
  * co-simulation state machine, error reporting and the FMU state. fmi2_api.c and
- * fmi3_api.c map the FMI 2.0 and 3.0 functions onto it; the model file (plant.c,
- * controller.c or trajectory.c) supplies the hooks declared at the end.
+ * fmi3_api.c map the FMI 2.0 and 3.0 functions onto it. The model operations declared at
+ * the end are supplied by the model file: in C for the native FMUs (plant.c, controller.c
+ * or trajectory.c), by calling into Python for the pythonfmu FMUs
+ * (fmu_common/native/python_model.c), so both families follow the same rules.
  *
  * The variable table (names, causality, variability, type, start, min, max; the value
  * reference is the index) is generated from tapmp/interface.py into model_vars.h at
@@ -43,6 +45,7 @@ typedef struct tapmp_instance {
     int logging_on;
     unsigned magic;         /* INSTANCE_MAGIC while alive (double free detection) */
     struct tapmp_state **states;  /* the FMU states this instance handed out and has not freed */
+    void *backend;          /* the model's resources outside the instance (the Python object), or NULL */
     size_t n_states, max_states;
     /* everything below is the FMU state */
     tapmp_mode mode;
@@ -120,10 +123,31 @@ TAPMP_LINKAGE void model_setup(tapmp_instance *inst);
 /* Outputs that depend on inputs at the end of initialization (controller); 0 + msg on error. */
 TAPMP_LINKAGE int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size);
 /* Advance from t to t + h [s]; compute the outputs into out (MODEL_N_OUT values, in the
- * order of the output block) without publishing; 0 + msg on error. */
+ * order of the output block) without publishing; 1, or 0 + msg on error, or -status for a
+ * status the model answers with itself (nothing published or logged: a Python model may). */
 TAPMP_LINKAGE int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
 /* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. */
 TAPMP_LINKAGE void model_get_hidden(const tapmp_instance *inst, double hidden[]);
 TAPMP_LINKAGE void model_set_hidden(tapmp_instance *inst, const double hidden[]);
+
+/* A model whose instances hold resources outside the instance (the pythonfmu family: a
+ * Python object) defines MODEL_OWN_RESOURCES in its header and these; for the others they
+ * do nothing. model_prepare runs before the instance exists (0 + why on failure: logged as
+ * the fmi2Instantiate error); model_instantiate sets inst->backend (0 on failure, logged);
+ * model_capture brings the hidden state into inst->m before an FMU state copies it. */
+#ifdef MODEL_OWN_RESOURCES
+TAPMP_LINKAGE int model_prepare(const char *resource_location, char *why, size_t size);
+TAPMP_LINKAGE int model_instantiate(tapmp_instance *inst, const char *resource_location, int visible);
+TAPMP_LINKAGE void model_capture(tapmp_instance *inst);
+TAPMP_LINKAGE void model_free(tapmp_instance *inst);
+/* A non-finite value for input vr: -1 (refused with the error), or a status the model answers with. */
+TAPMP_LINKAGE int model_input_status(tapmp_instance *inst, unsigned vr, double value);
+#else
+#define model_input_status(inst, vr, value) ((void)(inst), (void)(vr), (void)(value), -1)
+#define model_prepare(resource_location, why, size) ((void)(resource_location), (void)(why), (void)(size), 1)
+#define model_instantiate(inst, resource_location, visible) ((void)(resource_location), (void)(visible), 1)
+#define model_capture(inst) ((void)(inst))
+#define model_free(inst) ((void)(inst))
+#endif
 
 #endif

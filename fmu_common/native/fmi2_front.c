@@ -5,7 +5,9 @@
  * as FMPy or libcosimpy already has it; a C host gets the libpython recorded at build
  * time in python-env.txt, or $TAPMP_LIBPYTHON, loaded RTLD_GLOBAL so that numpy's
  * extension modules find it too), then loads the Python binding tapmp_fmi2_python.so
- * from the same folder and forwards every call to it. Nothing is ever unloaded: the
+ * from the same folder and forwards every call to it: that binding is the native FMUs'
+ * runtime (fmu_common/c: fmi2_api.c, instance.c, which refuse a freed or foreign instance)
+ * with the Python model operations of python_model.c. Nothing is ever unloaded: the
  * embedded interpreter lives until the process exits (finalizing it while numpy's native
  * libraries are loaded is what crashes hosts at exit). */
 #define _GNU_SOURCE  /* dladdr, RTLD_DEFAULT */
@@ -16,7 +18,7 @@
 
 #define BACKEND "tapmp_fmi2_python.so"
 
-/* Every forwarded function: backend symbol tapmp_<name>, with the FMI signature. */
+/* Every forwarded function: the backend's fmi2<name>. */
 #define TAPMP_FORWARDED(X)                                                                     \
     X(Instantiate) X(FreeInstance) X(SetDebugLogging) X(SetupExperiment)                       \
     X(EnterInitializationMode) X(ExitInitializationMode) X(Terminate) X(Reset) X(GetReal)     \
@@ -30,9 +32,6 @@
 static struct { TAPMP_FORWARDED(TAPMP_POINTER) } backend;
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
 static int loaded;
-#define MAX_LIVE 4096
-static fmi2Component live[MAX_LIVE];
-static int n_live;
 
 static void find_libpython(const char *key, const char *value, void *ctx)
 {
@@ -69,8 +68,8 @@ static int load_backend(char *why, size_t size)
         return 0;
     }
 #define TAPMP_RESOLVE(name)                                                                    \
-    if (!(backend.name = (fmi2##name##TYPE *)dlsym(lib, "tapmp_" #name))) {                    \
-        snprintf(why, size, "%s lacks tapmp_" #name, path);                                     \
+    if (!(backend.name = (fmi2##name##TYPE *)dlsym(lib, "fmi2" #name))) {                      \
+        snprintf(why, size, "%s lacks fmi2" #name, path);                                       \
         return 0;                                                                              \
     }
     TAPMP_FORWARDED(TAPMP_RESOLVE)
@@ -95,49 +94,20 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               "logStatusError", why);
         return NULL;
     }
-    fmi2Component c = backend.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
-                                          functions, visible, loggingOn);
-    if (c) {
-        pthread_mutex_lock(&load_lock);
-        int added = n_live < MAX_LIVE;
-        if (added) live[n_live++] = c;
-        pthread_mutex_unlock(&load_lock);
-        if (!added) {
-            backend.FreeInstance(c);
-            c = NULL;
-        }
-    }
-    return c;
+    return backend.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible,
+                               loggingOn);
 }
 
-/* Live instances: a call on, or a free of, a component that is not live (freed already,
- * or a stray pointer) is refused without touching it. Kept compact: the check on every
- * call scans only the live instances of this FMU in the process. */
-static int alive(fmi2Component c)
-{
-    for (int i = n_live - 1; i >= 0; i--)
-        if (live[i] == c) return 1;
-    return 0;
-}
-
+/* Before the first fmi2Instantiate no instance exists: any other call is refused. */
 void fmi2FreeInstance(fmi2Component c)
 {
-    pthread_mutex_lock(&load_lock);
-    int found = 0;
-    for (int i = 0; i < n_live; i++)
-        if (live[i] == c) {
-            live[i] = live[--n_live];
-            found = 1;
-            break;
-        }
-    pthread_mutex_unlock(&load_lock);
-    if (found) backend.FreeInstance(c);  /* a second free, or not ours: ignored */
+    if (loaded) backend.FreeInstance(c);
 }
 
 #define TAPMP_FORWARD(name, params, args)                                                      \
     fmi2Status fmi2##name params                                                               \
     {                                                                                          \
-        return alive(c) ? backend.name args : fmi2Error;                                       \
+        return loaded ? backend.name args : fmi2Error;                                       \
     }
 
 TAPMP_FORWARD(SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]),

@@ -7,9 +7,10 @@ adds them from the variable tables in ``tapmp.interface`` (one source of truth).
 
 pythonfmu 0.7's binary cannot return fmi2Error (a Python exception becomes fmi2Fatal and
 corrupts the host interpreter), needs libpython already in the host process, and costs
-a Python call per getReal/setReal. So the FMUs ship the binary in ``fmu_common/native``
-instead, compiled here by the project's C compiler (zig cc from the ziglang package, or $CC;
-orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
+a Python call per getReal/setReal. So the FMUs ship their own binary instead: the native
+FMUs' runtime (``fmu_common/c``) with model operations that call Python
+(``fmu_common/native``), compiled here by the project's C compiler (zig cc from the ziglang
+package, or $CC; orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
 """
 
 import shutil
@@ -37,6 +38,7 @@ SCRIPTS = {
 }
 BUNDLED_PACKAGES = (ROOT / "tapmp", ROOT / "fmu_common")
 NATIVE = ROOT / "fmu_common" / "native"
+RUNTIME = ROOT / "fmu_common" / "c"
 PLATFORM = "linux64"
 BINDING = "tapmp_fmi2_python.so"     # name the front binary loads (fmi2_front.c BACKEND)
 PYTHON_ENV = "python-env.txt"        # read by both binaries (python_env.h)
@@ -117,25 +119,63 @@ def python_headers() -> Path:
     return include
 
 
-def compile_binaries(dest: Path) -> tuple[Path, Path]:
-    """Compile the FMI front (no Python dependency) and the Python binding into dest.
+def python_model_vars(model: str) -> str:
+    """model_vars.h of ``model``'s pythonfmu binary: the native FMUs' table (build_native.py)
+    with the Python model's data (python_model.h), its output block, and the fmuGUID read
+    from resources/guid.txt at run time (pythonfmu makes a new one per build)."""
+    from .build_native import MODEL_FILES, model_vars_header
+    outputs = [vr for vr, v in enumerate(VARIABLES[model]) if v.causality == "output"]
+    if outputs != list(range(outputs[0], outputs[0] + len(outputs))):
+        raise BuildError(f"the outputs of {model} are not contiguous: the runtime publishes them as one block")
+    text = model_vars_header(model).replace(f'#include "{MODEL_FILES[model][1].name}"', '#include "python_model.h"')
+    lines = [("#define INSTANTIATION_TOKEN tapmp_python_token" if line.startswith("#define INSTANTIATION_TOKEN ")
+              else line) for line in text.splitlines()]
+    at = lines.index("#endif")
+    lines[at:at] = [f"#define MODEL_N_OUT {len(outputs)}", f"#define MODEL_OUT_FIRST {outputs[0]}"]
+    return "\n".join(lines) + "\n"
 
-    Returns (front, binding). The binding is built against this interpreter's headers
-    and deliberately not linked to libpython: in a Python host it uses the host's, in a
-    C host the front loads the recorded one first (RTLD_GLOBAL).
+
+# The pythonfmu binding as one translation unit: the native runtime with the Python model operations.
+PYTHON_UNITY = """#define _GNU_SOURCE /* dladdr */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#define TAPMP_LINKAGE static __attribute__((unused))
+#define TAPMP_DEFINITION static
+#include "instance.c"
+#include "python_model.c"
+#include "fmi2_api.c"
+"""
+
+
+def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tuple[Path, dict[str, Path]]:
+    """Compile the FMI front (no Python dependency) and, per model, the Python binding into dest.
+
+    Returns (front, {model: binding}). A binding is the native FMUs' runtime
+    (fmu_common/c/instance.c, fmi2_api.c) with model operations that call Python
+    (fmu_common/native/python_model.c), built against this interpreter's headers and
+    deliberately not linked to libpython: in a Python host it uses the host's, in a C host
+    the front loads the recorded one first (RTLD_GLOBAL).
     """
     import fmpy
 
     include = python_headers()
     fmi_headers = Path(fmpy.__file__).parent / "c-code"
     flags = ["-O2", "-Wall", "-fvisibility=hidden", "-g0"]
-    front, binding = dest / "front.so", dest / BINDING
+    front = dest / "front.so"
     # The front's fmi2 functions are its only exports (default visibility in fmi2Functions.h).
     _compile([NATIVE / "fmi2_front.c"], front, flags=flags, includes=[fmi_headers, NATIVE],
              libs=["dl", "pthread"], what="the pythonfmu FMUs' front binary")
-    _compile([NATIVE / "fmi2_python.c"], binding, flags=flags, extra=["-Wl,-z,nodelete", "-Wl,-z,lazy"],
-             includes=[fmi_headers, NATIVE, include], libs=["pthread"], what="the pythonfmu FMUs' Python binding")
-    return front, binding
+    bindings = {}
+    for model in models:
+        src = dest / f"{model}_src"
+        src.mkdir(exist_ok=True)
+        (src / "model_vars.h").write_text(python_model_vars(model))
+        (src / "python_unity.c").write_text(PYTHON_UNITY)
+        bindings[model] = dest / f"{model}_{BINDING}"
+        _compile([src / "python_unity.c"], bindings[model], flags=flags, extra=["-Wl,-z,nodelete", "-Wl,-z,lazy"],
+                 includes=[src, RUNTIME, NATIVE, fmi_headers, include], libs=["pthread"],
+                 what=f"the pythonfmu {model}'s Python binding")
+    return front, bindings
 
 
 def _rewrite_fmu(fmu: Path, transform: dict, add: dict) -> None:
@@ -177,9 +217,9 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
         fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         if binaries is None:
-            binaries = compile_binaries(Path(tmp))
+            binaries = compile_binaries(Path(tmp), (model,))
         fmu = Path(fmu)
-        front, binding = binaries
+        front, binding = binaries[0], binaries[1][model]
         where = f"binaries/{PLATFORM}/"
         with zipfile.ZipFile(fmu) as z:  # the binding checks the host's fmuGUID against resources/guid.txt
             guid = ET.fromstring(z.read("modelDescription.xml")).get("guid", "")
