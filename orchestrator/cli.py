@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from .engine import build as build_mod
-from .engine.toolchain import PLATFORMS
+from tapmp.toolchain import PLATFORMS
 from .engine.master import CoSimulationError, remove_stale_folders
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)

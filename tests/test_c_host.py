@@ -9,7 +9,7 @@ from pathlib import Path
 import fmpy
 import pytest
 
-from orchestrator.engine.toolchain import compile_c
+from tapmp.toolchain import compile_c
 from tapmp.interface import CONTROLLER, PLANT
 
 HOST_SOURCE = Path(__file__).parent / "c_host" / "fmi2_host.c"

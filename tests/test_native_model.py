@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.build_native import CFLAGS
-from orchestrator.engine.toolchain import compile_c
+from tapmp.toolchain import compile_c
 from orchestrator.experiments.scenario import load
 from tapmp import dynamics, kinematics
 from tapmp.closed_loop import simulate

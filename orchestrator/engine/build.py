@@ -9,7 +9,7 @@ pythonfmu 0.7's binary cannot return fmi2Error (a Python exception becomes fmi2F
 corrupts the host interpreter), needs libpython already in the host process, and costs
 a Python call per getReal/setReal. So the FMUs ship the binary in ``fmu_common/native``
 instead, compiled here by the project's C compiler (zig cc from the ziglang package, or $CC;
-orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
+tapmp/toolchain.py): see :func:`compile_binaries`.
 """
 
 import shutil
@@ -23,7 +23,7 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, UNITS, VARIABLES, dependencies, dependency_attributes
 
-from . import toolchain
+from tapmp import native, toolchain
 from .families import default_build_dir
 
 # The package's root: the repository in a checkout, site-packages in an installed wheel
@@ -185,6 +185,8 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
             dest = Path(tmp) / pkg.name
             shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "native"))
             staged.append(dest)
+        # the compiled C model goes with its sources: the FMU loads it, never compiles it
+        shutil.copyfile(native.library_path(), Path(tmp) / "tapmp" / "c" / native.bundled_name())
         fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         if binaries is None:

@@ -179,6 +179,48 @@ double tapmp_noise_sample(int seed, double sample, int motor)
     return sqrt(-2.0 * log(u1)) * cos(TWO_PI * u2);
 }
 
+/* Names of the real settings of tapmp_plant_config in field order (PlantConfig's fields). */
+static const char *const CONFIG_NAMES[22] = {
+    "encoder_resolution", "c_v1", "c_v2", "c_v3", "F_c1", "F_c2", "F_c3", "v_s", "force_limit", "k_pull",
+    "attraction_force", "attraction_gap", "cogging_amplitude", "cogging_pitch", "cogging_phase1",
+    "cogging_phase2", "cogging_phase3", "disturbance_force1", "disturbance_force2", "disturbance_force3",
+    "disturbance_time", "noise_rms"};
+
+int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
+                             const char **allowed)
+{
+    const double v[22] = {c->encoder_resolution, c->c_v[0], c->c_v[1], c->c_v[2], c->F_c[0], c->F_c[1],
+                          c->F_c[2], c->v_s, c->force_limit, c->k_pull, c->attraction_force,
+                          c->attraction_gap, c->cogging_amplitude, c->cogging_pitch, c->cogging_phase[0],
+                          c->cogging_phase[1], c->cogging_phase[2], c->disturbance_force[0],
+                          c->disturbance_force[1], c->disturbance_force[2], c->disturbance_time,
+                          c->noise_rms};
+    static const int positive[3] = {7, 11, 13};  /* v_s, attraction_gap, cogging_pitch */
+    for (int i = 0; i < 22; i++) {
+        /* k_pull (< 0: negative stiffness), the phases and the force steps may be negative */
+        int finite_only = i == 9 || (i >= 14 && i <= 19);
+        if (!(isfinite(v[i]) && (finite_only || v[i] >= 0.0))) {
+            *name = CONFIG_NAMES[i], *value = v[i];
+            *allowed = finite_only ? "a finite number" : "a finite number >= 0";
+            return 1;
+        }
+    }
+    for (int k = 0; k < 3; k++)
+        if (v[positive[k]] <= 0.0) {
+            *name = CONFIG_NAMES[positive[k]], *value = v[positive[k]], *allowed = "a finite number > 0";
+            return 1;
+        }
+    if (c->substeps < 1) {
+        *name = "substeps", *value = c->substeps, *allowed = "an integer >= 1";
+        return 2;
+    }
+    if (c->noise_seed < 0) {  /* the int type caps it at 2147483647 */
+        *name = "noise_seed", *value = c->noise_seed, *allowed = "an integer in [0, 2147483647]";
+        return 2;
+    }
+    return 0;
+}
+
 /* plant.PlantModel.__init__ (state and reference gaps; ranges are checked by the caller) */
 void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3])
 {

@@ -100,6 +100,12 @@ TAPMP_LINKAGE void tapmp_generalized_force(double B, double dB, const double xdd
 TAPMP_LINKAGE double tapmp_quantize(double q, double resolution);
 /* Standard normal number for (seed, sample index, motor 0..2), counter-based (plant.noise_sample). */
 TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
+/* The ranges of the plant's settings, in the order of tapmp.plant.PlantConfig's fields (its
+ * validated() and the native FMU check with this): 0 if all are allowed, else 1 for a real
+ * setting or 2 for an integer one (substeps, noise_seed), with its name, its value and what is
+ * allowed (the text of the one-line message "NAME = VALUE is invalid: allowed is ALLOWED"). */
+TAPMP_LINKAGE int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
+                                           const char **allowed);
 /* Set the initial state, the reference gaps of the pulling law and the sample count. */
 TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
