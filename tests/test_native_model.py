@@ -35,7 +35,7 @@ from tapmp.errors import KinematicDomainError
 from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel
 from tapmp.toolchain import compile_c
-from tapmp.trajectory import TrajectoryParams, reference
+from tapmp.trajectory import TrajectoryParams, _c_trajectory, circle_reference, move_plan, move_reference
 
 ROOT = Path(__file__).resolve().parent.parent
 MODEL_HEADER = ROOT / "tapmp" / "c" / "tapmp_model.h"
@@ -81,8 +81,8 @@ def c_gains(g: Gains, m: ModalGains = ModalGains()):
 
 
 def c_trajectory(tp: TrajectoryParams):
-    n = len(FFI.typeof("tapmp_trajectory").fields)
-    return FFI.new("tapmp_trajectory *", tuple(map(float, tp[:n])))  # the circle's fields; a move is trajectory.c's
+    """tp as tapmp_trajectory, its move planned by the C (tapmp_move_plan)."""
+    return _c_trajectory(tp)
 
 
 def c_controller_state():
@@ -884,7 +884,27 @@ def test_reference_trajectory_matches_python(native):
     rng, check = np.random.default_rng(501), Agreement("tapmp_reference")
     for _ in range(N_STATES):
         tp, t = random_trajectory(rng), u(rng, 0.0, 10.0)
-        check.check(native.reference(t, c_trajectory(tp)), reference(t, tp), (t, tp))
+        check.check(native.reference(t, c_trajectory(tp)), circle_reference(t, tp), (t, tp))
+    check.done()
+
+
+@pytest.mark.parametrize("profile", (1, 2, 3), ids=("step", "ramp", "s-curve"))
+def test_point_to_point_moves_match_python(native, profile):
+    """Random moves (some axes not moving, short ones that never reach a limit) sampled at random
+    times before, during and after: tapmp_move_plan and tapmp_reference against move_plan and
+    move_reference."""
+    rng, check = np.random.default_rng(502 + profile), Agreement("tapmp_move_plan + tapmp_reference")
+    for i in range(N_STATES // 10):
+        a = (u(rng, -0.02, 0.02), u(rng, -0.02, 0.02), u(rng, -0.3, 0.3))
+        b = tuple(x if rng.random() < 0.2 else x + u(rng, -10.0, 10.0) ** 3 * 1e-5 for x in a)
+        limits = {f"{k}_max_{ax}": u(rng, 0.3, 3.0) * base for k, base in (("v", 0.1), ("a", 1.0), ("j", 100.0))
+                  for ax in "XZB"}
+        tp = TrajectoryParams(profile=profile, X_a=a[0], Z_a=a[1], B_a=a[2], X_b=b[0], Z_b=b[1], B_b=b[2],
+                              t_move=u(rng, 0.0, 0.1), **limits)
+        c = c_trajectory(tp)
+        end = tp.t_move + max(p.T for p in move_plan(tp)) + 0.01
+        for t in (*(u(rng, 0.0, end) for _ in range(10)), 0.0, end):
+            check.check(native.reference(t, c), move_reference(t, tp), (t, tp))
     check.done()
 
 

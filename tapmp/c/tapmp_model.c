@@ -477,8 +477,8 @@ int tapmp_sample_index(double t, double t0, double T_s, double *k)
     return fabs(t - (t0 + *k * T_s)) <= TAPMP_SAMPLE_TOLERANCE * T_s;
 }
 
-/* trajectory.reference */
-void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
+/* trajectory.circle_reference */
+static void circle_reference(double t, const tapmp_trajectory *tp, double ref[9])
 {
     double w = TWO_PI * tp->f_xz, th = w * t + tp->phase_xz;
     double s = sin(th), c = cos(th), R = tp->radius;
@@ -493,4 +493,124 @@ void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
     ref[6] = -R * w * w * s;
     ref[7] = -R * w * w * c;
     ref[8] = -A * wb * wb * sb;
+}
+
+/* tapmp.trajectory.scurve_times: phase times of the rest-to-rest S-curve over D > 0. */
+static void scurve_times(double D, double V, double A, double J, double *Tj_, double *Ta_, double *Tv_)
+{
+    double Tj, Ta;
+    if (V * J >= A * A) {
+        Tj = A / J;
+        Ta = Tj + V / A;
+    } else {
+        Tj = sqrt(V / J);
+        Ta = 2.0 * Tj;
+    }
+    double vlim = J * Tj * (Ta - Tj);
+    double Tv = D / vlim - Ta;
+    if (Tv >= 0.0) {
+        *Tj_ = Tj, *Ta_ = Ta, *Tv_ = Tv;
+        return;
+    }
+    Tj = A / J;
+    if (D >= 2.0 * A * A * A / (J * J)) {
+        double v = (sqrt(A * A * A * A / (J * J) + 4.0 * D * A) - A * A / J) / 2.0;
+        Ta = Tj + v / A;
+    } else {
+        Tj = pow(D / (2.0 * J), 1.0 / 3.0);
+        Ta = 2.0 * Tj;
+    }
+    *Tj_ = Tj, *Ta_ = Ta, *Tv_ = 0.0;
+}
+
+/* tapmp.trajectory.move_plan */
+void tapmp_move_plan(int profile, const double q0s[3], const double q1s[3], const double v_max[3],
+                     const double a_max[3], const double j_max[3], tapmp_axis_plan plan[3])
+{
+    double own[3][4];
+    for (int i = 0; i < 3; i++) {
+        double D = fabs(q1s[i] - q0s[i]), V = v_max[i];
+        if (D == 0.0) {
+            own[i][0] = own[i][1] = own[i][2] = own[i][3] = 0.0;
+        } else if (profile == 2) {
+            own[i][0] = own[i][1] = 0.0;
+            own[i][2] = own[i][3] = D / V;
+        } else {
+            scurve_times(D, V, a_max[i], j_max[i], &own[i][0], &own[i][1], &own[i][2]);
+            own[i][3] = 2.0 * own[i][1] + own[i][2];
+        }
+    }
+    double T = own[0][3];
+    for (int i = 1; i < 3; i++)
+        if (own[i][3] > T) T = own[i][3];
+    for (int i = 0; i < 3; i++) {
+        tapmp_axis_plan *p = &plan[i];
+        double q0 = q0s[i], q1 = q1s[i], D = fabs(q1 - q0);
+        *p = (tapmp_axis_plan){q0, q1, q1 >= q0 ? 1.0 : -1.0, D, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+        if (D == 0.0 || profile == 1) continue;
+        if (profile == 2) {
+            p->Tv = T, p->T = T, p->vlim = D / T;
+            continue;
+        }
+        double lam = own[i][3] / T;
+        double Tj = own[i][0] / lam, Ta = own[i][1] / lam;
+        double J = j_max[i] * lam * lam * lam;
+        double alim = J * Tj, vlim = alim * (Ta - Tj);
+        double Tv = D / vlim - Ta;
+        if (!(Tv > 0.0)) Tv = 0.0;
+        p->Tj = Tj, p->Ta = Ta, p->Tv = Tv, p->T = 2.0 * Ta + Tv, p->J = J, p->alim = alim, p->vlim = vlim;
+    }
+}
+
+/* tapmp.trajectory._axis: position, velocity, acceleration at tr [s] into the move. */
+static void axis_at(double tr, const tapmp_axis_plan *p, int profile, double out[3])
+{
+    double s = p->s, J = p->J, Tj = p->Tj, Ta = p->Ta, T = p->T, alim = p->alim, vlim = p->vlim, q, u;
+    if (tr < 0.0) {
+        out[0] = p->q0, out[1] = 0.0, out[2] = 0.0;
+    } else if (tr >= T) {
+        out[0] = p->q1, out[1] = 0.0, out[2] = 0.0;
+    } else if (profile == 2) {
+        out[0] = p->q0 + s * vlim * tr, out[1] = s * vlim, out[2] = 0.0;
+    } else if (tr < Tj) {
+        out[0] = p->q0 + s * (J * tr * tr * tr / 6.0), out[1] = s * (J * tr * tr / 2.0), out[2] = s * (J * tr);
+    } else if (tr < Ta - Tj) {
+        q = alim / 6.0 * (3.0 * tr * tr - 3.0 * Tj * tr + Tj * Tj);
+        out[0] = p->q0 + s * q, out[1] = s * (alim * (tr - Tj / 2.0)), out[2] = s * alim;
+    } else if (tr < Ta) {
+        u = Ta - tr;
+        q = vlim * Ta / 2.0 - vlim * u + J * u * u * u / 6.0;
+        out[0] = p->q0 + s * q, out[1] = s * (vlim - J * u * u / 2.0), out[2] = s * (J * u);
+    } else if (tr < Ta + p->Tv) {
+        q = vlim * Ta / 2.0 + vlim * (tr - Ta);
+        out[0] = p->q0 + s * q, out[1] = s * vlim, out[2] = 0.0;
+    } else if ((u = tr - T + Ta) < Tj) {
+        q = vlim * Ta / 2.0 - vlim * u + J * u * u * u / 6.0;
+        out[0] = p->q1 - s * q, out[1] = s * (vlim - J * u * u / 2.0), out[2] = -s * (J * u);
+    } else if (u < Ta - Tj) {
+        q = vlim * Ta / 2.0 - vlim * u + alim / 6.0 * (3.0 * u * u - 3.0 * Tj * u + Tj * Tj);
+        out[0] = p->q1 - s * q, out[1] = s * (vlim - alim * (u - Tj / 2.0)), out[2] = -s * alim;
+    } else {
+        double w = T - tr;
+        out[0] = p->q1 - s * (J * w * w * w / 6.0), out[1] = s * (J * w * w / 2.0), out[2] = -s * (J * w);
+    }
+}
+
+/* trajectory.reference */
+void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
+{
+    if (tp->profile == 0) {
+        circle_reference(t, tp, ref);
+        return;
+    }
+    double tr = t - tp->t_move;
+    for (int i = 0; i < 3; i++) {
+        double a[3];
+        if (tp->profile == 1) {
+            a[0] = tr < 0.0 ? tp->axis[i].q0 : tp->axis[i].q1, a[1] = 0.0, a[2] = 0.0;
+        } else {
+            axis_at(tr, &tp->axis[i], tp->profile, a);
+        }
+        ref[i] = a[0], ref[3 + i] = a[1], ref[6 + i] = a[2];
+    }
 }

@@ -66,9 +66,21 @@ typedef struct {
     double kp_c, kv_c, ki_c, kp_d, kv_d, ki_d;
 } tapmp_gains;
 
-/* Reference trajectory parameters (tapmp.trajectory.TrajectoryParams): m, Hz, rad. */
+/* One axis of a point-to-point move (tapmp.trajectory.AxisPlan): from q0 to q1, sign s,
+ * distance D, S-curve phase times Tj, Ta, Tv and end T [s], jerk J, peak acceleration alim,
+ * peak velocity vlim. */
+typedef struct {
+    double q0, q1, s, D, Tj, Ta, Tv, T, J, alim, vlim;
+} tapmp_axis_plan;
+
+/* Reference trajectory (tapmp.trajectory.TrajectoryParams): the circle and sinusoid [m, Hz, rad],
+ * the profile (0 circle and sinusoid, 1 step, 2 ramp, 3 S-curve), the start of the move [s] and
+ * its plan per axis X, Z, B (tapmp_move_plan). */
 typedef struct {
     double X_c, Z_c, radius, f_xz, phase_xz, B_amplitude, f_B, phase_B, B_offset;
+    int profile;
+    double t_move;
+    tapmp_axis_plan axis[3];
 } tapmp_trajectory;
 
 /* --- kinematics (tapmp/kinematics.py) --- */
@@ -160,6 +172,10 @@ TAPMP_LINKAGE int tapmp_controller_sample(const tapmp_params *p, const tapmp_gai
 TAPMP_LINKAGE int tapmp_sample_index(double t, double t0, double T_s, double *k);
 
 /* --- trajectory (tapmp/trajectory.py) --- */
+/* The move of `profile` (1, 2 or 3) from pose a to pose b (X, Z, B) with the limits per axis
+ * v_max, a_max, j_max, every axis ending when the slowest does (move_plan). */
+TAPMP_LINKAGE void tapmp_move_plan(int profile, const double a[3], const double b[3], const double v_max[3],
+                                   const double a_max[3], const double j_max[3], tapmp_axis_plan plan[3]);
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
 TAPMP_LINKAGE void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
 
