@@ -1,5 +1,5 @@
-/* The TAPMP model in C; see tapmp_model.h. Each function names the Python function it
- * mirrors; expressions keep the Python evaluation order (left to right) on purpose, so
+/* The TAPMP model in C; see tapmp_model.h. Each function names the readable Python function
+ * of the same equations; expressions keep its evaluation order (left to right) on purpose, so
  * that both give the same doubles. Compile without -ffast-math and with
  * -ffp-contract=off (no fused multiply-add), as build_native.py does. */
 #include <math.h>

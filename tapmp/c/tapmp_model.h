@@ -2,10 +2,12 @@
  * with its non-idealities, the SC-DC (Eq. 15-26), APD-DC (Eq. 38-39) and PID-DC control laws and
  * the reference trajectory. Plain functions on doubles, SI units, nothing but libm.
  *
- * This is a hand-written twin of the Python package tapmp/ (kinematics.py, dynamics.py,
- * plant.py, control.py, trajectory.py): every expression is evaluated in the same order
- * as there, so the two agree to round-off (tests/test_native_model.py checks every
- * function on random states, and the closed loops, against the Python model). */
+ * This is the one implementation of the equations: the native FMUs compile it in, and the
+ * Python package (hence the pythonfmu FMUs and the FMI-free loop) calls it through cffi
+ * (tapmp/native.py reads the declarations below from this file). The Python modules
+ * kinematics.py, dynamics.py, plant.py (derivatives), control.py and trajectory.py write the
+ * same equations readably with the paper's numbers, evaluated in the same order;
+ * tests/test_native_model.py checks every function on random states against them. */
 #ifndef TAPMP_MODEL_H
 #define TAPMP_MODEL_H
 
