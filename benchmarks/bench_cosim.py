@@ -110,7 +110,7 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path, every_output: bool = Fals
     import zipfile
 
     from orchestrator.engine.build_native import fmi_headers_dir
-    from orchestrator.engine.toolchain import compile_c
+    from tapmp.toolchain import compile_c
     exe = tmp / "c_master"
     if not exe.exists():
         compile_c([ROOT / "benchmarks" / "c_master.c"], exe, shared=False, flags=["-O2"],

@@ -34,9 +34,7 @@ class TAPMP_Plant(TapmpSlave):
         self.publish()
 
     def publish(self):
-        m = self.model
-        self.publish_block(_OUTPUTS, (*m.measured_positions(), *m.joint_positions(),
-                                      *m.joint_velocities(), *m.state))
+        self.publish_block(_OUTPUTS, self.model.outputs())
 
     def check_hidden_state(self, hidden):
         if hidden is not None and not (len(hidden) == 7 and all(

@@ -10,40 +10,31 @@
 #define R(name) inst->reals[VR_##name]
 
 static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
-/* PlantConfig fields are the table's parameters VR_encoder_resolution .. VR_substeps - 1;
- * all finite and >= 0 except these (only finite), and these > 0 */
-static const int FINITE_VR[] = {VR_k_pull, VR_cogging_phase1, VR_cogging_phase2, VR_cogging_phase3,
-                                VR_disturbance_force1, VR_disturbance_force2, VR_disturbance_force3};
-#define N_FINITE_VR ((int)(sizeof FINITE_VR / sizeof FINITE_VR[0]))
-static const int POSITIVE_VR[] = {VR_v_s, VR_attraction_gap, VR_cogging_pitch};
 static const int INITIAL_VR[] = {VR_X0, VR_Z0, VR_B0, VR_dX0, VR_dZ0, VR_dB0};
+
+/* The FMU's settings as the model's tapmp_plant_config. */
+static tapmp_plant_config config_of(const tapmp_instance *inst)
+{
+    return (tapmp_plant_config){R(encoder_resolution), {R(c_v1), R(c_v2), R(c_v3)},
+                                {R(F_c1), R(F_c2), R(F_c3)}, R(v_s), R(force_limit), R(k_pull),
+                                R(attraction_force), R(attraction_gap), R(cogging_amplitude),
+                                R(cogging_pitch), {R(cogging_phase1), R(cogging_phase2), R(cogging_phase3)},
+                                {R(disturbance_force1), R(disturbance_force2), R(disturbance_force3)},
+                                R(disturbance_time), R(noise_rms), inst->ints[VR_substeps],
+                                inst->ints[VR_noise_seed]};
+}
 
 /* tapmp.params.ModelParams.validated, PlantConfig.validated, PlantModel.__init__ */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     char v[40];
+    const char *name, *allowed;
+    double x;
     if (!tapmp_require_positive(inst, PARAM_VR, 7, msg, size)) return 0;  /* ModelParams.validated */
-    /* PlantConfig.validated: fields in table order, k_pull and the phases only finite */
-    for (int vr = VR_encoder_resolution; vr < VR_substeps; vr++) {
-        double x = inst->reals[vr];
-        int finite_only = 0;
-        for (int k = 0; k < N_FINITE_VR; k++) finite_only |= FINITE_VR[k] == vr;
-        if (!(isfinite(x) && (finite_only || x >= 0.0)))
-            return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(x, v),
-                                      finite_only ? "a finite number" : "a finite number >= 0", 0, 0);
-    }
-    for (int k = 0; k < 3; k++)
-        if (inst->reals[POSITIVE_VR[k]] <= 0.0)
-            return tapmp_invalid_text(msg, size, VARS[POSITIVE_VR[k]].name,
-                                      tapmp_repr(inst->reals[POSITIVE_VR[k]], v), "a finite number > 0", 0, 0);
-    if (inst->ints[VR_substeps] < 1) {
-        snprintf(v, sizeof v, "%d", inst->ints[VR_substeps]);
-        return tapmp_invalid_text(msg, size, "substeps", v, "an integer >= 1", 0, 0);
-    }
-    if (inst->ints[VR_noise_seed] < 0) {  /* PlantConfig.validated; the int type caps it at 2147483647 */
-        snprintf(v, sizeof v, "%d", inst->ints[VR_noise_seed]);
-        return tapmp_invalid_text(msg, size, "noise_seed", v, "an integer in [0, 2147483647]", 0, 0);
-    }
+    tapmp_plant_config c = config_of(inst);
+    int bad = tapmp_plant_config_check(&c, &name, &x, &allowed);  /* PlantConfig.validated */
+    if (bad == 2) snprintf(v, sizeof v, "%d", (int)x);
+    if (bad) return tapmp_invalid_text(msg, size, name, bad == 2 ? v : tapmp_repr(x, v), allowed, 0, 0);
     for (int i = 0; i < 6; i++)
         if (!isfinite(inst->reals[INITIAL_VR[i]]))
             return tapmp_invalid_text(msg, size, VARS[INITIAL_VR[i]].name,
@@ -62,13 +53,7 @@ void model_setup(tapmp_instance *inst)
 {
     tapmp_plant *pl = &inst->m.plant;
     pl->p = (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
-    pl->c = (tapmp_plant_config){R(encoder_resolution), {R(c_v1), R(c_v2), R(c_v3)},
-                                 {R(F_c1), R(F_c2), R(F_c3)}, R(v_s), R(force_limit), R(k_pull),
-                                 R(attraction_force), R(attraction_gap), R(cogging_amplitude),
-                                 R(cogging_pitch), {R(cogging_phase1), R(cogging_phase2), R(cogging_phase3)},
-                                 {R(disturbance_force1), R(disturbance_force2), R(disturbance_force3)},
-                                 R(disturbance_time), R(noise_rms), inst->ints[VR_substeps],
-                                 inst->ints[VR_noise_seed]};
+    pl->c = config_of(inst);
     double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
     tapmp_plant_init(pl, pose0, rate0);
     publish(inst);

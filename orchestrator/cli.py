@@ -13,7 +13,7 @@ from pathlib import Path
 from tapmp.errors import ModelInputError
 
 from .engine import build as build_mod
-from .engine.toolchain import PLATFORMS
+from tapmp.toolchain import PLATFORMS
 from .engine.build_native import NativeBuildError
 from .engine.master import CoSimulationError
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,

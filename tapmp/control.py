@@ -9,9 +9,10 @@ of Theorem 1), so F = u / K_T. Gains are per motor (diagonal matrices of the pap
 import math
 from typing import NamedTuple
 
+from . import native
 from .dynamics import generalized_force
-from .errors import ModelInputError, require_finite
-from .kinematics import forward, inverse, joint_velocity, solve_transpose, task_velocity
+from .errors import KinematicDomainError, ModelInputError, require_finite
+from .kinematics import forward, solve_transpose, task_velocity
 from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, ModelParams, scdc_modal_image
 
 SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
@@ -154,8 +155,9 @@ def pid_command(e, de, integral_e, u_d, m: ModalGains, K_T) -> tuple[float, floa
 def sample_index(t: float, t0: float, T_s: float) -> int | None:
     """Index k of the sample instant t0 + k T_s [s] that the communication point t [s] falls
     on (within SAMPLE_TOLERANCE T_s), or None if t lies between sample instants."""
-    k = math.floor((t - t0) / T_s + 0.5)
-    return k if abs(t - (t0 + k * T_s)) <= SAMPLE_TOLERANCE * T_s else None
+    ffi, lib = native.load()
+    k = ffi.new("double *")
+    return int(k[0]) if lib.tapmp_sample_index(t, t0, T_s, k) else None
 
 
 class ControllerModel:
@@ -192,6 +194,13 @@ class ControllerModel:
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
+        ffi, self._lib = native.load()
+        self._cp = ffi.new("tapmp_params *", tuple(float(v) for v in self.p))
+        self._cg = ffi.new("tapmp_gains *", (*(tuple(float(x) for x in v) for v in self.g),
+                                             *(float(v) for v in self.modal)))
+        self._st = ffi.new("tapmp_controller_state *")
+        self._out = ffi.new("double[12]")
+        self._arg = ffi.new("double *")
         self.T_s = T_s
         self.t0 = t0
         self.integral = [0.0, 0.0, 0.0]
@@ -242,42 +251,24 @@ class ControllerModel:
         if not math.isfinite(sum(ref) + sum(q) + sum(dq_in)):  # one check on the fast path
             for name, v in zip(_INPUT_NAMES, (*ref, *q, *dq_in)):
                 require_finite(name, v, t)
-        L1 = self.p.L_1
-        X_d, Z_d, B_d = ref[0], ref[1], ref[2]
-        q_d = inverse(X_d, Z_d, B_d, L1)
-        dq_d = joint_velocity(B_d, ref[3], ref[4], ref[5], L1)
-        if self.velocity_source == VELOCITY_DIFFERENCE and self.q_prev is not None and advance:
-            qp = self.q_prev
-            dq = ((q[0] - qp[0]) / h, (q[1] - qp[1]) / h, (q[2] - qp[2]) / h)
-        else:
-            dq = dq_in
-        e = (q_d[0] - q[0], q_d[1] - q[1], q_d[2] - q[2])          # Eq. 15
-        de = (dq_d[0] - dq[0], dq_d[1] - dq[1], dq_d[2] - dq[2])
-        e_s = sync_errors(*e)                                      # Eq. 18
-        u_d = feedforward(q, dq, ref[3:6], ref[6:9], self.p)       # Eq. 26
-        if self.law == SCDC:
-            c = sync_deviation(*e_s)                               # Eq. 21
-            integral = self.integral
-            if advance:
-                integral = [integral[i] + h * c[i] for i in range(3)]
-            u = scdc_command(e, de, c, integral, u_d, self.g)
-        elif self.law == PIDDC:
-            integral = self.integral
-            if advance:
-                integral = [integral[i] + h * e[i] for i in range(3)]
-            u = pid_command(e, de, integral, u_d, self.modal, self.g.K_T)
-        else:
-            integral = self.integral
-            u = apd_command(e, de, u_d, self.g)
+        st, out = self._st, self._out
+        if type(ref) is not tuple:  # cffi takes tuples and lists for arrays (a host may give numpy arrays)
+            ref, q, dq_in = tuple(ref), tuple(q), tuple(dq_in)
+        st.integral = self.integral
+        if self.q_prev is not None:
+            st.q_prev = self.q_prev
+        st.has_q_prev = self.q_prev is not None
+        if not self._lib.tapmp_controller_sample(self._cp, self._cg, self.law, self.velocity_source,
+                                                 self.force_limit, st, h, ref, q, dq_in, advance, out, st,
+                                                 self._arg):
+            raise KinematicDomainError(  # the text of kinematics.forward
+                "sqrt(3)/(2 L1)*(2 q2 - q1 - q3)", self._arg[0],
+                f"|value| < 1 (q = [{q[0]!r}, {q[1]!r}, {q[2]!r}] m, L1 = {self.p.L_1!r} m)")
         if advance:
-            self.integral = integral
-            self.q_prev = tuple(q)
-        K_T = self.g.K_T
-        F = [u[i] / K_T[i] for i in range(3)]
-        lim = self.force_limit
-        if lim > 0.0:
-            F = [min(max(f, -lim), lim) for f in F]
-        return tuple(F), tuple(u), e, e_s
+            self.integral = list(st.integral)
+            self.q_prev = tuple(st.q_prev)
+        o = tuple(out)
+        return o[0:3], o[3:6], o[6:9], o[9:12]
 
 
 def missed_sample_text(t: float, due: float, T_s: float) -> str:

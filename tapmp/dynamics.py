@@ -51,11 +51,6 @@ def coriolis_times(B: float, dB: float, v3: float, p: ModelParams) -> tuple[floa
     return w1 + w3, S3 * (w1 - w3), a1 * w1 + a3 * w3
 
 
-def gravity(p: ModelParams) -> tuple[float, float, float]:
-    """G(x) = [0, m_p g, 0] [N] (Eq. 13)."""
-    return 0.0, p.m_p * p.g, 0.0
-
-
 def mass_matrix_eq13(B: float, p: ModelParams) -> Mat3:
     """The paper's closed-form M of Eq. 13, which assumes m_1 = m_3 (uses m_1 for both)."""
     L, m1, c, s = p.L_1, p.m_1, math.cos(B), math.sin(B)

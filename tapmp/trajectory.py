@@ -26,14 +26,17 @@ starts at t_move [s]; before it the reference rests at A, after it at B (exactly
 Limits per axis: v_max_X, v_max_Z [m/s], v_max_B [rad/s]; a_max_* [m/s^2, rad/s^2];
 j_max_* [m/s^3, rad/s^3], all > 0 (a step uses none, a ramp only v_max).
 
-The C twin (fmu_controller/trajectory.c) evaluates the same expressions in the same
-order, so the FMUs give the same doubles.
+:func:`reference` is the C model's (tapmp_reference and tapmp_move_plan in
+tapmp/c/tapmp_model.c, what every FMU family runs); :func:`circle_reference`,
+:func:`move_plan` and :func:`move_reference` write the same equations readably in Python,
+the reference the C is tested against (tests/test_native_model.py).
 """
 
 import math
 from functools import lru_cache
 from typing import NamedTuple
 
+from . import native
 from .errors import ModelInputError, require_finite
 from .params import DEG
 
@@ -234,14 +237,31 @@ def move_reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
     return x[0], z[0], b[0], x[1], z[1], b[1], x[2], z[2], b[2]
 
 
+@lru_cache(maxsize=64)
+def _c_trajectory(tp: TrajectoryParams):
+    """``tp`` as the C model's tapmp_trajectory, its move planned by tapmp_move_plan."""
+    ffi, lib = native.load()
+    c = ffi.new("tapmp_trajectory *", (*(float(v) for v in tp[:9]), tp.profile, float(tp.t_move)))
+    lim = [tuple(float(_limit(tp, kind, i)) for i in range(3)) for kind in "vaj"]
+    if tp.profile:
+        lib.tapmp_move_plan(tp.profile, (tp.X_a, tp.Z_a, tp.B_a), (tp.X_b, tp.Z_b, tp.B_b), *lim, c.axis)
+    return c
+
+
 def reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
-    """Desired pose and its derivatives at time t [s].
+    """Desired pose and its derivatives at time t [s] (the C model's tapmp_reference).
 
     Returns (X_d, Z_d, B_d, dX_d, dZ_d, dB_d, ddX_d, ddZ_d, ddB_d) in m, rad and
     their first and second time derivatives.
     """
-    if tp.profile:
-        return move_reference(t, tp)
+    ffi, lib = native.load()
+    ref = ffi.new("double[9]")
+    lib.tapmp_reference(t, _c_trajectory(tp), ref)
+    return tuple(ref)
+
+
+def circle_reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
+    """The circle and sinusoid of profile 0 at t [s], in the order of :func:`reference`."""
     w = TWO_PI * tp.f_xz
     th = w * t + tp.phase_xz
     s, c = math.sin(th), math.cos(th)

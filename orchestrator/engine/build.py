@@ -10,7 +10,7 @@ corrupts the host interpreter), needs libpython already in the host process, and
 a Python call per getReal/setReal. So the FMUs ship their own binary instead: the native
 FMUs' runtime (``fmu_common/c``) with model operations that call Python
 (``fmu_common/native``), compiled here by the project's C compiler (zig cc from the ziglang
-package, or $CC; orchestrator/engine/toolchain.py): see :func:`compile_binaries`.
+package, or $CC; tapmp/toolchain.py): see :func:`compile_binaries`.
 """
 
 import shutil
@@ -24,7 +24,7 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES, dependencies
 
-from . import toolchain
+from tapmp import native, toolchain
 from .families import default_build_dir
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
@@ -214,6 +214,8 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
             dest = Path(tmp) / pkg.name
             shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "native"))
             staged.append(dest)
+        # the compiled C model goes with its sources: the FMU loads it, never compiles it
+        shutil.copyfile(native.library_path(), Path(tmp) / "tapmp" / "c" / native.bundled_name())
         fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         if binaries is None:

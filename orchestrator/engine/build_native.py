@@ -1,6 +1,6 @@
 """Build the self-contained native FMUs: FMI 2.0 and FMI 3.0, C sources inside, binaries
 for Linux, Windows and macOS on x86-64 and ARM (compiled by Zig's C compiler from PyPI,
-orchestrator/engine/toolchain.py), no Python at run time. One C model (tapmp/c/tapmp_model.c) and one instance layer
+tapmp/toolchain.py), no Python at run time. One C model (tapmp/c/tapmp_model.c) and one instance layer
 (fmu_common/c/instance.c) feed both FMI versions; the model files (fmu_plant/plant.c,
 fmu_controller/controller.c, fmu_controller/trajectory.c) map variables to the model.
 
@@ -34,10 +34,10 @@ from concurrent.futures import ThreadPoolExecutor
 from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
                              dependencies, dependency_attributes)
 
-from . import toolchain
+from tapmp import toolchain
 from .families import default_build_dir
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
-from .toolchain import CFLAGS, PLATFORMS, ToolchainError
+from tapmp.toolchain import CFLAGS, PLATFORMS, ToolchainError
 
 # The package's root: the repository in a checkout, site-packages in an installed wheel
 # (the C sources are package data there).

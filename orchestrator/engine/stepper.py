@@ -48,15 +48,15 @@ def cache_dir() -> Path:
 
 def compiler_command(source: Path, output: Path) -> list[str]:
     """The compiler and flags that build the core (the project's toolchain: $CC if set, else
-    zig cc from the ziglang package; orchestrator.engine.toolchain); part of the cache key."""
-    from .toolchain import compiler
+    zig cc from the ziglang package; tapmp.toolchain); part of the cache key."""
+    from tapmp.toolchain import compiler
     return [*compiler(), *CFLAGS, "-shared", "-fPIC", "-o", str(output), str(source), "-lm"]
 
 
 def compile_core(source: Path, output: Path) -> Path:
     """Compile the stepping core ``source`` into ``output`` with the project's toolchain;
     StepperBuildError with the compiler's first error line if it fails."""
-    from .toolchain import ToolchainError, compile_c
+    from tapmp.toolchain import ToolchainError, compile_c
     try:
         return compile_c([source], output, flags=CFLAGS, libs=("m",), what="the compiled stepping core")
     except ToolchainError as err:

@@ -1,5 +1,5 @@
-/* The TAPMP model in C; see tapmp_model.h. Each function names the Python function it
- * mirrors; expressions keep the Python evaluation order (left to right) on purpose, so
+/* The TAPMP model in C; see tapmp_model.h. Each function names the readable Python function
+ * of the same equations; expressions keep its evaluation order (left to right) on purpose, so
  * that both give the same doubles. Compile without -ffast-math and with
  * -ffp-contract=off (no fused multiply-add), as build_native.py does. */
 #include <math.h>
@@ -177,6 +177,48 @@ double tapmp_noise_sample(int seed, double sample, int motor)
     double u1 = (double)((splitmix64(key + n) >> 11) + 1) * 0x1p-53;
     double u2 = (double)(splitmix64(key + n + 1) >> 11) * 0x1p-53;
     return sqrt(-2.0 * log(u1)) * cos(TWO_PI * u2);
+}
+
+/* Names of the real settings of tapmp_plant_config in field order (PlantConfig's fields). */
+static const char *const CONFIG_NAMES[22] = {
+    "encoder_resolution", "c_v1", "c_v2", "c_v3", "F_c1", "F_c2", "F_c3", "v_s", "force_limit", "k_pull",
+    "attraction_force", "attraction_gap", "cogging_amplitude", "cogging_pitch", "cogging_phase1",
+    "cogging_phase2", "cogging_phase3", "disturbance_force1", "disturbance_force2", "disturbance_force3",
+    "disturbance_time", "noise_rms"};
+
+int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
+                             const char **allowed)
+{
+    const double v[22] = {c->encoder_resolution, c->c_v[0], c->c_v[1], c->c_v[2], c->F_c[0], c->F_c[1],
+                          c->F_c[2], c->v_s, c->force_limit, c->k_pull, c->attraction_force,
+                          c->attraction_gap, c->cogging_amplitude, c->cogging_pitch, c->cogging_phase[0],
+                          c->cogging_phase[1], c->cogging_phase[2], c->disturbance_force[0],
+                          c->disturbance_force[1], c->disturbance_force[2], c->disturbance_time,
+                          c->noise_rms};
+    static const int positive[3] = {7, 11, 13};  /* v_s, attraction_gap, cogging_pitch */
+    for (int i = 0; i < 22; i++) {
+        /* k_pull (< 0: negative stiffness), the phases and the force steps may be negative */
+        int finite_only = i == 9 || (i >= 14 && i <= 19);
+        if (!(isfinite(v[i]) && (finite_only || v[i] >= 0.0))) {
+            *name = CONFIG_NAMES[i], *value = v[i];
+            *allowed = finite_only ? "a finite number" : "a finite number >= 0";
+            return 1;
+        }
+    }
+    for (int k = 0; k < 3; k++)
+        if (v[positive[k]] <= 0.0) {
+            *name = CONFIG_NAMES[positive[k]], *value = v[positive[k]], *allowed = "a finite number > 0";
+            return 1;
+        }
+    if (c->substeps < 1) {
+        *name = "substeps", *value = c->substeps, *allowed = "an integer >= 1";
+        return 2;
+    }
+    if (c->noise_seed < 0) {  /* the int type caps it at 2147483647 */
+        *name = "noise_seed", *value = c->noise_seed, *allowed = "an integer in [0, 2147483647]";
+        return 2;
+    }
+    return 0;
 }
 
 /* plant.PlantModel.__init__ (state and reference gaps; ranges are checked by the caller) */
@@ -435,8 +477,8 @@ int tapmp_sample_index(double t, double t0, double T_s, double *k)
     return fabs(t - (t0 + *k * T_s)) <= TAPMP_SAMPLE_TOLERANCE * T_s;
 }
 
-/* trajectory.reference */
-void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
+/* trajectory.circle_reference */
+static void circle_reference(double t, const tapmp_trajectory *tp, double ref[9])
 {
     double w = TWO_PI * tp->f_xz, th = w * t + tp->phase_xz;
     double s = sin(th), c = cos(th), R = tp->radius;
@@ -451,4 +493,124 @@ void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
     ref[6] = -R * w * w * s;
     ref[7] = -R * w * w * c;
     ref[8] = -A * wb * wb * sb;
+}
+
+/* tapmp.trajectory.scurve_times: phase times of the rest-to-rest S-curve over D > 0. */
+static void scurve_times(double D, double V, double A, double J, double *Tj_, double *Ta_, double *Tv_)
+{
+    double Tj, Ta;
+    if (V * J >= A * A) {
+        Tj = A / J;
+        Ta = Tj + V / A;
+    } else {
+        Tj = sqrt(V / J);
+        Ta = 2.0 * Tj;
+    }
+    double vlim = J * Tj * (Ta - Tj);
+    double Tv = D / vlim - Ta;
+    if (Tv >= 0.0) {
+        *Tj_ = Tj, *Ta_ = Ta, *Tv_ = Tv;
+        return;
+    }
+    Tj = A / J;
+    if (D >= 2.0 * A * A * A / (J * J)) {
+        double v = (sqrt(A * A * A * A / (J * J) + 4.0 * D * A) - A * A / J) / 2.0;
+        Ta = Tj + v / A;
+    } else {
+        Tj = pow(D / (2.0 * J), 1.0 / 3.0);
+        Ta = 2.0 * Tj;
+    }
+    *Tj_ = Tj, *Ta_ = Ta, *Tv_ = 0.0;
+}
+
+/* tapmp.trajectory.move_plan */
+void tapmp_move_plan(int profile, const double q0s[3], const double q1s[3], const double v_max[3],
+                     const double a_max[3], const double j_max[3], tapmp_axis_plan plan[3])
+{
+    double own[3][4];
+    for (int i = 0; i < 3; i++) {
+        double D = fabs(q1s[i] - q0s[i]), V = v_max[i];
+        if (D == 0.0) {
+            own[i][0] = own[i][1] = own[i][2] = own[i][3] = 0.0;
+        } else if (profile == 2) {
+            own[i][0] = own[i][1] = 0.0;
+            own[i][2] = own[i][3] = D / V;
+        } else {
+            scurve_times(D, V, a_max[i], j_max[i], &own[i][0], &own[i][1], &own[i][2]);
+            own[i][3] = 2.0 * own[i][1] + own[i][2];
+        }
+    }
+    double T = own[0][3];
+    for (int i = 1; i < 3; i++)
+        if (own[i][3] > T) T = own[i][3];
+    for (int i = 0; i < 3; i++) {
+        tapmp_axis_plan *p = &plan[i];
+        double q0 = q0s[i], q1 = q1s[i], D = fabs(q1 - q0);
+        *p = (tapmp_axis_plan){q0, q1, q1 >= q0 ? 1.0 : -1.0, D, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+        if (D == 0.0 || profile == 1) continue;
+        if (profile == 2) {
+            p->Tv = T, p->T = T, p->vlim = D / T;
+            continue;
+        }
+        double lam = own[i][3] / T;
+        double Tj = own[i][0] / lam, Ta = own[i][1] / lam;
+        double J = j_max[i] * lam * lam * lam;
+        double alim = J * Tj, vlim = alim * (Ta - Tj);
+        double Tv = D / vlim - Ta;
+        if (!(Tv > 0.0)) Tv = 0.0;
+        p->Tj = Tj, p->Ta = Ta, p->Tv = Tv, p->T = 2.0 * Ta + Tv, p->J = J, p->alim = alim, p->vlim = vlim;
+    }
+}
+
+/* tapmp.trajectory._axis: position, velocity, acceleration at tr [s] into the move. */
+static void axis_at(double tr, const tapmp_axis_plan *p, int profile, double out[3])
+{
+    double s = p->s, J = p->J, Tj = p->Tj, Ta = p->Ta, T = p->T, alim = p->alim, vlim = p->vlim, q, u;
+    if (tr < 0.0) {
+        out[0] = p->q0, out[1] = 0.0, out[2] = 0.0;
+    } else if (tr >= T) {
+        out[0] = p->q1, out[1] = 0.0, out[2] = 0.0;
+    } else if (profile == 2) {
+        out[0] = p->q0 + s * vlim * tr, out[1] = s * vlim, out[2] = 0.0;
+    } else if (tr < Tj) {
+        out[0] = p->q0 + s * (J * tr * tr * tr / 6.0), out[1] = s * (J * tr * tr / 2.0), out[2] = s * (J * tr);
+    } else if (tr < Ta - Tj) {
+        q = alim / 6.0 * (3.0 * tr * tr - 3.0 * Tj * tr + Tj * Tj);
+        out[0] = p->q0 + s * q, out[1] = s * (alim * (tr - Tj / 2.0)), out[2] = s * alim;
+    } else if (tr < Ta) {
+        u = Ta - tr;
+        q = vlim * Ta / 2.0 - vlim * u + J * u * u * u / 6.0;
+        out[0] = p->q0 + s * q, out[1] = s * (vlim - J * u * u / 2.0), out[2] = s * (J * u);
+    } else if (tr < Ta + p->Tv) {
+        q = vlim * Ta / 2.0 + vlim * (tr - Ta);
+        out[0] = p->q0 + s * q, out[1] = s * vlim, out[2] = 0.0;
+    } else if ((u = tr - T + Ta) < Tj) {
+        q = vlim * Ta / 2.0 - vlim * u + J * u * u * u / 6.0;
+        out[0] = p->q1 - s * q, out[1] = s * (vlim - J * u * u / 2.0), out[2] = -s * (J * u);
+    } else if (u < Ta - Tj) {
+        q = vlim * Ta / 2.0 - vlim * u + alim / 6.0 * (3.0 * u * u - 3.0 * Tj * u + Tj * Tj);
+        out[0] = p->q1 - s * q, out[1] = s * (vlim - alim * (u - Tj / 2.0)), out[2] = -s * alim;
+    } else {
+        double w = T - tr;
+        out[0] = p->q1 - s * (J * w * w * w / 6.0), out[1] = s * (J * w * w / 2.0), out[2] = -s * (J * w);
+    }
+}
+
+/* trajectory.reference */
+void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
+{
+    if (tp->profile == 0) {
+        circle_reference(t, tp, ref);
+        return;
+    }
+    double tr = t - tp->t_move;
+    for (int i = 0; i < 3; i++) {
+        double a[3];
+        if (tp->profile == 1) {
+            a[0] = tr < 0.0 ? tp->axis[i].q0 : tp->axis[i].q1, a[1] = 0.0, a[2] = 0.0;
+        } else {
+            axis_at(tr, &tp->axis[i], tp->profile, a);
+        }
+        ref[i] = a[0], ref[3 + i] = a[1], ref[6 + i] = a[2];
+    }
 }

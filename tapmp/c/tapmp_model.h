@@ -2,10 +2,12 @@
  * with its non-idealities, the SC-DC (Eq. 15-26), APD-DC (Eq. 38-39) and PID-DC control laws and
  * the reference trajectory. Plain functions on doubles, SI units, nothing but libm.
  *
- * This is a hand-written twin of the Python package tapmp/ (kinematics.py, dynamics.py,
- * plant.py, control.py, trajectory.py): every expression is evaluated in the same order
- * as there, so the two agree to round-off (tests/test_native_model.py checks every
- * function on random states, and the closed loops, against the Python model). */
+ * This is the one implementation of the equations: the native FMUs compile it in, and the
+ * Python package (hence the pythonfmu FMUs and the FMI-free loop) calls it through cffi
+ * (tapmp/native.py reads the declarations below from this file). The Python modules
+ * kinematics.py, dynamics.py, plant.py (derivatives), control.py and trajectory.py write the
+ * same equations readably with the paper's numbers, evaluated in the same order;
+ * tests/test_native_model.py checks every function on random states against them. */
 #ifndef TAPMP_MODEL_H
 #define TAPMP_MODEL_H
 
@@ -66,9 +68,21 @@ typedef struct {
     double kp_c, kv_c, ki_c, kp_d, kv_d, ki_d;
 } tapmp_gains;
 
-/* Reference trajectory parameters (tapmp.trajectory.TrajectoryParams): m, Hz, rad. */
+/* One axis of a point-to-point move (tapmp.trajectory.AxisPlan): from q0 to q1, sign s,
+ * distance D, S-curve phase times Tj, Ta, Tv and end T [s], jerk J, peak acceleration alim,
+ * peak velocity vlim. */
+typedef struct {
+    double q0, q1, s, D, Tj, Ta, Tv, T, J, alim, vlim;
+} tapmp_axis_plan;
+
+/* Reference trajectory (tapmp.trajectory.TrajectoryParams): the circle and sinusoid [m, Hz, rad],
+ * the profile (0 circle and sinusoid, 1 step, 2 ramp, 3 S-curve), the start of the move [s] and
+ * its plan per axis X, Z, B (tapmp_move_plan). */
 typedef struct {
     double X_c, Z_c, radius, f_xz, phase_xz, B_amplitude, f_B, phase_B, B_offset;
+    int profile;
+    double t_move;
+    tapmp_axis_plan axis[3];
 } tapmp_trajectory;
 
 /* --- kinematics (tapmp/kinematics.py) --- */
@@ -100,6 +114,12 @@ TAPMP_LINKAGE void tapmp_generalized_force(double B, double dB, const double xdd
 TAPMP_LINKAGE double tapmp_quantize(double q, double resolution);
 /* Standard normal number for (seed, sample index, motor 0..2), counter-based (plant.noise_sample). */
 TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
+/* The ranges of the plant's settings, in the order of tapmp.plant.PlantConfig's fields (its
+ * validated() and the native FMU check with this): 0 if all are allowed, else 1 for a real
+ * setting or 2 for an integer one (substeps, noise_seed), with its name, its value and what is
+ * allowed (the text of the one-line message "NAME = VALUE is invalid: allowed is ALLOWED"). */
+TAPMP_LINKAGE int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
+                                           const char **allowed);
 /* Set the initial state, the reference gaps of the pulling law and the sample count. */
 TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
@@ -154,6 +174,10 @@ TAPMP_LINKAGE int tapmp_controller_sample(const tapmp_params *p, const tapmp_gai
 TAPMP_LINKAGE int tapmp_sample_index(double t, double t0, double T_s, double *k);
 
 /* --- trajectory (tapmp/trajectory.py) --- */
+/* The move of `profile` (1, 2 or 3) from pose a to pose b (X, Z, B) with the limits per axis
+ * v_max, a_max, j_max, every axis ending when the slowest does (move_plan). */
+TAPMP_LINKAGE void tapmp_move_plan(int profile, const double a[3], const double b[3], const double v_max[3],
+                                   const double a_max[3], const double j_max[3], tapmp_axis_plan plan[3]);
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
 TAPMP_LINKAGE void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
 

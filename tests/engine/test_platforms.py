@@ -1,4 +1,4 @@
-"""The native FMUs' binaries for every platform, built by zig cc (orchestrator/engine/toolchain.py).
+"""The native FMUs' binaries for every platform, built by zig cc (tapmp/toolchain.py).
 
 * aarch64 Linux runs: the C hosts (tests/fmu/c_host), built for aarch64 by the same toolchain, step
   the aarch64 binaries 2,000 times under qemu-aarch64 (Debian's qemu-user, libc6-arm64-cross as

@@ -1,4 +1,4 @@
-"""The one C toolchain (orchestrator/engine/toolchain.py): every FMU family and platform builds
+"""The one C toolchain (tapmp/toolchain.py): every FMU family and platform builds
 with no system compiler, $CC is honoured for the host platform, and a failing compiler or an
 unknown platform is one line with exit code 2 and no half-written FMU."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.engine.build_native import PLATFORM_DIRS
-from orchestrator.engine.toolchain import PLATFORMS
+from tapmp.toolchain import PLATFORMS
 from tapmp.interface import FMU_NAMES
 
 pytestmark = pytest.mark.slow  # builds every family for every platform with zig cc

@@ -9,7 +9,7 @@ from pathlib import Path
 import fmpy
 import pytest
 
-from orchestrator.engine.toolchain import compile_c
+from tapmp.toolchain import compile_c
 from tapmp.interface import CONTROLLER, PLANT
 
 pytestmark = pytest.mark.slow  # compiles a C host and runs the FMU in it

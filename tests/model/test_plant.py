@@ -6,6 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from tapmp import native
 from tapmp.errors import ModelInputError
 from tapmp.params import PAPER_MODEL
 from tapmp.plant import IDEAL, PlantConfig, PlantModel, quantize
@@ -62,14 +63,18 @@ def test_plant_refuses_to_leave_the_kinematic_domain():
        cogging=st.sampled_from([0.0, 3.0]))
 def test_fused_right_hand_side_is_bit_identical_to_the_composed_one(X, Z, B, dX, dZ, dB, F, k_pull,
                                                                      attraction, cogging):
-    """step() integrates with a fused closure for speed; it must be the same arithmetic
-    as derivatives(), which composes the documented kinematics, friction and dynamics."""
+    """step() integrates with the C model's fused right-hand side (tapmp_plant_rhs); it must be
+    the same arithmetic as derivatives(), which composes the documented kinematics, friction and
+    dynamics."""
     cfg = PlantConfig(k_pull=k_pull, attraction_force=attraction, attraction_gap=0.2, cogging_amplitude=cogging,
                       cogging_phase1=0.3, cogging_phase2=-1.0, cogging_phase3=2.0)
     plant = PlantModel(PAPER_MODEL, cfg, (0.001, -0.002, 0.01))
     lim = plant.cfg.force_limit
     held = [min(max(f, -lim), lim) for f in F]  # step() saturates the held command once
-    assert plant._rhs(X, Z, B, dX, dZ, dB, *held) == tuple(plant.derivatives([X, Z, B, dX, dZ, dB], *F))
+    ffi, lib = native.load()
+    ds = ffi.new("double[6]")
+    lib.tapmp_plant_rhs(plant._pl, [X, Z, B, dX, dZ, dB], held, ds)
+    assert tuple(ds) == tuple(plant.derivatives([X, Z, B, dX, dZ, dB], *F))
 
 
 # --- disturbances: the force laws of docs/disturbances.md, against hand-derived values ---

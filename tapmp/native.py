@@ -1,0 +1,113 @@
+"""The C model (tapmp/c/tapmp_model.c) loaded into Python: the one implementation of the equations.
+
+The plant's right-hand side and RK4 step, the control laws and the reference trajectory are
+computed by the C functions of ``tapmp_model.c`` in every FMU family and in the FMI-free
+loop (tapmp.closed_loop), so they cannot drift apart. :func:`load` gives cffi's ``ffi``
+and the library ``lib`` (ABI mode: no compiler needed to load it). The declarations come
+from ``tapmp_model.h`` itself (:func:`cdef_text`), so nothing is mirrored by hand.
+
+The library is, in this order:
+* bundled next to the sources (``tapmp/c/tapmp_model-<hash>.so``, written into the
+  pythonfmu FMUs' resources at build time): an FMU never compiles at run time;
+* compiled on first use by the project's toolchain (tapmp.toolchain: zig cc, or $CC) into
+  the cache folder ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
+  under a file lock so that concurrent processes (a study's workers) build it once.
+Both names carry a hash of the C sources, so an edited model is never run from a stale library.
+"""
+
+import fcntl
+import hashlib
+import os
+import re
+import tempfile
+from pathlib import Path
+
+C_DIR = Path(__file__).resolve().with_name("c")
+SOURCE = C_DIR / "tapmp_model.c"
+HEADER = C_DIR / "tapmp_model.h"
+
+
+class NativeModelError(RuntimeError):
+    """The C model cannot be built or loaded; the message says why in one line."""
+
+
+def cdef_text(header: str) -> str:
+    """The declarations of ``header`` (tapmp_model.h's text) as cffi's cdef takes them: without
+    comments, preprocessor lines and the TAPMP_LINKAGE macro."""
+    text = re.sub(r"/\*.*?\*/", " ", header, flags=re.S)
+    lines = [line for line in text.splitlines() if not line.lstrip().startswith("#")]
+    return re.sub(r"\bTAPMP_LINKAGE\b", "", "\n".join(lines))
+
+
+def source_hash() -> str:
+    """16 hex digits of the SHA-256 of tapmp_model.c and tapmp_model.h."""
+    return hashlib.sha256(SOURCE.read_bytes() + b"\0" + HEADER.read_bytes()).hexdigest()[:16]
+
+
+def bundled_name() -> str:
+    """File name of the prebuilt x86_64 Linux library of these sources (in tapmp/c/)."""
+    return f"tapmp_model-{source_hash()}.so"
+
+
+def cache_dir() -> Path:
+    """Folder of compiled libraries: $TAPMP_CACHE, $XDG_CACHE_HOME/tapmp or ~/.cache/tapmp."""
+    if os.environ.get("TAPMP_CACHE"):
+        return Path(os.environ["TAPMP_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tapmp"
+
+
+def compile_library(output: Path) -> Path:
+    """Compile tapmp_model.c into the shared library ``output`` with the native FMUs' flags
+    (tapmp.toolchain.CFLAGS) but exported symbols; NativeModelError if the compiler fails."""
+    from .toolchain import CFLAGS, ToolchainError, compile_c
+    # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
+    flags = [f for f in CFLAGS if not f.startswith("-fvisibility")]
+    try:
+        return compile_c([SOURCE], output, flags=flags, includes=[C_DIR], libs=["m"], what="the C model")
+    except ToolchainError as err:
+        raise NativeModelError(str(err)) from None
+
+
+def _cached_library() -> Path:
+    """The library in the cache folder, compiled there under a file lock unless present."""
+    from .toolchain import CFLAGS, compiler
+    key = hashlib.sha256(f"{source_hash()}\0{' '.join(compiler())}\0{' '.join(CFLAGS)}".encode()).hexdigest()
+    path = cache_dir() / f"tapmp_model_{key[:16]}.so"
+    if path.is_file():
+        return path
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path.parent / ".tapmp_model.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not path.is_file():
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tapmp_model.", suffix=".so")
+                os.close(fd)
+                try:
+                    compile_library(Path(tmp))
+                    os.replace(tmp, path)
+                finally:
+                    Path(tmp).unlink(missing_ok=True)
+    except OSError as err:
+        raise NativeModelError(f"cannot write the compiled C model into {path.parent}: "
+                               f"{err.strerror or err} (set TAPMP_CACHE to a writable folder)") from None
+    return path
+
+
+def library_path() -> Path:
+    """The bundled library of these sources if present, else the cache's (built if needed)."""
+    bundled = C_DIR / bundled_name()
+    return bundled if bundled.is_file() else _cached_library()
+
+
+_LOADED = None
+
+
+def load():
+    """(ffi, lib): cffi's FFI with tapmp_model.h's declarations and the loaded C model."""
+    global _LOADED
+    if _LOADED is None:
+        from cffi import FFI
+        ffi = FFI()
+        ffi.cdef(cdef_text(HEADER.read_text()))
+        _LOADED = ffi, ffi.dlopen(str(library_path()))
+    return _LOADED
