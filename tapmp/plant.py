@@ -166,9 +166,10 @@ class PlantModel:
         self._pl.c = _c_config(config)[0]
 
     @property
-    def state(self) -> list[float]:
-        """The state [X, Z, B, dX, dZ, dB] [m, m, rad, m/s, m/s, rad/s] (a new list)."""
-        return list(self._pl.s)
+    def state(self) -> tuple[float, ...]:
+        """The state (X, Z, B, dX, dZ, dB) [m, m, rad, m/s, m/s, rad/s]. A tuple: the state lives
+        in the C model, so it changes only by assigning a whole new state."""
+        return tuple(self._pl.s)
 
     @state.setter
     def state(self, s) -> None:

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.slow  # builds every family in a copy of the repository
+
+ROOT = Path(__file__).resolve().parents[2]
 EXTRA_FORCE = 7.0  # [N] on mover 1
 STEPS, H = 20, 1e-4
 
