@@ -11,6 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from tapmp.errors import ModelInputError
+from tapmp.native import NativeModelError
 
 from .engine import build as build_mod
 from tapmp.toolchain import PLATFORMS
@@ -38,7 +39,7 @@ from .studies.study import StudyError
 # disk, a scheduler address). Every other exception is a programming error and shows its traceback.
 USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
                ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-               ResultsWriteError, build_mod.BuildError, NativeBuildError, OSError)
+               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, OSError)
 
 
 def _family(value: str) -> str:

@@ -68,11 +68,16 @@ def compile_library(output: Path) -> Path:
         raise NativeModelError(str(err)) from None
 
 
-def _cached_library() -> Path:
-    """The library in the cache folder, compiled there under a file lock unless present."""
+def cached_library_path() -> Path:
+    """Where the cache keeps the library of these sources for the current compiler and flags."""
     from .toolchain import CFLAGS, compiler
     key = hashlib.sha256(f"{source_hash()}\0{' '.join(compiler())}\0{' '.join(CFLAGS)}".encode()).hexdigest()
-    path = cache_dir() / f"tapmp_model_{key[:16]}.so"
+    return cache_dir() / f"tapmp_model_{key[:16]}.so"
+
+
+def _cached_library() -> Path:
+    """The library in the cache folder, compiled there under a file lock unless present."""
+    path = cached_library_path()
     if path.is_file():
         return path
     try:

@@ -120,3 +120,18 @@ def test_a_missing_or_corrupt_ssp_is_named_with_exit_2(content, tmp_path, capsys
     assert main(["run", PAPER, "--ssp", str(ssp), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and str(ssp) in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_a_c_model_that_cannot_be_compiled_is_one_line_naming_the_compiler(tmp_path):
+    """The Python model runs the C model's library; with none in the cache and a compiler that
+    does not exist, `tapmp run` stops with one line naming both, exit code 2."""
+    import os
+    cc = tmp_path / "no-such-cc"
+    env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), CC=str(cc))
+    res = subprocess.run([sys.executable, "-m", "orchestrator", "run", PAPER, "--out", str(tmp_path / "out"),
+                          "--no-progress"], capture_output=True, text=True, timeout=300, env=env)
+    assert res.returncode == 2
+    assert res.stderr.splitlines() == [f"error: the C model (x86_64-linux): C compiler {str(cc)!r} not found "
+                                       "(unset CC to use zig cc from the ziglang package)"]
+    assert not (tmp_path / "out").exists()

@@ -4,6 +4,7 @@ failing runs the same error message, exit code and partial results."""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine import stepper
+from tapmp import native
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
 from orchestrator.experiments.envelope import envelope
 from orchestrator.experiments.reading import read_results
@@ -135,8 +137,14 @@ def test_the_core_is_built_once_into_the_cache_folder(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_a_core_that_cannot_be_built_is_one_line_and_the_run_steps_in_python(tmp_path, built):
-    """No compiler: `tapmp run` says so in one line and completes with the Python loop."""
+def test_a_core_that_cannot_be_built_is_one_line_and_the_run_steps_in_python(tmp_path, built, monkeypatch):
+    """No compiler: `tapmp run` says so in one line and completes with the Python loop (the C
+    model's library is there, as after any build: only the stepping core is missing)."""
+    library = native.library_path()
+    monkeypatch.setenv("TAPMP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    (tmp_path / "cache").mkdir()
+    shutil.copyfile(library, native.cached_library_path())
     env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), CC=str(tmp_path / "no-such-cc"),
                TMPDIR=str(tmp_path))
     env.pop("TAPMP_STEPPER", None)
