@@ -73,8 +73,11 @@ void model_setup(tapmp_instance *inst)
     const double a[3] = {R(X_a), R(Z_a), R(B_a)}, b[3] = {R(X_b), R(Z_b), R(B_b)};
     const double v[3] = {R(v_max_X), R(v_max_Z), R(v_max_B)}, acc[3] = {R(a_max_X), R(a_max_Z), R(a_max_B)};
     const double j[3] = {R(j_max_X), R(j_max_Z), R(j_max_B)};
-    *tp = (tapmp_trajectory){R(X_c), R(Z_c), R(radius), R(f_xz), R(phase_xz), R(B_amplitude), R(f_B),
-                             R(phase_B), R(B_offset), inst->ints[VR_profile], R(t_move), {{0}}};
+    /* designated: the axis plans, zero here, are filled by tapmp_move_plan below */
+    *tp = (tapmp_trajectory){.X_c = R(X_c), .Z_c = R(Z_c), .radius = R(radius), .f_xz = R(f_xz),
+                             .phase_xz = R(phase_xz), .B_amplitude = R(B_amplitude), .f_B = R(f_B),
+                             .phase_B = R(phase_B), .B_offset = R(B_offset), .profile = inst->ints[VR_profile],
+                             .t_move = R(t_move)};
     tapmp_move_plan(tp->profile, a, b, v, acc, j, tp->axis);
     inst->m.L_1 = R(L_1);
     outputs(inst, inst->time, inst->reals + MODEL_OUT_FIRST);
