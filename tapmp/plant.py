@@ -150,10 +150,11 @@ class PlantModel:
         if not abs(pose0[2]) < HALF_PI:
             raise KinematicDomainError("B0", pose0[2], "|B0| < pi/2 rad")
         self._lib.tapmp_plant_init(self._pl, [float(v) for v in pose0], [float(v) for v in rate0])
+        # a plain list that callers may change in place; it goes into the C struct at each call
+        self.state = list(self._pl.s)  # [X, Z, B, dX, dZ, dB] [m, m, rad, m/s, m/s, rad/s]
+        self.sample = 0.0  # completed steps: the index of the measurement noise
         self._s_new = ffi.new("double[6]")
         self._out = ffi.new("double[15]")
-        self._state_size = ffi.sizeof("double[6]")
-        self._memmove = ffi.memmove
 
     @property
     def cfg(self) -> PlantConfig:
@@ -164,25 +165,6 @@ class PlantModel:
     def cfg(self, config: PlantConfig) -> None:
         self._cfg = config.validated()
         self._pl.c = _c_config(config)[0]
-
-    @property
-    def state(self) -> tuple[float, ...]:
-        """The state (X, Z, B, dX, dZ, dB) [m, m, rad, m/s, m/s, rad/s]. A tuple: the state lives
-        in the C model, so it changes only by assigning a whole new state."""
-        return tuple(self._pl.s)
-
-    @state.setter
-    def state(self, s) -> None:
-        self._pl.s = [float(v) for v in s]
-
-    @property
-    def sample(self) -> float:
-        """Completed steps: the index of the measurement noise."""
-        return self._pl.sample
-
-    @sample.setter
-    def sample(self, k: float) -> None:
-        self._pl.sample = k
 
     @property
     def gap12_0(self) -> float:
@@ -249,16 +231,19 @@ class PlantModel:
             for name, v in (("F1", F1), ("F2", F2), ("F3", F3)):
                 require_finite(name, v, t)
         s = self._s_new
+        self._pl.s = self.state
         if not self._lib.tapmp_plant_step(self._pl, t, h, (F1, F2, F3), s):
             raise KinematicDomainError("plant state (X, Z, B, dX, dZ, dB)", tuple(s),
                                        "finite values with |B| < pi/2 rad", t + h)
-        self._memmove(self._pl.s, s, self._state_size)
-        self._pl.sample += 1.0
+        self.state = list(s)
+        self.sample += 1.0
 
     def outputs(self) -> tuple[float, ...]:
         """The 15 outputs in the FMU's order: measured positions q1..q3 [m] (true + noise of this
         sample, quantized), true positions, motor velocities [m/s], then the state."""
-        self._lib.tapmp_plant_outputs(self._pl, self._out)
+        pl = self._pl
+        pl.s, pl.sample = self.state, self.sample
+        self._lib.tapmp_plant_outputs(pl, self._out)
         return tuple(self._out)
 
     def joint_positions(self) -> tuple[float, float, float]:

@@ -25,7 +25,7 @@ def tracking_errors(scenario, n_steps, linear=False, perturb=0.0):
     """Max |q_d - q_true| over the motors [m] at each communication point of the plain loop,
     and the step at which the plant left the workspace (None if it did not)."""
     plant, ctrl, traj = loop_models(scenario, linear)
-    plant.state = (plant.state[0] + perturb, *plant.state[1:])
+    plant.state[0] += perturb
     rows = []
 
     def record(t, ref, F, q, q_true):
@@ -66,7 +66,7 @@ def loop_states(scenario, perturb):
     """Plant state and integral of c at each communication point of the linearized plain loop,
     with the start X perturbed by ``perturb`` [m]."""
     plant, ctrl, traj = loop_models(scenario, linear=True)
-    plant.state = (plant.state[0] + perturb, *plant.state[1:])
+    plant.state[0] += perturb
     rows = []
     simulate(plant, ctrl, traj, scenario.start_time, scenario.n_steps, scenario.step, scenario.ordering,
              lambda *_: rows.append([*plant.state, *ctrl.integral]))
