@@ -29,7 +29,7 @@ j_max_* [m/s^3, rad/s^3], all > 0 (a step uses none, a ramp only v_max).
 :func:`reference` is the C model's (tapmp_reference and tapmp_move_plan in
 tapmp/c/tapmp_model.c, what every FMU family runs); :func:`circle_reference`,
 :func:`move_plan` and :func:`move_reference` write the same equations readably in Python,
-the reference the C is tested against (tests/test_native_model.py).
+the reference the C is tested against (tests/model/test_native_model.py).
 """
 
 import math

@@ -14,7 +14,7 @@ How the runtime co-simulates (FMPy's native/container-fmu):
   then every FMU leaves initialization; so the FMUs must report their initial
   outputs in Initialization Mode (the controller's F from q_d and q), which they do.
 Under ``fmpy simulate`` at a 0.1 ms output interval its results equal the
-orchestrator's Jacobi ordering bit for bit (tests/test_container_fmu.py).
+orchestrator's Jacobi ordering bit for bit (tests/fmu/test_container_fmu.py).
 
 Written here rather than with ``fmpy.container_fmu.cli.create_container_fmu`` because
 that builder (0.3.32) writes the FMI 2 type name ``Real`` into ``connections``, which

@@ -27,7 +27,7 @@ TAPMP_Trajectory (:data:`ROLES`), whatever the SSP calls it. Recorded columns ar
 ``element.output``, with such an element written by its role, so the TAPMP system records
 the same columns under any element names.
 
-Conventions of other masters, to reproduce them bit for bit (tests/test_libcosim.py,
+Conventions of other masters, to reproduce them bit for bit (tests/interop/test_libcosim.py,
 test_ecos.py, test_fmpy_ssp.py):
 * ``clock``: how t_k and h_k are computed (``orchestrator.engine.clocks``): ``exact``
   (default, t0 + k h), ``accumulated`` (FMPy, Ecos) or ``nanoseconds`` (libcosim).

@@ -6,7 +6,7 @@ function pointers of the libraries fmpy loaded, a block of steps per call, and r
 Python after every block (progress, stop requests, recording) and at the first failed call
 or suspect output, which the master reports with the same error as its Python loop
 (``CoSimulation.step``). The rows are the Python loop's to the bit
-(tests/test_stepper.py).
+(tests/engine/test_stepper.py).
 
 The C file is compiled on first use (or by ``tapmp build``) into a cache folder outside
 the package: ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,

@@ -7,7 +7,7 @@
  * (tapmp/native.py reads the declarations below from this file). The Python modules
  * kinematics.py, dynamics.py, plant.py (derivatives), control.py and trajectory.py write the
  * same equations readably with the paper's numbers, evaluated in the same order;
- * tests/test_native_model.py checks every function on random states against them. */
+ * tests/model/test_native_model.py checks every function on random states against them. */
 #ifndef TAPMP_MODEL_H
 #define TAPMP_MODEL_H
 
