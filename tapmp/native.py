@@ -15,11 +15,8 @@ The library is, in this order:
 Both names carry a hash of the C sources, so an edited model is never run from a stale library.
 """
 
-import fcntl
 import hashlib
-import os
 import re
-import tempfile
 from pathlib import Path
 
 C_DIR = Path(__file__).resolve().with_name("c")
@@ -49,13 +46,6 @@ def bundled_name() -> str:
     return f"tapmp_model-{source_hash()}.so"
 
 
-def cache_dir() -> Path:
-    """Folder of compiled libraries: $TAPMP_CACHE, $XDG_CACHE_HOME/tapmp or ~/.cache/tapmp."""
-    if os.environ.get("TAPMP_CACHE"):
-        return Path(os.environ["TAPMP_CACHE"])
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tapmp"
-
-
 def compile_library(output: Path) -> Path:
     """Compile tapmp_model.c into the shared library ``output`` with the native FMUs' flags
     (tapmp.toolchain.CFLAGS) but exported symbols; NativeModelError if the compiler fails."""
@@ -70,32 +60,20 @@ def compile_library(output: Path) -> Path:
 
 def cached_library_path() -> Path:
     """Where the cache keeps the library of these sources for the current compiler and flags."""
-    from .toolchain import CFLAGS, compiler
+    from .toolchain import CFLAGS, cache_dir, compiler
     key = hashlib.sha256(f"{source_hash()}\0{' '.join(compiler())}\0{' '.join(CFLAGS)}".encode()).hexdigest()
     return cache_dir() / f"tapmp_model_{key[:16]}.so"
 
 
 def _cached_library() -> Path:
-    """The library in the cache folder, compiled there under a file lock unless present."""
+    """The library in the cache folder, compiled there (under a file lock) unless present."""
     path = cached_library_path()
-    if path.is_file():
-        return path
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path.parent / ".tapmp_model.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            if not path.is_file():
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tapmp_model.", suffix=".so")
-                os.close(fd)
-                try:
-                    compile_library(Path(tmp))
-                    os.replace(tmp, path)
-                finally:
-                    Path(tmp).unlink(missing_ok=True)
+        from .toolchain import build_cached
+        return build_cached(path, compile_library)
     except OSError as err:
         raise NativeModelError(f"cannot write the compiled C model into {path.parent}: "
                                f"{err.strerror or err} (set TAPMP_CACHE to a writable folder)") from None
-    return path
 
 
 def library_path() -> Path:

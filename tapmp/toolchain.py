@@ -132,6 +132,36 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
 
 # -- universal (fat) Mach-O ----------------------------------------------------------------
 
+def cache_dir() -> Path:
+    """Folder of libraries compiled on first use: $TAPMP_CACHE, $XDG_CACHE_HOME/tapmp or ~/.cache/tapmp."""
+    if os.environ.get("TAPMP_CACHE"):
+        return Path(os.environ["TAPMP_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tapmp"
+
+
+def build_cached(path: Path, compile_into) -> Path:
+    """``path`` (a library in the cache), compiled by ``compile_into(tmp_path)`` unless present.
+
+    A file lock beside it makes concurrent builds (a study's workers) wait for the first one, and
+    the library appears under its name only once complete (written to a temporary file, then
+    renamed). OSError if the folder cannot be written; compile_into's errors pass through."""
+    if path.is_file():
+        return path
+    from filelock import FileLock
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with FileLock(str(path.parent / f".{path.stem}.lock")):
+        if not path.is_file():
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+            os.close(fd)
+            try:
+                compile_into(Path(tmp))
+                os.chmod(tmp, 0o755)
+                os.replace(tmp, path)
+            finally:
+                Path(tmp).unlink(missing_ok=True)
+    return path
+
+
 FAT_MAGIC = 0xCAFEBABE
 CPU_TYPE = {0x01000007: "x86_64", 0x0100000C: "arm64"}
 _CPU = {"x86_64": (0x01000007, 3), "arm64": (0x0100000C, 0)}  # (cputype, cpusubtype ALL)

@@ -16,13 +16,12 @@ on stderr and steps in Python. ``TAPMP_STEPPER=python`` selects the Python loop.
 """
 
 import ctypes
-import fcntl
 import hashlib
-import os
 import sys
-import tempfile
 from ctypes import POINTER, Structure, c_double, c_int32, c_int64, c_void_p
 from pathlib import Path
+
+from tapmp.toolchain import build_cached, cache_dir
 
 SOURCE = Path(__file__).with_name("stepper.c")
 STEPPERS = ("auto", "compiled", "python")
@@ -36,14 +35,6 @@ CLOCK_KINDS = {"exact": 0, "accumulated": 1, "nanoseconds": 2}
 
 class StepperBuildError(RuntimeError):
     """The compiled stepping core cannot be built or loaded; the message says why."""
-
-
-def cache_dir() -> Path:
-    """Folder of the compiled core: $TAPMP_CACHE, $XDG_CACHE_HOME/tapmp or ~/.cache/tapmp."""
-    if os.environ.get("TAPMP_CACHE"):
-        return Path(os.environ["TAPMP_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "tapmp"
 
 
 def compiler_command(source: Path, output: Path) -> list[str]:
@@ -73,25 +64,11 @@ def build() -> Path:
     """Build the compiled core into the cache unless it is there; returns its path.
     A file lock makes concurrent builds (a study's workers) wait for the first one."""
     path = library_path()
-    if path.is_file():
-        return path
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path.parent / ".stepper.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            if not path.is_file():
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".stepper.", suffix=".so")
-                os.close(fd)
-                try:
-                    compile_core(SOURCE, Path(tmp))
-                    os.chmod(tmp, 0o755)
-                    os.replace(tmp, path)
-                finally:
-                    Path(tmp).unlink(missing_ok=True)
+        return build_cached(path, lambda tmp: compile_core(SOURCE, tmp))
     except OSError as err:
         raise StepperBuildError(f"cannot write the compiled core into {path.parent}: "
                                 f"{err.strerror or err} (set TAPMP_CACHE to a writable folder)") from None
-    return path
 
 
 _LIB = None
