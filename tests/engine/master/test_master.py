@@ -114,12 +114,47 @@ BROKEN_STEP = """
 """
 
 
+# A third-party FMU that publishes a NaN with status OK (plain pythonfmu, no TAPMP runtime): the
+# master's own finiteness check must catch it.
+NAN_PROBE = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+
+
+class NanProbe(Fmi2Slave):
+    """y = 0, then NaN after the step from t = 0.5 ms."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.y = 0.0
+        self.register_variable(Real("y", causality=Fmi2Causality.output))
+
+    def do_step(self, current_time, step_size):
+        if current_time >= 4.5e-4:
+            self.y = float("nan")
+        return True
+'''
+
+
 @pytest.mark.slow
 def test_a_non_finite_output_of_any_fmu_stops_the_run(built, tmp_path):
+    from test_master_any_ssp import _build, rewrite_ssp
+    probe = _build(tmp_path, NAN_PROBE, "NanProbe")
+    ssp = rewrite_ssp(built["ssp"], tmp_path / "probed.ssp", add=[("probe", probe, [("y", "output")])])
+    with pytest.raises(DivergenceError, match=r"probe.y = nan at t = 0.0006 s is not finite") as info:
+        run_scenario(load(PAPER), ssp, tmp_path / "run")
+    assert info.value.signal == "probe.y"
+    assert len((tmp_path / "run" / "results.csv").read_text().splitlines()) == 1 + 6  # t = 0 .. 0.5 ms
+
+
+@pytest.mark.slow
+def test_a_tapmp_fmu_refuses_to_publish_a_non_finite_output(built, tmp_path):
+    """The TAPMP runtime checks its outputs itself: the same NaN in the plant is an error status
+    with the runtime's message, which the master reports naming the plant."""
     broken = faulty_plant_fmu(tmp_path, BROKEN_STEP, "The real plant, except that q2_true is NaN after the step "
                                                      "from t = 0.5 ms.")
     ssp = faulty_ssp(tmp_path / "broken.ssp", broken, built)
-    with pytest.raises(DivergenceError, match=r"plant.q2_true = nan at t = 0.0006 s is not finite") as info:
+    with pytest.raises(CoSimulationError, match=r"^plant: doStep failed at t = 0.0005 s: \[ERROR\] plant: q2_true = "
+                                                r"nan at t = 0.0006 s is invalid: allowed is a finite number") as info:
         run_scenario(load(PAPER), ssp, tmp_path / "run")
-    assert info.value.signal == "plant.q2_true"
+    assert not isinstance(info.value, DivergenceError)
     assert len((tmp_path / "run" / "results.csv").read_text().splitlines()) == 1 + 6  # t = 0 .. 0.5 ms
