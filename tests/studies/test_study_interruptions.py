@@ -127,7 +127,7 @@ SLOW_STUDY = """[study]
 base = "{base}"
 keep_results = true
 [set]
-stop_time = 2.0
+stop_time = 10.0
 [grid]
 "gain_overrides.D" = [450.0, 900.0, 1800.0]
 """

@@ -77,12 +77,35 @@ def test_two_runs_started_at_once_on_one_folder_one_runs_and_the_other_is_refuse
     assert sorted(p.name for p in out.iterdir()) == [".tapmp.lock", "metrics.json", "results.csv", "run.json"]
 
 
+def paused_while_writing(proc: subprocess.Popen, done: Path) -> bool:
+    """Stop ``proc`` (SIGSTOP) and say whether it is stopped inside its output lock: alive and
+    ``done`` (written inside the lock as its last act) not there yet. Else it is let go."""
+    proc.send_signal(signal.SIGSTOP)
+    if proc.poll() is None and not done.exists():
+        return True
+    proc.send_signal(signal.SIGCONT)
+    return False
+
+
+def run_finished(out: Path) -> Path:
+    """A file that exists once the run into ``out`` has recorded its end (inside its lock)."""
+    return out / "metrics.json"
+
+
 def test_overwrite_does_not_take_a_folder_another_run_is_writing(built, tmp_path):
-    out = tmp_path / "out"
-    first = start(*run_args(built["ssp"], out, 3), tmpdir=tmp_path / "tmp")
-    wait_for_rows(out / "results.csv")
+    for attempt in range(5):  # the first run is paused inside its lock, so the second meets it
+        out = tmp_path / f"out{attempt}"
+        first = start(*run_args(built["ssp"], out, 3), tmpdir=tmp_path / "tmp")
+        wait_for_rows(out / "results.csv")
+        if paused_while_writing(first, run_finished(out)):
+            break
+        finish(first)  # it had ended before it could be paused: try again
+    else:
+        pytest.fail("the first run always ended before it could be paused")
     second = start(*run_args(built["ssp"], out, 0.3, "--overwrite"), tmpdir=tmp_path / "tmp")
-    assert finish(second) == (2, in_use(out, first.pid) + "\n")
+    result = finish(second)
+    first.send_signal(signal.SIGCONT)
+    assert result == (2, in_use(out, first.pid) + "\n")
     assert finish(first)[0] == 0
     assert len(whole_rows(out / "results.csv")) == 30001
     assert json.loads((out / "run.json").read_text())["status"] == "completed"
@@ -121,11 +144,15 @@ def test_a_run_into_the_folder_or_a_subfolder_of_a_running_compare_is_refused(bu
     compare = start("compare", PAPER, "--ssp", built["ssp"], "--out", out, "--set", "stop_time=3", "--no-progress",
                     tmpdir=tmp_path / "tmp")
     wait_for_rows(out / "sc-dc" / "results.csv")
-    for folder in (out, out / "sc-dc"):
-        code, err = finish(start(*run_args(built["ssp"], folder, 0.3, "--overwrite"), tmpdir=tmp_path / "tmp"))
-        assert (code, err) == (2, in_use(folder, compare.pid) + "\n")
-    compare.terminate()
-    finish(compare)
+    assert paused_while_writing(compare, out / "comparison.md"), "the compare ended before it could be paused"
+    try:
+        for folder in (out, out / "sc-dc"):
+            code, err = finish(start(*run_args(built["ssp"], folder, 0.3, "--overwrite"), tmpdir=tmp_path / "tmp"))
+            assert (code, err) == (2, in_use(folder, compare.pid) + "\n")
+    finally:
+        compare.terminate()
+        compare.send_signal(signal.SIGCONT)
+        finish(compare)
 
 
 def test_json_files_are_written_under_unique_temporary_names(tmp_path):
