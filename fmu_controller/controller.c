@@ -11,57 +11,13 @@
 
 #define R(name) inst->reals[VR_##name]
 
-static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
-static const int GAIN_VR[5] = {VR_Lambda_p1, VR_Lambda_v1, VR_b1, VR_D1, VR_K_T1};
-static const int MODAL_VR[6] = {VR_kp_c, VR_kv_c, VR_ki_c, VR_kp_d, VR_kv_d, VR_ki_d};
-
-/* tapmp.params.ModelParams.validated, tapmp.control.Gains.validated, ModalGains.validated,
- * ControllerModel.__init__ */
-int model_validate(const tapmp_instance *inst, char *msg, size_t size)
+/* The parameters and gains into the model; the loop state (integral, previous q) and the
+ * clock are kept. */
+static void read_settings(const tapmp_instance *inst, ModelData *m)
 {
-    char v[40];
-    if (!tapmp_require_positive(inst, PARAM_VR, 7, msg, size)) return 0;  /* ModelParams.validated */
-    for (int k = 0; k < 5; k++)
-        for (int i = 0; i < 3; i++) {
-            int vr = GAIN_VR[k] + i;  /* motors 1..3 are consecutive in the table */
-            double x = inst->reals[vr];
-            int k_t = k == 4;
-            if (!(isfinite(x) && (k_t ? x > 0.0 : x >= 0.0)))
-                return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(x, v),
-                                          k_t ? "a finite number > 0" : "a finite number >= 0", 0, 0);
-        }
-    for (int k = 0; k < 6; k++) {  /* ModalGains.validated */
-        double x = inst->reals[MODAL_VR[k]];
-        if (!(isfinite(x) && x >= 0.0))
-            return tapmp_invalid_text(msg, size, VARS[MODAL_VR[k]].name, tapmp_repr(x, v),
-                                      "a finite number >= 0", 0, 0);
-    }
-    int law = inst->ints[VR_law], vs = inst->ints[VR_velocity_source];
-    if (law != TAPMP_SCDC && law != TAPMP_APDDC && law != TAPMP_PIDDC) {
-        snprintf(v, sizeof v, "%d", law);
-        return tapmp_invalid_text(msg, size, "law", v, "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)", 0, 0);
-    }
-    if (vs != 0 && vs != 1) {
-        snprintf(v, sizeof v, "%d", vs);
-        return tapmp_invalid_text(msg, size, "velocity_source", v,
-                                  "0 (backward difference of q) or 1 (dq inputs)", 0, 0);
-    }
-    if (!(isfinite(R(force_limit)) && R(force_limit) >= 0.0))
-        return tapmp_invalid_text(msg, size, "force_limit", tapmp_repr(R(force_limit), v),
-                                  "a finite number >= 0 (0 = no limit)", 0, 0);
-    if (!(isfinite(R(T_s)) && R(T_s) > 0.0))
-        return tapmp_invalid_text(msg, size, "T_s", tapmp_repr(R(T_s), v),
-                                  "a finite number > 0 (the controller's sample period [s])", 0, 0);
-    return 1;
-}
-
-/* The parameters into the model; the loop state (integral, previous q) is kept. */
-static void build(tapmp_instance *inst)
-{
-    ModelData *m = &inst->m;
     m->p = (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
     for (int i = 0; i < 3; i++) {
-        m->g.Lambda_p[i] = inst->reals[VR_Lambda_p1 + i];
+        m->g.Lambda_p[i] = inst->reals[VR_Lambda_p1 + i];  /* motors 1..3 are consecutive in the table */
         m->g.Lambda_v[i] = inst->reals[VR_Lambda_v1 + i];
         m->g.b[i] = inst->reals[VR_b1 + i];
         m->g.D[i] = inst->reals[VR_D1 + i];
@@ -76,16 +32,30 @@ static void build(tapmp_instance *inst)
     m->law = inst->ints[VR_law];
     m->velocity_source = inst->ints[VR_velocity_source];
     m->force_limit = R(force_limit);
-    m->T_s = R(T_s);
+    m->clock.T_s = R(T_s);
+}
+
+/* tapmp.params.ModelParams.validated, tapmp.control.Gains.validated, ModalGains.validated,
+ * ControllerModel.__init__: the C model's range checks on the settings as read_settings() takes them */
+int model_validate(const tapmp_instance *inst, char *msg, size_t size)
+{
+    ModelData m = inst->m;
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    read_settings(inst, &m);
+    int bad = tapmp_params_check(&m.p, &name, &x, &allowed);
+    if (!bad) bad = tapmp_motor_gains_check(&m.g, &name, &x, &allowed);
+    if (!bad) bad = tapmp_modal_gains_check(&m.g, &name, &x, &allowed);
+    if (!bad) bad = tapmp_controller_check(m.law, m.velocity_source, m.force_limit, m.clock.T_s, &name, &x,
+                                           &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
 }
 
 void model_setup(tapmp_instance *inst)
 {
-    build(inst);
+    read_settings(inst, &inst->m);
     memset(&inst->m.st, 0, sizeof inst->m.st);
-    inst->m.t0 = inst->time;
-    inst->m.k_last = 0.0;
-    inst->m.has_sample = inst->m.warned = 0;
+    inst->m.clock = (tapmp_clock){inst->time, inst->m.clock.T_s, 0.0, 0, 0};
 }
 
 static int sample(tapmp_instance *inst, double t, double h, int advance, double out[], char *msg,
@@ -113,55 +83,30 @@ int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size)
     return 1;
 }
 
-/* The warning logged once when the host's communication points skip sample instants
- * (tapmp.control.skipped_samples_text). Passed on whatever loggingOn says, as the pythonfmu
- * family's binary passes on every warning; doStep still returns OK. */
-static void warn_skipped(tapmp_instance *inst, double t, double steps)
+/* A warning of the clock (tapmp_clock_*_text), passed on whatever loggingOn says, as the
+ * pythonfmu family's binary passes on every warning; doStep still returns OK. */
+static void warn(tapmp_instance *inst, void (*text_of)(const tapmp_clock *, double, double, char *, size_t),
+                 double t, double x)
 {
     char text[TAPMP_MESSAGE_MAX];
-    double T_s = inst->m.T_s;
-    snprintf(text, sizeof text, "the host's communication points skip sample instants of T_s = %g s: the "
-             "controller sampled at t = %.9g s, %g s (%.0f T_s) after its previous sample, and uses that "
-             "interval for the velocity estimate and the integral (it samples only at communication points "
-             "on its grid t0 + k T_s)", T_s, t, steps * T_s, steps);
+    text_of(&inst->m.clock, t, x, text, sizeof text);
     if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
 }
 
-/* tapmp.control.missed_sample_text */
-static void warn_missed(tapmp_instance *inst, double t, double due)
-{
-    char text[TAPMP_MESSAGE_MAX];
-    snprintf(text, sizeof text, "the host's communication points skip sample instants of T_s = %g s: none fell "
-             "on the sample instant t = %.9g s; at t = %.9g s the controller holds its command until a "
-             "communication point falls on its grid t0 + k T_s", inst->m.T_s, due, t);
-    if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
-}
-
+/* tapmp.control.ControllerModel.communication_point */
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
 {
-    ModelData *m = &inst->m;
-    double k;
+    tapmp_clock *clock = &inst->m.clock;
+    double k, steps, missed;
     (void)h;  /* the host's step never enters the law: the time between samples does */
-    build(inst);  /* new tunable values take effect at this sample; the loop state carries over */
-    int on_grid = tapmp_sample_index(t, m->t0, m->T_s, &k);
-    if (!on_grid || (m->has_sample && k <= m->k_last)) {
+    read_settings(inst, &inst->m);  /* new tunable values take effect here; the loop state carries over */
+    if (!tapmp_clock_at(clock, t, &k, &steps, &missed)) {
         memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
-        if (!on_grid && m->has_sample && !m->warned &&
-            t > m->t0 + (m->k_last + 1.0 + TAPMP_SAMPLE_TOLERANCE) * m->T_s) {
-            m->warned = 1;  /* a due sample instant passed without a communication point on it */
-            warn_missed(inst, t, m->t0 + (m->k_last + 1.0) * m->T_s);
-        }
+        if (!isnan(missed)) warn(inst, tapmp_clock_missed_text, t, missed);
         return 1;
     }
-    /* the first sample integrates over one period, as every later one on an unbroken grid */
-    double steps = m->has_sample ? k - m->k_last : 1.0;
-    if (sample(inst, t, steps * m->T_s, 1, out, msg, size)) {
-        if (steps > 1.0 && !m->warned) {
-            m->warned = 1;
-            warn_skipped(inst, t, steps);
-        }
-        m->k_last = k;
-        m->has_sample = 1;
+    if (sample(inst, t, steps * clock->T_s, 1, out, msg, size)) {
+        if (tapmp_clock_sampled(clock, k, steps)) warn(inst, tapmp_clock_skipped_text, t, steps);
         return 1;
     }
     size_t n = strlen(msg);
@@ -177,10 +122,10 @@ void model_get_hidden(const tapmp_instance *inst, double hidden[])
         hidden[3 + i] = st->q_prev[i];
     }
     hidden[6] = st->has_q_prev;
-    hidden[7] = inst->m.t0;
-    hidden[8] = inst->m.k_last;
-    hidden[9] = inst->m.has_sample;
-    hidden[10] = inst->m.warned;
+    hidden[7] = inst->m.clock.t0;
+    hidden[8] = inst->m.clock.k_last;
+    hidden[9] = inst->m.clock.has_sample;
+    hidden[10] = inst->m.clock.warned;
 }
 
 void model_set_hidden(tapmp_instance *inst, const double hidden[])
@@ -191,8 +136,8 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
         st->q_prev[i] = hidden[3 + i];
     }
     st->has_q_prev = hidden[6] != 0.0;
-    inst->m.t0 = hidden[7];
-    inst->m.k_last = hidden[8];
-    inst->m.has_sample = hidden[9] != 0.0;
-    inst->m.warned = hidden[10] != 0.0;
+    inst->m.clock.t0 = hidden[7];
+    inst->m.clock.k_last = hidden[8];
+    inst->m.clock.has_sample = hidden[9] != 0.0;
+    inst->m.clock.warned = hidden[10] != 0.0;
 }

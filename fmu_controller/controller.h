@@ -9,11 +9,7 @@ typedef struct {
     int law, velocity_source;
     double force_limit;
     tapmp_controller_state st;
-    double T_s;        /* sample period [s] */
-    double t0;         /* first sample instant [s]: the start time */
-    double k_last;     /* index of the last sample instant t0 + k T_s (valid if has_sample) */
-    int has_sample;    /* a sample was taken in Step Mode */
-    int warned;        /* the warning about skipped sample instants was given */
+    tapmp_clock clock; /* the sample instants t0 + k T_s, t0 the start time */
 } ModelData;
 
 /* integral of c (3), previous q (3), has previous q, t0, k_last, has_sample, warned */

@@ -9,7 +9,6 @@
 #define HALF_PI 1.5707963267948966
 #define R(name) inst->reals[VR_##name]
 
-static const int PARAM_VR[] = {VR_m_p, VR_m_1, VR_m_2, VR_m_3, VR_I_y, VR_L_1, VR_g};
 static const int INITIAL_VR[] = {VR_X0, VR_Z0, VR_B0, VR_dX0, VR_dZ0, VR_dB0};
 
 /* The FMU's settings as the model's tapmp_plant_config. */
@@ -24,17 +23,23 @@ static tapmp_plant_config config_of(const tapmp_instance *inst)
                                 inst->ints[VR_noise_seed]};
 }
 
+/* The model's parameters (tapmp_params). */
+static tapmp_params params_of(const tapmp_instance *inst)
+{
+    return (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
+}
+
 /* tapmp.params.ModelParams.validated, PlantConfig.validated, PlantModel.__init__ */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     char v[40];
-    const char *name, *allowed;
-    double x;
-    if (!tapmp_require_positive(inst, PARAM_VR, 7, msg, size)) return 0;  /* ModelParams.validated */
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    tapmp_params p = params_of(inst);
     tapmp_plant_config c = config_of(inst);
-    int bad = tapmp_plant_config_check(&c, &name, &x, &allowed);  /* PlantConfig.validated */
-    if (bad == 2) snprintf(v, sizeof v, "%d", (int)x);
-    if (bad) return tapmp_invalid_text(msg, size, name, bad == 2 ? v : tapmp_repr(x, v), allowed, 0, 0);
+    int bad = tapmp_params_check(&p, &name, &x, &allowed);
+    if (!bad) bad = tapmp_plant_config_check(&c, &name, &x, &allowed);
+    if (bad) return tapmp_range_text(bad, name, x, allowed, msg, size);
     for (int i = 0; i < 6; i++)
         if (!isfinite(inst->reals[INITIAL_VR[i]]))
             return tapmp_invalid_text(msg, size, VARS[INITIAL_VR[i]].name,
@@ -52,7 +57,7 @@ static void publish(tapmp_instance *inst)
 void model_setup(tapmp_instance *inst)
 {
     tapmp_plant *pl = &inst->m.plant;
-    pl->p = (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
+    pl->p = params_of(inst);
     pl->c = config_of(inst);
     double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
     tapmp_plant_init(pl, pose0, rate0);

@@ -18,15 +18,11 @@ from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, ModelPara
 SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
 APDDC = 1  # law: augmented PD with dynamics compensation (Eq. 38)
 PIDDC = 2  # law: PID on e with modal gains and dynamics compensation (pid_command)
-LAW_TEXT = "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)"
 VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
-# A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s.
-# Wide enough for a host that sums its steps (t += h drifts by 1e-7 T_s after 1e5 steps and by
-# 2e-5 T_s after 1e6 steps of 1e-4 s), narrow enough that every host step >= 1e-4 T_s (10 ns at
-# T_s = 0.1 ms) lands off the grid.
-SAMPLE_TOLERANCE = 1e-4
-T_S_TEXT = "a finite number > 0 (the controller's sample period [s])"
+# A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s
+# (the C model's TAPMP_SAMPLE_TOLERANCE, which says why this width).
+SAMPLE_TOLERANCE = native.header_number("TAPMP_SAMPLE_TOLERANCE")
 _INPUT_NAMES = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d",
                 "q1", "q2", "q3", "dq1", "dq2", "dq3")
 
@@ -41,13 +37,11 @@ class Gains(NamedTuple):
     K_T: tuple[float, float, float]       # feedforward gain, K_T F = u
 
     def validated(self) -> "Gains":
-        """Return self if every gain is finite and >= 0 and K_T > 0 (ModelInputError otherwise)."""
-        for name, values in zip(self._fields, self):
-            for i, v in enumerate(values, start=1):
-                lo_ok = v > 0.0 if name == "K_T" else v >= 0.0
-                if not (math.isfinite(v) and lo_ok):
-                    allowed = "a finite number > 0" if name == "K_T" else "a finite number >= 0"
-                    raise ModelInputError(f"{name}{i}", v, allowed)
+        """Return self if every gain is finite and >= 0 and K_T > 0 (ModelInputError otherwise;
+        the C model's tapmp_motor_gains_check, which the native FMU runs too)."""
+        native.require_in_ranges("tapmp_motor_gains_check", _c_gains(self, ModalGains()),
+                                 values={f"{n}{i}": v for n, vs in zip(self._fields, self)
+                                         for i, v in enumerate(vs, start=1)})
         return self
 
     @classmethod
@@ -73,10 +67,9 @@ class ModalGains(NamedTuple):
     ki_d: float = _MG["ki_d"]
 
     def validated(self) -> "ModalGains":
-        """Return self if every gain is finite and >= 0 (ModelInputError otherwise)."""
-        for name, v in zip(self._fields, self):
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ModelInputError(name, v, "a finite number >= 0")
+        """Return self if every gain is finite and >= 0 (ModelInputError otherwise; the C model's
+        tapmp_modal_gains_check, which the native FMU runs too)."""
+        native.require_in_ranges("tapmp_modal_gains_check", _c_gains(UNIT_GAINS, self), values=self._asdict())
         return self
 
     @classmethod
@@ -85,6 +78,15 @@ class ModalGains(NamedTuple):
         tapmp.params.scdc_modal_image); ValueError for non-uniform gains."""
         image = scdc_modal_image(g._asdict())
         return cls(*(image[n] for n in MODAL_GAIN_NAMES))
+
+
+UNIT_GAINS = Gains(*((1.0, 1.0, 1.0),) * 5)  # valid per-motor gains, beside modal gains being checked
+
+
+def _c_gains(g: Gains, m: ModalGains):
+    """The gains as the C model's tapmp_gains (a new cffi struct)."""
+    ffi, _ = native.load()
+    return ffi.new("tapmp_gains *", (*(tuple(map(float, v)) for v in g), *map(float, m)))
 
 
 def sync_errors(e1: float, e2: float, e3: float) -> tuple[float, float, float]:
@@ -182,31 +184,57 @@ class ControllerModel:
         self.p = params.validated()
         self.g = gains.validated()
         self.modal = modal.validated()
-        if law not in (SCDC, APDDC, PIDDC):
-            raise ModelInputError("law", law, LAW_TEXT)
-        if velocity_source not in (VELOCITY_DIFFERENCE, VELOCITY_INPUT):
-            raise ModelInputError("velocity_source", velocity_source,
-                                  "0 (backward difference of q) or 1 (dq inputs)")
-        if not (math.isfinite(force_limit) and force_limit >= 0.0):
-            raise ModelInputError("force_limit", force_limit, "a finite number >= 0 (0 = no limit)")
-        if not (math.isfinite(T_s) and T_s > 0.0):
-            raise ModelInputError("T_s", T_s, T_S_TEXT)
+        native.require_in_ranges("tapmp_controller_check", law, velocity_source, force_limit, T_s,
+                                 values={"law": law, "velocity_source": velocity_source,
+                                         "force_limit": force_limit, "T_s": T_s})
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
         ffi, self._lib = native.load()
+        self._ffi = ffi
         self._cp = ffi.new("tapmp_params *", tuple(float(v) for v in self.p))
-        self._cg = ffi.new("tapmp_gains *", (*(tuple(float(x) for x in v) for v in self.g),
-                                             *(float(v) for v in self.modal)))
+        self._cg = _c_gains(self.g, self.modal)
         self._st = ffi.new("tapmp_controller_state *")
         self._out = ffi.new("double[12]")
         self._arg = ffi.new("double *")
-        self.T_s = T_s
-        self.t0 = t0
+        self._clock = ffi.new("tapmp_clock *", {"t0": t0, "T_s": T_s})
+        self._k, self._steps, self._missed = ffi.new("double *"), ffi.new("double *"), ffi.new("double *")
+        self._text = ffi.new("char[]", 1024)
         self.integral = [0.0, 0.0, 0.0]
         self.q_prev = None
-        self.k_last = None    # index of the last sample instant, None before the first
-        self.warned = False   # the warning about skipped sample instants was given
+
+    @property
+    def T_s(self) -> float:
+        """The sample period [s]."""
+        return self._clock.T_s
+
+    @property
+    def t0(self) -> float:
+        """The first sample instant [s]: the start time."""
+        return self._clock.t0
+
+    @t0.setter
+    def t0(self, value: float):
+        self._clock.t0 = value
+
+    @property
+    def k_last(self) -> int | None:
+        """Index of the last sample instant t0 + k T_s sampled, None before the first."""
+        return int(self._clock.k_last) if self._clock.has_sample else None
+
+    @k_last.setter
+    def k_last(self, value: int | None):
+        self._clock.has_sample = value is not None
+        self._clock.k_last = 0.0 if value is None else value
+
+    @property
+    def warned(self) -> bool:
+        """The warning about skipped sample instants was given."""
+        return bool(self._clock.warned)
+
+    @warned.setter
+    def warned(self, value: bool):
+        self._clock.warned = bool(value)
 
     def communication_point(self, t: float, h: float, ref, q, dq_in):
         """A host's doStep(t, h) [s]: sample if t is a sample instant not sampled yet, else hold.
@@ -220,23 +248,19 @@ class ControllerModel:
         """
         if not (math.isfinite(h) and h > 0.0):
             raise ModelInputError("communicationStepSize", h, "a finite number > 0", t)
-        k = sample_index(t, self.t0, self.T_s)
-        if k is None or (self.k_last is not None and k <= self.k_last):
-            warning = None
-            if (k is None and self.k_last is not None and not self.warned
-                    and t > self.t0 + (self.k_last + 1 + SAMPLE_TOLERANCE) * self.T_s):
-                self.warned = True  # a due sample instant passed without a communication point on it
-                warning = missed_sample_text(t, self.t0 + (self.k_last + 1) * self.T_s, self.T_s)
-            return None, warning
-        # the first sample integrates over one period, as every later one on an unbroken grid
-        steps = 1 if self.k_last is None else k - self.k_last
+        lib, clock = self._lib, self._clock
+        if not lib.tapmp_clock_at(clock, t, self._k, self._steps, self._missed):  # hold
+            missed = self._missed[0]
+            return None, None if math.isnan(missed) else self._warning(lib.tapmp_clock_missed_text, t, missed)
+        steps = self._steps[0]
         out = self.sample(t, steps * self.T_s, ref, q, dq_in)
-        warning = None
-        if steps > 1 and not self.warned:
-            self.warned = True
-            warning = skipped_samples_text(t, steps, self.T_s)
-        self.k_last = k
-        return out, warning
+        skipped = lib.tapmp_clock_sampled(clock, self._k[0], steps)
+        return out, self._warning(lib.tapmp_clock_skipped_text, t, steps) if skipped else None
+
+    def _warning(self, text_function, t: float, x: float) -> str:
+        """The text the C model writes for a warning of the clock (tapmp_clock_*_text)."""
+        text_function(self._clock, t, x, self._text, len(self._text))
+        return self._ffi.string(self._text).decode()
 
     def sample(self, t: float, h: float, ref, q, dq_in, advance: bool = True):
         """Compute the command from one sample of the inputs.
@@ -269,18 +293,3 @@ class ControllerModel:
             self.q_prev = tuple(st.q_prev)
         o = tuple(out)
         return o[0:3], o[3:6], o[6:9], o[9:12]
-
-
-def missed_sample_text(t: float, due: float, T_s: float) -> str:
-    """The warning of a host whose communication points pass a sample instant off the grid."""
-    return (f"the host's communication points skip sample instants of T_s = {T_s:g} s: none fell on the "
-            f"sample instant t = {due:.9g} s; at t = {t:.9g} s the controller holds its command until a "
-            f"communication point falls on its grid t0 + k T_s")
-
-
-def skipped_samples_text(t: float, steps: int, T_s: float) -> str:
-    """The warning of a host whose communication points skip sample instants."""
-    return (f"the host's communication points skip sample instants of T_s = {T_s:g} s: the controller "
-            f"sampled at t = {t:.9g} s, {steps * T_s:g} s ({steps} T_s) after its previous sample, and "
-            f"uses that interval for the velocity estimate and the integral (it samples only at "
-            f"communication points on its grid t0 + k T_s)")

@@ -36,6 +36,14 @@ def cdef_text(header: str) -> str:
     return re.sub(r"\bTAPMP_LINKAGE\b", "", "\n".join(lines))
 
 
+def header_number(name: str) -> float:
+    """The value of ``#define NAME NUMBER`` in tapmp_model.h (a constant cffi's ABI mode cannot read)."""
+    m = re.search(rf"^#define {re.escape(name)} (\S+)", HEADER.read_text(), flags=re.M)
+    if m is None:
+        raise NativeModelError(f"{HEADER} defines no {name}")
+    return float(m.group(1))
+
+
 def source_hash() -> str:
     """16 hex digits of the SHA-256 of tapmp_model.c and tapmp_model.h."""
     return hashlib.sha256(SOURCE.read_bytes() + b"\0" + HEADER.read_bytes()).hexdigest()[:16]
@@ -94,3 +102,15 @@ def load():
         ffi.cdef(cdef_text(HEADER.read_text()))
         _LOADED = ffi, ffi.dlopen(str(library_path()))
     return _LOADED
+
+
+def require_in_ranges(check: str, *args, values: dict) -> None:
+    """Run the C model's range check ``check`` (tapmp_params_check, tapmp_plant_config_check, ...)
+    on ``args``; ModelInputError for the first offender it reports, with its value as given in
+    ``values`` (name -> value, so that the message shows it as the caller wrote it)."""
+    from .errors import ModelInputError
+    ffi, lib = load()
+    name, value, allowed = ffi.new("const char **"), ffi.new("double *"), ffi.new("const char **")
+    if getattr(lib, check)(*args, name, value, allowed):
+        field = ffi.string(name[0]).decode()
+        raise ModelInputError(field, values[field], ffi.string(allowed[0]).decode())

@@ -7,7 +7,7 @@ plus a default set that is stable in a loop sampled at 0.1 ms (see README).
 import math
 from typing import NamedTuple
 
-from .errors import require_positive
+from . import native
 
 
 class ModelParams(NamedTuple):
@@ -22,9 +22,11 @@ class ModelParams(NamedTuple):
     g: float = 9.8         # gravitational acceleration [m/s^2]
 
     def validated(self) -> "ModelParams":
-        """Return self after checking every field is finite and > 0 (ModelInputError otherwise)."""
-        for name, value in zip(self._fields, self):
-            require_positive(name, value)
+        """Return self after checking every field is finite and > 0 (ModelInputError otherwise;
+        the C model's tapmp_params_check, which the native FMUs run too)."""
+        ffi, _ = native.load()
+        native.require_in_ranges("tapmp_params_check", ffi.new("tapmp_params *", tuple(map(float, self))),
+                                 values=self._asdict())
         return self
 
 

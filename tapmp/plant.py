@@ -122,11 +122,7 @@ def _c_config(cfg: PlantConfig):
 
 def _check_config(cfg: PlantConfig) -> None:
     """ModelInputError for the first setting of ``cfg`` outside its range (tapmp_plant_config_check)."""
-    ffi, lib = native.load()
-    name, value, allowed = ffi.new("const char **"), ffi.new("double *"), ffi.new("const char **")
-    if lib.tapmp_plant_config_check(_c_config(cfg), name, value, allowed):
-        field = ffi.string(name[0]).decode()
-        raise ModelInputError(field, getattr(cfg, field), ffi.string(allowed[0]).decode())
+    native.require_in_ranges("tapmp_plant_config_check", _c_config(cfg), values=cfg._asdict())
 
 
 class PlantModel:

@@ -37,14 +37,11 @@ from functools import lru_cache
 from typing import NamedTuple
 
 from . import native
-from .errors import ModelInputError, require_finite
 from .params import DEG
 
 TWO_PI = 2.0 * math.pi
 PROFILES = {"circle": 0, "step": 1, "ramp": 2, "s-curve": 3}  # values of the profile parameter
-PROFILE_TEXT = "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)"
 AXES = ("X", "Z", "B")
-LIMIT_NAMES = tuple(f"{k}_max_{a}" for k in "vaj" for a in AXES)
 
 
 class TrajectoryParams(NamedTuple):
@@ -82,23 +79,11 @@ class TrajectoryParams(NamedTuple):
     j_max_B: float = 1000.0
 
     def validated(self) -> "TrajectoryParams":
-        """Return self after range checks (ModelInputError names the offender)."""
-        for name, v in zip(self._fields, self):
-            require_finite(name, v)
-        for name in ("radius", "f_xz", "B_amplitude", "f_B"):
-            if getattr(self, name) < 0.0:
-                raise ModelInputError(name, getattr(self, name), "a finite number >= 0")
-        if not abs(self.B_offset) + self.B_amplitude < 0.5 * math.pi:
-            raise ModelInputError("B_amplitude", self.B_amplitude,
-                                  "|B_offset| + B_amplitude < pi/2 rad (kinematic domain)")
-        if self.profile not in (0, 1, 2, 3):
-            raise ModelInputError("profile", self.profile, PROFILE_TEXT)
-        for name in LIMIT_NAMES:
-            if not getattr(self, name) > 0.0:
-                raise ModelInputError(name, getattr(self, name), "a finite number > 0")
-        for name in ("B_a", "B_b"):
-            if not abs(getattr(self, name)) < 0.5 * math.pi:
-                raise ModelInputError(name, getattr(self, name), "|B| < pi/2 rad (kinematic domain)")
+        """Return self after range checks (ModelInputError names the offender; the C model's
+        tapmp_trajectory_check, which the native FMU runs too)."""
+        ffi, _ = native.load()
+        native.require_in_ranges("tapmp_trajectory_check", ffi.new("double[]", tuple(map(float, self))),
+                                 values=self._asdict())
         return self
 
 

@@ -184,15 +184,12 @@ int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed
                       MODE_NAMES[inst->mode], allowed);
 }
 
-int tapmp_require_positive(const tapmp_instance *inst, const int vrs[], int n, char *msg, size_t size)
+int tapmp_range_text(int kind, const char *name, double value, const char *allowed, char *msg, size_t size)
 {
     char v[40];
-    for (int i = 0; i < n; i++) {
-        double x = inst->reals[vrs[i]];
-        if (!(isfinite(x) && x > 0.0))
-            return tapmp_invalid_text(msg, size, VARS[vrs[i]].name, tapmp_repr(x, v), "a finite number > 0", 0, 0);
-    }
-    return 1;
+    if (!kind) return 1;
+    if (kind == 2) snprintf(v, sizeof v, "%d", (int)value);
+    return tapmp_invalid_text(msg, size, name, kind == 2 ? v : tapmp_repr(value, v), allowed, 0, 0);
 }
 
 /* Range of a parameter, declared as min/max in the modelDescription (tapmp/interface.py). */

@@ -81,8 +81,10 @@ TAPMP_LINKAGE int tapmp_invalid(tapmp_instance *inst, const char *name, const ch
 /* The same with the message only written to buf (no logging); returns 0. */
 TAPMP_LINKAGE int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
                        const char *allowed, int has_time, double time);
-/* errors.require_positive on the Real parameters vrs[0..n-1], in that order; 0 + msg on the first failure. */
-TAPMP_LINKAGE int tapmp_require_positive(const tapmp_instance *inst, const int vrs[], int n, char *msg, size_t size);
+/* The result of one of the C model's range checks (tapmp_*_check): 1 if it found nothing
+ * (`kind` 0), else 0 with its message in msg (the value of an integer, kind 2, as an integer). */
+TAPMP_LINKAGE int tapmp_range_text(int kind, const char *name, double value, const char *allowed, char *msg,
+                                   size_t size);
 TAPMP_LINKAGE int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);
 
 /* FMI operations, version neutral; each returns a status. */

@@ -4,6 +4,7 @@
  * -ffp-contract=off (no fused multiply-add), as build_native.py does. */
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "tapmp_model.h"
 
@@ -218,6 +219,26 @@ int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, dou
         *name = "noise_seed", *value = c->noise_seed, *allowed = "an integer in [0, 2147483647]";
         return 2;
     }
+    return 0;
+}
+
+/* One offender of a range check: its name, value and what is allowed; returns `kind`. */
+static int offender(const char *n, double x, const char *a, int kind, const char **name, double *value,
+                    const char **allowed)
+{
+    *name = n, *value = x, *allowed = a;
+    return kind;
+}
+
+static const char *const PARAM_NAMES[7] = {"m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g"};
+
+/* params.ModelParams.validated */
+int tapmp_params_check(const tapmp_params *p, const char **name, double *value, const char **allowed)
+{
+    const double v[7] = {p->m_p, p->m_1, p->m_2, p->m_3, p->I_y, p->L_1, p->g};
+    for (int i = 0; i < 7; i++)
+        if (!(isfinite(v[i]) && v[i] > 0.0))
+            return offender(PARAM_NAMES[i], v[i], "a finite number > 0", 1, name, value, allowed);
     return 0;
 }
 
@@ -477,6 +498,97 @@ int tapmp_sample_index(double t, double t0, double T_s, double *k)
     return fabs(t - (t0 + *k * T_s)) <= TAPMP_SAMPLE_TOLERANCE * T_s;
 }
 
+/* control.ControllerModel.communication_point: sample or hold */
+int tapmp_clock_at(tapmp_clock *c, double t, double *k, double *steps, double *missed)
+{
+    int on_grid = tapmp_sample_index(t, c->t0, c->T_s, k);
+    *missed = NAN;
+    if (!on_grid || (c->has_sample && *k <= c->k_last)) {
+        if (!on_grid && c->has_sample && !c->warned &&
+            t > c->t0 + (c->k_last + 1.0 + TAPMP_SAMPLE_TOLERANCE) * c->T_s) {
+            c->warned = 1;  /* a due sample instant passed without a communication point on it */
+            *missed = c->t0 + (c->k_last + 1.0) * c->T_s;
+        }
+        return 0;
+    }
+    /* the first sample integrates over one period, as every later one on an unbroken grid */
+    *steps = c->has_sample ? *k - c->k_last : 1.0;
+    return 1;
+}
+
+int tapmp_clock_sampled(tapmp_clock *c, double k, double steps)
+{
+    int warn = steps > 1.0 && !c->warned;
+    c->k_last = k;
+    c->has_sample = 1;
+    c->warned = c->warned || warn;
+    return warn;
+}
+
+/* control.missed_sample_text */
+void tapmp_clock_missed_text(const tapmp_clock *c, double t, double due, char *text, size_t size)
+{
+    snprintf(text, size, "the host's communication points skip sample instants of T_s = %g s: none fell "
+             "on the sample instant t = %.9g s; at t = %.9g s the controller holds its command until a "
+             "communication point falls on its grid t0 + k T_s", c->T_s, due, t);
+}
+
+/* control.skipped_samples_text */
+void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char *text, size_t size)
+{
+    snprintf(text, size, "the host's communication points skip sample instants of T_s = %g s: the "
+             "controller sampled at t = %.9g s, %g s (%.0f T_s) after its previous sample, and uses that "
+             "interval for the velocity estimate and the integral (it samples only at communication points "
+             "on its grid t0 + k T_s)", c->T_s, t, steps * c->T_s, steps);
+}
+
+static const char *const GAIN_NAMES[15] = {"Lambda_p1", "Lambda_p2", "Lambda_p3", "Lambda_v1", "Lambda_v2",
+                                           "Lambda_v3", "b1", "b2", "b3", "D1", "D2", "D3", "K_T1", "K_T2",
+                                           "K_T3"};
+static const char *const MODAL_NAMES[6] = {"kp_c", "kv_c", "ki_c", "kp_d", "kv_d", "ki_d"};
+
+/* control.Gains.validated */
+int tapmp_motor_gains_check(const tapmp_gains *g, const char **name, double *value, const char **allowed)
+{
+    const double *field[5] = {g->Lambda_p, g->Lambda_v, g->b, g->D, g->K_T};
+    for (int k = 0; k < 5; k++)
+        for (int i = 0; i < 3; i++) {
+            double x = field[k][i];
+            if (!(isfinite(x) && (k == 4 ? x > 0.0 : x >= 0.0)))
+                return offender(GAIN_NAMES[3 * k + i], x, k == 4 ? "a finite number > 0" : "a finite number >= 0",
+                                1, name, value, allowed);
+        }
+    return 0;
+}
+
+/* control.ModalGains.validated */
+int tapmp_modal_gains_check(const tapmp_gains *g, const char **name, double *value, const char **allowed)
+{
+    const double v[6] = {g->kp_c, g->kv_c, g->ki_c, g->kp_d, g->kv_d, g->ki_d};
+    for (int i = 0; i < 6; i++)
+        if (!(isfinite(v[i]) && v[i] >= 0.0))
+            return offender(MODAL_NAMES[i], v[i], "a finite number >= 0", 1, name, value, allowed);
+    return 0;
+}
+
+/* control.ControllerModel.__init__ */
+int tapmp_controller_check(double law, double velocity_source, double force_limit, double T_s,
+                           const char **name, double *value, const char **allowed)
+{
+    if (!(law == TAPMP_SCDC || law == TAPMP_APDDC || law == TAPMP_PIDDC))
+        return offender("law", law, "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)", 2, name, value, allowed);
+    if (!(velocity_source == 0.0 || velocity_source == 1.0))
+        return offender("velocity_source", velocity_source, "0 (backward difference of q) or 1 (dq inputs)", 2,
+                        name, value, allowed);
+    if (!(isfinite(force_limit) && force_limit >= 0.0))
+        return offender("force_limit", force_limit, "a finite number >= 0 (0 = no limit)", 1, name, value,
+                        allowed);
+    if (!(isfinite(T_s) && T_s > 0.0))
+        return offender("T_s", T_s, "a finite number > 0 (the controller's sample period [s])", 1, name, value,
+                        allowed);
+    return 0;
+}
+
 /* trajectory.circle_reference */
 static void circle_reference(double t, const tapmp_trajectory *tp, double ref[9])
 {
@@ -613,4 +725,44 @@ void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
         }
         ref[i] = a[0], ref[3 + i] = a[1], ref[6 + i] = a[2];
     }
+}
+
+/* TrajectoryParams's field names, in order. */
+static const char *const TRAJECTORY_NAMES[TAPMP_TRAJECTORY_N] = {
+    "X_c", "Z_c", "radius", "f_xz", "phase_xz", "B_amplitude", "f_B", "phase_B", "B_offset", "profile",
+    "X_a", "Z_a", "B_a", "X_b", "Z_b", "B_b", "t_move", "v_max_X", "v_max_Z", "v_max_B", "a_max_X",
+    "a_max_Z", "a_max_B", "j_max_X", "j_max_Z", "j_max_B"};
+
+enum { TR_RADIUS = 2, TR_F_XZ = 3, TR_B_AMPLITUDE = 5, TR_F_B = 6, TR_B_OFFSET = 8, TR_PROFILE = 9, TR_B_A = 12,
+       TR_B_B = 15, TR_LIMITS = 17 };
+
+/* trajectory.TrajectoryParams.validated */
+int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name, double *value,
+                           const char **allowed)
+{
+    static const int nonnegative[4] = {TR_RADIUS, TR_F_XZ, TR_B_AMPLITUDE, TR_F_B};
+    static const int poses_B[2] = {TR_B_A, TR_B_B};
+    for (int i = 0; i < TAPMP_TRAJECTORY_N; i++)
+        if (!isfinite(v[i]))
+            return offender(TRAJECTORY_NAMES[i], v[i], "a finite number", i == TR_PROFILE ? 2 : 1, name, value,
+                            allowed);
+    for (int i = 0; i < 4; i++)
+        if (v[nonnegative[i]] < 0.0)
+            return offender(TRAJECTORY_NAMES[nonnegative[i]], v[nonnegative[i]], "a finite number >= 0", 1, name,
+                            value, allowed);
+    if (!(fabs(v[TR_B_OFFSET]) + v[TR_B_AMPLITUDE] < HALF_PI))
+        return offender("B_amplitude", v[TR_B_AMPLITUDE], "|B_offset| + B_amplitude < pi/2 rad (kinematic domain)",
+                        1, name, value, allowed);
+    double profile = v[TR_PROFILE];
+    if (!(profile == 0.0 || profile == 1.0 || profile == 2.0 || profile == 3.0))
+        return offender("profile", profile, "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)", 2, name,
+                        value, allowed);
+    for (int i = TR_LIMITS; i < TAPMP_TRAJECTORY_N; i++)
+        if (!(v[i] > 0.0))
+            return offender(TRAJECTORY_NAMES[i], v[i], "a finite number > 0", 1, name, value, allowed);
+    for (int i = 0; i < 2; i++)
+        if (!(fabs(v[poses_B[i]]) < HALF_PI))
+            return offender(TRAJECTORY_NAMES[poses_B[i]], v[poses_B[i]], "|B| < pi/2 rad (kinematic domain)", 1, name,
+                            value, allowed);
+    return 0;
 }

@@ -1,6 +1,7 @@
 /* The TAPMP model in C: kinematics (Eq. 1-4), task-space dynamics (Eq. 5-14), the plant
  * with its non-idealities, the SC-DC (Eq. 15-26), APD-DC (Eq. 38-39) and PID-DC control laws and
- * the reference trajectory. Plain functions on doubles, SI units, nothing but libm.
+ * the reference trajectory, and the ranges of their settings. Plain functions on doubles, SI
+ * units, nothing but libm (and snprintf for the texts of the controller's warnings).
  *
  * This is the one implementation of the equations: the native FMUs compile it in, and the
  * Python package (hence the pythonfmu FMUs and the FMI-free loop) calls it through cffi
@@ -10,6 +11,8 @@
  * tests/model/test_native_model.py checks every function on random states against them. */
 #ifndef TAPMP_MODEL_H
 #define TAPMP_MODEL_H
+
+#include <stddef.h>
 
 /* Linkage of everything that is not an FMI function. Compiled file by file these are
  * ordinary external declarations. The FMU's sources/all.c compiles the whole FMU as one
@@ -120,6 +123,10 @@ TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
  * allowed (the text of the one-line message "NAME = VALUE is invalid: allowed is ALLOWED"). */
 TAPMP_LINKAGE int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
                                            const char **allowed);
+/* The ranges of the rigid-body parameters (ModelParams.validated): every one finite and > 0;
+ * returns and reports as tapmp_plant_config_check. */
+TAPMP_LINKAGE int tapmp_params_check(const tapmp_params *p, const char **name, double *value,
+                                     const char **allowed);
 /* Set the initial state, the reference gaps of the pulling law and the sample count. */
 TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
@@ -149,6 +156,17 @@ TAPMP_LINKAGE void tapmp_apd_command(const double e[3], const double de[3], cons
 TAPMP_LINKAGE void tapmp_pid_command(const double e[3], const double de[3], const double integral_e[3],
                        const double u_d[3], const tapmp_gains *g, double u[3]);
 
+/* The ranges of the controller's settings (tapmp.control.Gains.validated, ModalGains.validated,
+ * ControllerModel), returned and reported as tapmp_plant_config_check: the gains per motor
+ * (Lambda_p1..K_T3 in tapmp_gains's field order: finite, >= 0, K_T > 0), then the modal gains
+ * (finite, >= 0); then law, velocity_source (integers: 2), force_limit and T_s. */
+TAPMP_LINKAGE int tapmp_motor_gains_check(const tapmp_gains *g, const char **name, double *value,
+                                          const char **allowed);
+TAPMP_LINKAGE int tapmp_modal_gains_check(const tapmp_gains *g, const char **name, double *value,
+                                          const char **allowed);
+TAPMP_LINKAGE int tapmp_controller_check(double law, double velocity_source, double force_limit, double T_s,
+                                         const char **name, double *value, const char **allowed);
+
 /* The discrete controller's state between samples. */
 typedef struct {
     double integral[3];  /* running integral of c (SC-DC) or e (PID-DC) [m s] */
@@ -166,18 +184,49 @@ TAPMP_LINKAGE int tapmp_controller_sample(const tapmp_params *p, const tapmp_gai
                             double out[12], tapmp_controller_state *next, double *arg);
 
 /* tapmp.control.SAMPLE_TOLERANCE: a communication point within this x T_s of a sample
- * instant t0 + k T_s is that instant. */
+ * instant t0 + k T_s is that instant. Wide enough for a host that sums its steps (t += h drifts
+ * by 1e-7 T_s after 1e5 steps and by 2e-5 T_s after 1e6 steps of 1e-4 s), narrow enough that
+ * every host step >= 1e-4 T_s (10 ns at T_s = 0.1 ms) lands off the grid. */
 #define TAPMP_SAMPLE_TOLERANCE 1e-4
 
 /* tapmp.control.sample_index: 1 and *k if the communication point t [s] falls on the sample
  * instant t0 + k T_s (within TAPMP_SAMPLE_TOLERANCE T_s), else 0 (between instants). */
 TAPMP_LINKAGE int tapmp_sample_index(double t, double t0, double T_s, double *k);
 
+/* The controller's own clock: sample instants t0 + k T_s [s], the last one sampled (k_last,
+ * valid if has_sample) and whether the one warning about skipped instants was given. */
+typedef struct {
+    double t0, T_s, k_last;
+    int has_sample, warned;
+} tapmp_clock;
+
+/* What the controller does at the communication point t [s] (a host's doStep(t, h)): 1 to
+ * sample, at the instant *k, *steps sample periods after the previous sample (1 for the
+ * first); 0 to hold its outputs (t is between instants or sampled already). *missed is the
+ * sample instant [s] that passed without a communication point on it, the first time a hold
+ * finds one (the clock then counts its warning as given), else NaN. */
+TAPMP_LINKAGE int tapmp_clock_at(tapmp_clock *c, double t, double *k, double *steps, double *missed);
+/* Record the sample taken at instant k, `steps` periods after the previous one; 1 if it
+ * skipped instants and the warning was not given yet (the clock now counts it as given). */
+TAPMP_LINKAGE int tapmp_clock_sampled(tapmp_clock *c, double k, double steps);
+/* The warning texts (at most `size` bytes with the terminating zero): the communication point t
+ * [s] held past the sample instant `due` [s]; the sample at t taken `steps` periods after the
+ * previous one. */
+TAPMP_LINKAGE void tapmp_clock_missed_text(const tapmp_clock *c, double t, double due, char *text, size_t size);
+TAPMP_LINKAGE void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char *text, size_t size);
+
 /* --- trajectory (tapmp/trajectory.py) --- */
 /* The move of `profile` (1, 2 or 3) from pose a to pose b (X, Z, B) with the limits per axis
  * v_max, a_max, j_max, every axis ending when the slowest does (move_plan). */
 TAPMP_LINKAGE void tapmp_move_plan(int profile, const double a[3], const double b[3], const double v_max[3],
                                    const double a_max[3], const double j_max[3], tapmp_axis_plan plan[3]);
+/* The number of the reference's settings: tapmp.trajectory.TrajectoryParams's fields. */
+enum { TAPMP_TRAJECTORY_N = 26 };
+/* The ranges of the reference's settings v, in TrajectoryParams's field order (X_c .. B_offset,
+ * profile, X_a .. t_move, v_max_X .. j_max_B), returned and reported as
+ * tapmp_plant_config_check (the profile is the integer: 2). */
+TAPMP_LINKAGE int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name, double *value,
+                                         const char **allowed);
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
 TAPMP_LINKAGE void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
 
