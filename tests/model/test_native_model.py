@@ -993,3 +993,8 @@ def test_closed_loop_through_the_c_functions_follows_the_python_loop(native, law
         key = f"closed loop {label} {ordering}: {n} (max abs diff)"
         MEASURED[key] = {"states": CLOSED_LOOP_STEPS + 1, "worst": diff[n],
                          "identical": bool(np.array_equal(c_arr[n], py_arr[n]))}
+
+
+def test_the_law_numbers_of_python_are_the_c_models():
+    _, lib = native_model.load()
+    assert (SCDC, APDDC, PIDDC) == (lib.TAPMP_SCDC, lib.TAPMP_APDDC, lib.TAPMP_PIDDC) == (0, 1, 2)
