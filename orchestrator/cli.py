@@ -290,6 +290,12 @@ def summary_table(results: dict) -> str:
     return "\n".join(lines)
 
 
+def _check_workers(workers: int) -> None:
+    """--workers: UsageError unless at least one process."""
+    if workers < 1:
+        raise UsageError(f"--workers = {workers} is invalid: allowed is an integer >= 1")
+
+
 def _jobs(args) -> int:
     """--jobs checked: a positive integer up to the cores (default: one per core)."""
     from .experiments.pool import parse_jobs
@@ -330,8 +336,7 @@ def cmd_reproduce(args) -> int:
     if not 0 < args.paper_gains_stop_time < float("inf"):
         raise UsageError(f"--paper-gains-stop-time = {args.paper_gains_stop_time:g} is invalid: allowed is a "
                          "finite horizon > 0 s")
-    if args.workers < 1:
-        raise UsageError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+    _check_workers(args.workers)
     if page.suffix != ".md":
         raise UsageError(f"--out = {str(page)!r} is invalid: allowed is a Markdown file ending in .md")
     if args.record_every is not None:
@@ -376,8 +381,8 @@ def cmd_study(args) -> int:
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
                          "or tapmp build) or pass --ssp")
-    if args.workers is not None and args.workers < 1:
-        raise StudyError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+    if args.workers is not None:
+        _check_workers(args.workers)
     if args.format or args.record_every is not None:  # scenario keys, applied like the study's [set]
         import dataclasses
         recording = {k: v for k, v in (("format", args.format), ("record_every", every)) if v is not None}
@@ -500,26 +505,30 @@ def parser() -> argparse.ArgumentParser:
         scenario_arg(sp, "--set stop_time=0.5 --set plant.k_pull=0")
         fmu_args(sp)
 
-    def recording_args(sp, format_too=False):
-        """--record-every (and --format): what the result files keep."""
-        if format_too:
-            sp.add_argument("--format", choices=RESULT_FORMATS, help="result files: csv (text) or mat (MATLAB 5 "
-                            "MAT-file, about 40 %% of the size); overrides the scenarios' format (default csv)")
+    def recording_args(sp):
+        """--format and --record-every: what the result files keep."""
+        sp.add_argument("--format", choices=RESULT_FORMATS, help="result files: csv (results.csv, text) or mat "
+                        "(results.mat, MATLAB 5 MAT-file, about 40 %% of the size and faster to write); overrides "
+                        "the scenario's format (default csv)")
         sp.add_argument("--record-every", metavar="N", help="keep every N-th step (and the last) "
                         "in the result files; the metrics still use every step (default: the scenario's "
                         "record_every, 1)")
+
+    def progress_arg(sp):
+        sp.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    def jobs_arg(sp, what):
+        sp.add_argument("--jobs", metavar="N", help=f"{what} at once, each in its own process (default: one per "
+                        "core)")
 
     def scenario_args(sp):
         source_args(sp)
         sp.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, "
                         f"then /<law> for run, /compare for compare); {RELATIVE}")
-        sp.add_argument("--format", choices=RESULT_FORMATS, help="result file: csv (results.csv, text) or mat "
-                        "(results.mat, MATLAB 5 MAT-file, about half the size and faster to write); overrides the "
-                        "scenario's format (default csv)")
         sp.add_argument("--overwrite", action="store_true", help="replace a completed result in the output folder "
                         "(a failed or interrupted one is replaced without it)")
         recording_args(sp)
-        sp.add_argument("--no-progress", action="store_true", help="no progress bar")
+        progress_arg(sp)
 
     r = sub.add_parser("run", help="run one scenario", description="Co-simulate one scenario and write "
                        "results.csv (or results.mat), run.json and metrics.json into its output folder, by default "
@@ -560,7 +569,7 @@ def parser() -> argparse.ArgumentParser:
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
     scenario_args(c)
-    c.add_argument("--jobs", metavar="N", help="runs at once, each in its own process (default: one per core)")
+    jobs_arg(c, "runs")
     c.add_argument("--runs", metavar="R1,R2,...", help="runs the figures show (folder names, e.g. "
                    "sc-dc,apd-dc,pid-dc-mode-matched, or all; default: sc-dc, apd-dc and the better of "
                    "apd-dc-mode-matched and apd-dc-ms-matched by mean tracking MAE); every run still runs and is "
@@ -575,7 +584,7 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", help="page to write, ending in .md (default: RESULTS/paper-reproduction.md)")
     rp.add_argument("--write-docs", action="store_true", help="also write the page to docs/paper-reproduction.md "
                     "(relative to the current directory: run it from the repository root)")
-    recording_args(rp, format_too=True)
+    recording_args(rp)
     rp.add_argument("--scenarios", default=str(SCENARIOS_DIR), help="folder with paper_simulation.toml, "
                     "paper_experiment.toml (default: the scenarios shipped with the package)")
     rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
@@ -584,9 +593,8 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--paper-gains-stop-time", type=float, default=0.2, metavar="S",
                     help="horizon [s] of each run of the paper's gains at 1 us, 10 us and 0.1 ms (default 0.2)")
     rp.add_argument("--workers", type=int, default=2, help="processes for the paper-gain runs (default 2)")
-    rp.add_argument("--jobs", metavar="N", help="compare runs at once, each in its own process (default: one per "
-                    "core)")
-    rp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    jobs_arg(rp, "compare runs")
+    progress_arg(rp)
     rp.set_defaults(func=cmd_reproduce)
     st = sub.add_parser("study", help="run a parameter study on Dask",
                         description="Run every case of a study file (grid, Monte Carlo or tuning) as an "
@@ -599,11 +607,11 @@ def parser() -> argparse.ArgumentParser:
     fmu_args(st)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
-    recording_args(st, format_too=True)
+    recording_args(st)
     st.add_argument("--write-docs", action="store_true", help="a tuning study: write its presets, comparison.md "
                     "and objective.png into its [tune] write_to folder (studies/tune.toml: docs/tuning) instead "
                     "of OUT/tuning")
-    st.add_argument("--no-progress", action="store_true", help="no progress bar")
+    progress_arg(st)
     st.set_defaults(func=cmd_study)
     ex = sub.add_parser("export", help="write a scenario as an SSP with its parameter set",
                         description="Write the SSP of the FMU family with the scenario's parameter set (SSP "

@@ -77,6 +77,17 @@ def test_study_writes_one_row_per_case_with_the_numbers_of_its_metrics(built, tm
     assert list((tmp_path / "tmp").iterdir()) == []
 
 
+@pytest.mark.parametrize("command", ["study", "reproduce"])
+def test_workers_below_one_are_refused_alike_by_study_and_reproduce(built, tmp_path, command):
+    study = tmp_path / "s.toml"
+    study.write_text(f'[study]\nbase = "{PAPER}"\n[grid]\nlaw = ["sc-dc"]\n')
+    first = (study,) if command == "study" else ()
+    res = tapmp(command, *first, "--ssp", built["ssp"], "--out", tmp_path / "out.md", "--workers", "0",
+                tmp_path=tmp_path)
+    assert (res.returncode, res.stderr) == (2, "error: --workers = 0 is invalid: allowed is an integer >= 1\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml", "tmp"]  # nothing written
+
+
 def test_reproduce_writes_the_page_with_the_numbers_of_its_runs(built, tmp_path):
     from orchestrator.experiments.baselines import BASELINES
     scenarios = tmp_path / "scenarios"
