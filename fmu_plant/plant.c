@@ -6,10 +6,7 @@
 
 #include "instance.h"
 
-#define HALF_PI 1.5707963267948966
 #define R(name) inst->reals[VR_##name]
-
-static const int INITIAL_VR[] = {VR_X0, VR_Z0, VR_B0, VR_dX0, VR_dZ0, VR_dB0};
 
 /* The FMU's settings as the model's tapmp_plant_config. */
 static tapmp_plant_config config_of(const tapmp_instance *inst)
@@ -32,21 +29,15 @@ static tapmp_params params_of(const tapmp_instance *inst)
 /* tapmp.params.ModelParams.validated, PlantConfig.validated, PlantModel.__init__ */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
-    char v[40];
     const char *name = NULL, *allowed = NULL;
     double x = 0.0;
     tapmp_params p = params_of(inst);
     tapmp_plant_config c = config_of(inst);
+    const double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
     int bad = tapmp_params_check(&p, &name, &x, &allowed);
     if (!bad) bad = tapmp_plant_config_check(&c, &name, &x, &allowed);
-    if (bad) return tapmp_range_text(bad, name, x, allowed, msg, size);
-    for (int i = 0; i < 6; i++)
-        if (!isfinite(inst->reals[INITIAL_VR[i]]))
-            return tapmp_invalid_text(msg, size, VARS[INITIAL_VR[i]].name,
-                                      tapmp_repr(inst->reals[INITIAL_VR[i]], v), "a finite number", 0, 0);
-    if (!(fabs(R(B0)) < HALF_PI))
-        return tapmp_invalid_text(msg, size, "B0", tapmp_repr(R(B0), v), "|B0| < pi/2 rad", 0, 0);
-    return 1;
+    if (!bad) bad = tapmp_initial_state_check(pose0, rate0, &name, &x, &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
 }
 
 static void publish(tapmp_instance *inst)

@@ -106,11 +106,14 @@ def load():
 
 def require_in_ranges(check: str, *args, values: dict) -> None:
     """Run the C model's range check ``check`` (tapmp_params_check, tapmp_plant_config_check, ...)
-    on ``args``; ModelInputError for the first offender it reports, with its value as given in
-    ``values`` (name -> value, so that the message shows it as the caller wrote it)."""
-    from .errors import ModelInputError
+    on ``args``; ModelInputError for the first offender it reports (KinematicDomainError for a
+    value outside the kinematic domain), with its value as given in ``values`` (name -> value,
+    so that the message shows it as the caller wrote it)."""
+    from .errors import KinematicDomainError, ModelInputError
     ffi, lib = load()
     name, value, allowed = ffi.new("const char **"), ffi.new("double *"), ffi.new("const char **")
-    if getattr(lib, check)(*args, name, value, allowed):
+    kind = getattr(lib, check)(*args, name, value, allowed)
+    if kind:
         field = ffi.string(name[0]).decode()
-        raise ModelInputError(field, values[field], ffi.string(allowed[0]).decode())
+        error = KinematicDomainError if kind == 3 else ModelInputError
+        raise error(field, values[field], ffi.string(allowed[0]).decode())

@@ -34,11 +34,10 @@ from typing import NamedTuple
 
 from . import native
 from .dynamics import task_acceleration
-from .errors import KinematicDomainError, ModelInputError, require_finite
+from .errors import KinematicDomainError, require_finite
 from .kinematics import inverse, joint_velocity, rotation_column, S3
 from .params import ModelParams
 
-HALF_PI = 0.5 * math.pi
 TWO_PI = 2.0 * math.pi
 NOISE_SEED_MAX = 2147483647
 
@@ -141,11 +140,10 @@ class PlantModel:
         self._pl = ffi.new("tapmp_plant *")
         self._pl.p = tuple(float(v) for v in self.p)
         self.cfg = config
-        for name, v in zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), (*pose0, *rate0)):
-            require_finite(name, v)
-        if not abs(pose0[2]) < HALF_PI:
-            raise KinematicDomainError("B0", pose0[2], "|B0| < pi/2 rad")
-        self._lib.tapmp_plant_init(self._pl, [float(v) for v in pose0], [float(v) for v in rate0])
+        given = dict(zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), (*pose0, *rate0)))
+        pose0, rate0 = [float(v) for v in pose0], [float(v) for v in rate0]
+        native.require_in_ranges("tapmp_initial_state_check", pose0, rate0, values=given)
+        self._lib.tapmp_plant_init(self._pl, pose0, rate0)
         # a plain list that callers may change in place; it goes into the C struct at each call
         self.state = list(self._pl.s)  # [X, Z, B, dX, dZ, dB] [m, m, rad, m/s, m/s, rad/s]
         self.sample = 0.0  # completed steps: the index of the measurement noise

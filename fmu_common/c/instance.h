@@ -82,7 +82,8 @@ TAPMP_LINKAGE int tapmp_invalid(tapmp_instance *inst, const char *name, const ch
 TAPMP_LINKAGE int tapmp_invalid_text(char *buf, size_t size, const char *name, const char *value,
                        const char *allowed, int has_time, double time);
 /* The result of one of the C model's range checks (tapmp_*_check): 1 if it found nothing
- * (`kind` 0), else 0 with its message in msg (the value of an integer, kind 2, as an integer). */
+ * (`kind` 0), else 0 with its message in msg (the value of an integer, kind 2, as an integer;
+ * kind 3, outside the kinematic domain, as a real). */
 TAPMP_LINKAGE int tapmp_range_text(int kind, const char *name, double value, const char *allowed, char *msg,
                                    size_t size);
 TAPMP_LINKAGE int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);

@@ -37,7 +37,7 @@ from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VAR
 from tapmp import toolchain
 from .families import default_build_dir
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
-from tapmp.toolchain import CFLAGS, PLATFORMS, ToolchainError
+from tapmp.toolchain import PLATFORMS, ToolchainError
 
 # The package's root: the repository in a checkout, site-packages in an installed wheel
 # (the C sources are package data there).

@@ -31,8 +31,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..engine.ssp import (OSP, SSC, SSD, ParameterAddressError, default_experiment,  # noqa: F401 (OSP for readers)
-                          resolve_parameters, set_system_step)
+from ..engine.ssp import SSC, SSD, ParameterAddressError, default_experiment, resolve_parameters, set_system_step
 from .scenario import Scenario
 
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"

@@ -257,7 +257,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, comman
             key = f"{name}_calibrated"
             folders[key] = Path(results_dir) / key / "compare"
             calibrated[key] = (sc, *compare(sc, folders[key])[:3])
-    say(f"the paper's gains at steps of " + ", ".join(f"{h:g}" for h in PAPER_GAIN_STEPS)
+    say("the paper's gains at steps of " + ", ".join(f"{h:g}" for h in PAPER_GAIN_STEPS)
         + f" s, {paper_gains_stop:g} s per run, on {workers} process(es)")
     gain_rows = run_paper_gains(steps=PAPER_GAIN_STEPS, stop_time=paper_gains_stop, workers=workers)
     pg_cmd = (f"python -m orchestrator.experiments.paper_gains --stop-time {paper_gains_stop:g} --steps "

@@ -165,7 +165,7 @@ def _heatmaps(study, groups, group_keys, keys, flagged):
             ax.set_xlabel(key_label(kx))
             ax.set_ylabel(key_label(ky))
             ax.set_title(f"{title}\n{_label(group_keys, g)}", fontsize=9)
-            fig.colorbar(im, ax=ax, label=f"log10 of the MAE in µm [-]")
+            fig.colorbar(im, ax=ax, label="log10 of the MAE in µm [-]")
     fig.suptitle(textwrap.fill(f"{study.name} (blank/failed: the case did not complete; cross-hatched: flagged "
                                "unstable (spectral radius > 1) or saturated (force at the limit in > 1 % of "
                                "samples))", 130), fontsize=9)

@@ -242,6 +242,19 @@ int tapmp_params_check(const tapmp_params *p, const char **name, double *value, 
     return 0;
 }
 
+/* plant.PlantModel.__init__ */
+int tapmp_initial_state_check(const double pose0[3], const double rate0[3], const char **name, double *value,
+                              const char **allowed)
+{
+    static const char *const names[6] = {"X0", "Z0", "B0", "dX0", "dZ0", "dB0"};
+    for (int i = 0; i < 6; i++) {
+        double x = i < 3 ? pose0[i] : rate0[i - 3];
+        if (!isfinite(x)) return offender(names[i], x, "a finite number", 1, name, value, allowed);
+    }
+    if (!(fabs(pose0[2]) < HALF_PI)) return offender("B0", pose0[2], "|B0| < pi/2 rad", 3, name, value, allowed);
+    return 0;
+}
+
 /* plant.PlantModel.__init__ (state and reference gaps; ranges are checked by the caller) */
 void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3])
 {
@@ -752,7 +765,7 @@ int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name
                             value, allowed);
     if (!(fabs(v[TR_B_OFFSET]) + v[TR_B_AMPLITUDE] < HALF_PI))
         return offender("B_amplitude", v[TR_B_AMPLITUDE], "|B_offset| + B_amplitude < pi/2 rad (kinematic domain)",
-                        1, name, value, allowed);
+                        3, name, value, allowed);
     double profile = v[TR_PROFILE];
     if (!(profile == 0.0 || profile == 1.0 || profile == 2.0 || profile == 3.0))
         return offender("profile", profile, "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)", 2, name,
@@ -762,7 +775,7 @@ int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name
             return offender(TRAJECTORY_NAMES[i], v[i], "a finite number > 0", 1, name, value, allowed);
     for (int i = 0; i < 2; i++)
         if (!(fabs(v[poses_B[i]]) < HALF_PI))
-            return offender(TRAJECTORY_NAMES[poses_B[i]], v[poses_B[i]], "|B| < pi/2 rad (kinematic domain)", 1, name,
+            return offender(TRAJECTORY_NAMES[poses_B[i]], v[poses_B[i]], "|B| < pi/2 rad (kinematic domain)", 3, name,
                             value, allowed);
     return 0;
 }

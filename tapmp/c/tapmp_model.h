@@ -120,13 +120,19 @@ TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
 /* The ranges of the plant's settings, in the order of tapmp.plant.PlantConfig's fields (its
  * validated() and the native FMU check with this): 0 if all are allowed, else 1 for a real
  * setting or 2 for an integer one (substeps, noise_seed), with its name, its value and what is
- * allowed (the text of the one-line message "NAME = VALUE is invalid: allowed is ALLOWED"). */
+ * allowed (the text of the one-line message "NAME = VALUE is invalid: allowed is ALLOWED").
+ * The other range checks below answer alike, and 3 for a value outside the kinematic domain
+ * (a pose with |B| >= pi/2: Python's KinematicDomainError). */
 TAPMP_LINKAGE int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
                                            const char **allowed);
 /* The ranges of the rigid-body parameters (ModelParams.validated): every one finite and > 0;
  * returns and reports as tapmp_plant_config_check. */
 TAPMP_LINKAGE int tapmp_params_check(const tapmp_params *p, const char **name, double *value,
                                      const char **allowed);
+/* The initial pose (X0, Z0, B0) and rates (dX0, dZ0, dB0) (PlantModel.__init__): finite, with
+ * |B0| < pi/2 (3: outside the kinematic domain); returns and reports as tapmp_plant_config_check. */
+TAPMP_LINKAGE int tapmp_initial_state_check(const double pose0[3], const double rate0[3], const char **name,
+                                            double *value, const char **allowed);
 /* Set the initial state, the reference gaps of the pulling law and the sample count. */
 TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */

@@ -3,7 +3,6 @@ with no system compiler, $CC is honoured for the host platform, and a failing co
 unknown platform is one line with exit code 2 and no half-written FMU."""
 
 import os
-import shutil
 import subprocess
 import sys
 import zipfile

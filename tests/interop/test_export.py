@@ -24,7 +24,8 @@ from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_
 from orchestrator.cli import main
 from orchestrator.engine import families
 from orchestrator.engine.container import CONTAINER
-from orchestrator.experiments.export import OSP, SSD_MEMBER
+from orchestrator.engine.ssp import OSP
+from orchestrator.experiments.export import SSD_MEMBER
 
 NAMES = MOTOR_POSITIONS + COMMANDS
 SSD_NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",

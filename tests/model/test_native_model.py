@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.engine.build_native import CFLAGS
 from orchestrator.experiments.scenario import load
 from tapmp import dynamics, kinematics, native as native_model
 from tapmp.closed_loop import simulate
@@ -34,7 +33,7 @@ from tapmp.control import sync_errors
 from tapmp.errors import KinematicDomainError
 from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel
-from tapmp.toolchain import compile_c
+from tapmp.toolchain import CFLAGS, compile_c
 from tapmp.trajectory import TrajectoryParams, _c_trajectory, circle_reference, move_plan, move_reference
 
 ROOT = Path(__file__).resolve().parents[2]

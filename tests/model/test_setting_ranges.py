@@ -7,9 +7,9 @@ import math
 import pytest
 
 from tapmp.control import ControllerModel, Gains, ModalGains
-from tapmp.errors import ModelInputError
+from tapmp.errors import KinematicDomainError, ModelInputError
 from tapmp.params import PAPER_MODEL, ModelParams, gain_preset
-from tapmp.plant import PlantConfig
+from tapmp.plant import PlantConfig, PlantModel
 from tapmp.trajectory import TrajectoryParams
 
 GAINS = Gains.from_preset(gain_preset("default"))
@@ -52,6 +52,23 @@ def message(make) -> str:
 ])
 def test_the_first_setting_out_of_range_is_named_with_its_value_and_what_is_allowed(make, text):
     assert message(make) == text
+
+
+@pytest.mark.parametrize("pose0, rate0, text", [
+    ((0.0, math.nan, 2.0), (0.0, 0.0, 0.0), "Z0 = nan is invalid: allowed is a finite number"),
+    ((0.0, 0.0, 0.0), (0.0, 0.0, math.inf), "dB0 = inf is invalid: allowed is a finite number"),
+    ((0.0, 0.0, -2), (0.0, 0.0, 0.0), "B0 = -2 is invalid: allowed is |B0| < pi/2 rad"),
+])
+def test_the_plants_initial_state_is_checked_finite_and_inside_the_kinematic_domain(pose0, rate0, text):
+    assert message(lambda: PlantModel(PAPER_MODEL, PlantConfig(), pose0, rate0)) == text
+
+
+@pytest.mark.parametrize("make", [lambda: PlantModel(PAPER_MODEL, PlantConfig(), (0.0, 0.0, 1.6)),
+                                  lambda: TrajectoryParams(B_a=1.6).validated(),
+                                  lambda: TrajectoryParams(B_offset=1.0, B_amplitude=0.6).validated()])
+def test_a_pose_outside_the_kinematic_domain_is_a_kinematic_domain_error(make):
+    with pytest.raises(KinematicDomainError):
+        make()
 
 
 def test_settings_inside_every_range_pass_unchanged():
