@@ -37,13 +37,6 @@ def require_positive(name: str, value: float) -> float:
     return value
 
 
-def require_nonnegative(name: str, value: float) -> float:
-    """Return ``value`` if finite and >= 0, else raise :class:`ModelInputError`."""
-    if not (math.isfinite(value) and value >= 0.0):
-        raise ModelInputError(name, value, "a finite number >= 0")
-    return value
-
-
 def suggestion(value, allowed) -> str:
     """``"; did you mean B?"`` naming the allowed names closest to ``value`` (difflib's ratio
     >= 0.6, at most three, best first), or ``""`` when none is close."""

@@ -248,10 +248,6 @@ PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(t) for t in (PLANT_VARS,
 VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECTORY_VARS}
 
 
-def range_text(v: Var) -> str:
-    """What a parameter allows, as the FMUs write it: "a number in [min, max]"."""
-    return f"a number in [{v.min:g}, {v.max:g}]"
-
 # (source model, source variable, destination model, destination variable)
 CONNECTIONS: tuple[tuple[str, str, str, str], ...] = tuple(
     [(TRAJECTORY, v.name, CONTROLLER, v.name) for v in TRAJECTORY_VARS[:9]]
