@@ -69,7 +69,7 @@ class ModalGains(NamedTuple):
     def validated(self) -> "ModalGains":
         """Return self if every gain is finite and >= 0 (ModelInputError otherwise; the C model's
         tapmp_modal_gains_check, which the native FMU runs too)."""
-        native.require_in_ranges("tapmp_modal_gains_check", _c_gains(UNIT_GAINS, self), values=self._asdict())
+        native.require_in_ranges("tapmp_modal_gains_check", _c_gains(_UNIT_GAINS, self), values=self._asdict())
         return self
 
     @classmethod
@@ -80,7 +80,7 @@ class ModalGains(NamedTuple):
         return cls(*(image[n] for n in MODAL_GAIN_NAMES))
 
 
-UNIT_GAINS = Gains(*((1.0, 1.0, 1.0),) * 5)  # valid per-motor gains, beside modal gains being checked
+_UNIT_GAINS = Gains(*((1.0, 1.0, 1.0),) * 5)  # valid per-motor gains, beside modal gains being checked
 
 
 def _c_gains(g: Gains, m: ModalGains):

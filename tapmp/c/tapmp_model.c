@@ -757,8 +757,7 @@ int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name
     static const int poses_B[2] = {TR_B_A, TR_B_B};
     for (int i = 0; i < TAPMP_TRAJECTORY_N; i++)
         if (!isfinite(v[i]))
-            return offender(TRAJECTORY_NAMES[i], v[i], "a finite number", i == TR_PROFILE ? 2 : 1, name, value,
-                            allowed);
+            return offender(TRAJECTORY_NAMES[i], v[i], "a finite number", 1, name, value, allowed);
     for (int i = 0; i < 4; i++)
         if (v[nonnegative[i]] < 0.0)
             return offender(TRAJECTORY_NAMES[nonnegative[i]], v[nonnegative[i]], "a finite number >= 0", 1, name,

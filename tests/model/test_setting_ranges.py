@@ -71,6 +71,11 @@ def test_a_pose_outside_the_kinematic_domain_is_a_kinematic_domain_error(make):
         make()
 
 
+def test_the_c_check_reads_as_many_trajectory_settings_as_trajectory_params_has():
+    from tapmp import native
+    assert len(TrajectoryParams._fields) == native.load()[1].TAPMP_TRAJECTORY_N == 26
+
+
 def test_settings_inside_every_range_pass_unchanged():
     tp = TrajectoryParams(profile=3, B_a=1.5, B_b=-1.5, radius=0.0)
     assert tp.validated() is tp
