@@ -14,7 +14,7 @@ from tapmp.errors import ModelInputError
 from tapmp.native import NativeModelError
 
 from .engine import build as build_mod
-from tapmp.toolchain import PLATFORMS
+from tapmp.toolchain import PLATFORMS, CacheTrustError
 from .engine.build_native import NativeBuildError
 from .engine.master import CoSimulationError
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
@@ -39,7 +39,7 @@ from .studies.study import StudyError
 # disk, a scheduler address). Every other exception is a programming error and shows its traceback.
 USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
                ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, OSError)
+               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
 
 
 def _family(value: str) -> str:
