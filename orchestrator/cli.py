@@ -25,8 +25,8 @@ from .engine.tempdirs import remove_stale_folders
 from .errors import UsageError
 from .experiments.estimate import check_output_size
 from .experiments.export import ExportError
-from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, output_lock, prepare_output,
-                                  write_comparison_status)
+from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, check_output, output_lock,
+                                  prepare_output, write_comparison_status)
 from .experiments.progress import Progress
 from .experiments.reading import ResultFolderError
 from .experiments.results import one_line, run_scenario
@@ -120,10 +120,12 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
     """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
     for the duration; comparison.json records "running", then "completed", or "failed" /
     "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
-    an unfinished one is replaced, its runs with it."""
+    an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
+    unless empty (see folders.check_output)."""
     laws = {name: sc.law for name, sc in runs.items()}
+    check_output(out, overwrite, "comparison", laws)  # before the lock file is made: a refused folder stays as it was
     with output_lock(out):
-        prepare_output(out, overwrite, "comparison")
+        prepare_output(out, overwrite, "comparison", laws)
         write_comparison_status(out, scenario.name, laws, "running")
         try:
             yield out
