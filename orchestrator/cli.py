@@ -98,14 +98,15 @@ def _load(args):
 
 
 def record_every(value) -> int:
-    """--record-every checked: an integer >= 1."""
+    """--record-every checked: an integer from 1 to MAX_INT (the scenario key's bound)."""
+    from .experiments.scenario import MAX_INT
     try:
         n = int(value)
     except ValueError:
         n = 0
-    if n < 1:
-        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer >= 1 "
-                                         "(keep every N-th step)")
+    if not 1 <= n <= MAX_INT:
+        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer from 1 to {MAX_INT} "
+                         "(keep every N-th step)")
     return n
 
 

@@ -174,6 +174,9 @@ class CoSimulation:
         return False
 
     def _open(self):
+        if self.ssp_path.is_dir():
+            raise CoSimulationError(f"SSP file {self.ssp_path} is a folder: allowed is an SSP file (a zip archive "
+                                    "holding SystemStructure.ssd and the FMUs)")
         if not self.ssp_path.is_file():
             raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
         ssd, members = self._read_ssp()
@@ -493,6 +496,10 @@ class CoSimulation:
         failure raises what :meth:`step` raises, after setting :attr:`filled` to the rows
         stored before it."""
         self.filled = 0
+        try:  # before any step, the same in both loops: the compiled core's int64 clock must not wrap
+            self.clock.require_steps(self.k + len(rows))
+        except ValueError as err:
+            raise CoSimulationError(str(err)) from None
         if self._core is None:  # the reference loop
             for i in range(len(rows)):
                 self.step()
