@@ -188,7 +188,7 @@ def cmd_check(args) -> int:
 
 def cmd_analyze(args) -> int:
     from .experiments.analysis import analyze, pole_table, table
-    scenario = load(args.scenario, args.set)
+    scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .experiments.baselines import compare_runs
     result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
@@ -293,10 +293,15 @@ def summary_table(results: dict) -> str:
     return "\n".join(lines)
 
 
+MAX_WORKERS = 4096  # processes one command may start; bounded before the number reaches the OS or Dask
+
+
 def _check_workers(workers: int) -> None:
-    """--workers: UsageError unless at least one process."""
+    """--workers: UsageError unless 1 to MAX_WORKERS processes."""
     if workers < 1:
         raise UsageError(f"--workers = {workers} is invalid: allowed is an integer >= 1")
+    if workers > MAX_WORKERS:
+        raise UsageError(f"--workers = {workers} is invalid: allowed is an integer from 1 to {MAX_WORKERS}")
 
 
 def _jobs(args) -> int:

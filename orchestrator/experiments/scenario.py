@@ -142,6 +142,9 @@ def _section(table: dict, info) -> dict:
                              f"allowed is to set {key}")
         known(k, allowed, f"{section}.")
         out[k] = check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
+        if allowed[k].type == "Integer":  # before the value reaches C (fmi2Integer is an int32)
+            require(-MAX_INT - 1 <= out[k] <= MAX_INT, f"{section}.{k} = {v!r} is invalid: allowed is an FMI "
+                    f"Integer, from {-MAX_INT - 1} to {MAX_INT}")
     return out
 
 

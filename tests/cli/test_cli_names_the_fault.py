@@ -32,6 +32,8 @@ def refused(tmp_path, *settings, ssp=None):
     (["record_every=99999999999999999999"],
      "record_every = 99999999999999999999 is invalid: allowed is an integer from 1 to 2147483647"),
     (["record_every=0"], "record_every = 0 is invalid: allowed is an integer from 1 to 2147483647"),
+    (["plant.substeps=99999999999999999999"],
+     "plant.substeps = 99999999999999999999 is invalid: allowed is an FMI Integer, from -2147483648 to 2147483647"),
     (["start_time=1e10", "stop_time=10000000000.00015"],
      "stop_time = 10000000000.00015 is invalid: stop_time - start_time = 0.0001506805419921875 s is not a whole "
      "number of steps of 0.0001 s, and no stop time near it is: at |t| = 1e+10 s a double resolves 1.91e-06 s, too "
@@ -39,7 +41,7 @@ def refused(tmp_path, *settings, ssp=None):
     (["start_time=1000", "stop_time=1000.00015"],
      "stop_time = 1000.00015 is invalid: stop_time - start_time = 0.00014999999996234692 s is not a whole number of "
      "steps of 0.0001 s: allowed are e.g. 1000.0001 or 1000.0002"),
-], ids=["start nan", "stop inf", "record_every overflow", "record_every 0", "off-grid at 1e10", "off-grid at 1000"])
+], ids=["start nan", "stop inf", "record_every overflow", "record_every 0", "Integer overflow", "off-grid at 1e10", "off-grid at 1000"])
 def test_a_bad_time_or_integer_setting_is_named_in_one_line(tmp_path, settings, message):
     assert refused(tmp_path, *settings) == (2, [f"error: {message}"])
 
@@ -70,3 +72,11 @@ def test_an_ssp_that_is_a_folder_is_named_as_a_folder(tmp_path, built):
     assert refused(tmp_path, ssp=ssp.parent) == (
         2, [f"error: --ssp = '{ssp.parent}' is a folder: allowed is an SSP file (a zip archive holding "
             f"SystemStructure.ssd and the FMUs), e.g. {ssp}"])
+
+
+def test_a_number_of_workers_beyond_any_machine_is_one_line(tmp_path):
+    res = tapmp("reproduce", "--workers", "99999999999999999999", "--out", tmp_path / "page.md", "--results",
+                tmp_path / "results")
+    assert (res.returncode, res.stderr.splitlines()) == (
+        2, ["error: --workers = 99999999999999999999 is invalid: allowed is an integer from 1 to 4096"])
+    assert not list(tmp_path.iterdir())
