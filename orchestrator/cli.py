@@ -124,7 +124,8 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
     an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
     unless empty (see folders.check_output)."""
     laws = {name: sc.law for name, sc in runs.items()}
-    check_output(out, overwrite, "comparison", laws)  # before the lock file is made: a refused folder stays as it was
+    # before the lock file is made: a refused folder stays as it was
+    check_output(out, overwrite, "comparison", laws, unmarked_only=True)
     with output_lock(out):
         prepare_output(out, overwrite, "comparison", laws)
         write_comparison_status(out, scenario.name, laws, "running")

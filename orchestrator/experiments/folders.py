@@ -245,17 +245,21 @@ def _unmarked_clobbered(folder: Path, kind: str, runs=(), prefix: str = "") -> l
     return out
 
 
-def check_output(out: Path, overwrite: bool, kind: str = "run", runs=()) -> None:
+def check_output(out: Path, overwrite: bool, kind: str = "run", runs=(), unmarked_only: bool = False) -> None:
     """Refuse (OutputExistsError, one line naming the folder, nothing changed) to write a result
     of ``kind`` ("run" or "comparison", with the run folders ``runs``) into ``out`` if: it holds
     the other kind; it holds a completed result and not ``overwrite``; tapmp did not mark it
     (marked_kind) and it holds anything but tapmp's lock file, unless ``overwrite`` (then
     results are written beside those files); or an unmarked file would be replaced by one tapmp
-    writes (whatever ``overwrite`` says: tapmp never deletes what it did not write)."""
+    writes (whatever ``overwrite`` says: tapmp never deletes what it did not write).
+    ``unmarked_only``: only the last two (before the lock is taken: a folder tapmp marked may be
+    another writer's, which the lock reports)."""
     out = Path(out)
     if not out.is_dir():
         return  # made by output_lock (a file there is refused by the file system, one line)
     marked = marked_kind(out)
+    if unmarked_only and marked is not None:
+        return
     marker = MARKERS[kind]
     if marked is not None and marked != kind:
         raise OutputExistsError(f"output folder {out} holds {WHAT[marked]} ({MARKERS[marked]}), not {WHAT[kind]}: "

@@ -72,7 +72,7 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     written, for a caller that plots them, as long as they total at most ``keep_bytes``;
     beyond that it is emptied (read the result file instead).
     """
-    check_output(out, overwrite)  # before the lock file is made: a refused folder is left as it was
+    check_output(out, overwrite, unmarked_only=True)  # before the lock file is made: a refused folder is left as it was
     with output_lock(out):
         out = prepare_output(out, overwrite)
         return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)
