@@ -293,8 +293,9 @@ VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECT
 def allowed_text(v: Var) -> str:
     """What a parameter's range rule allows, as its refusal says: "a number in [0, 1e+09]", "an
     integer in [1, 10000]" or the named values of an enumeration."""
-    kind = "an integer" if v.type == "Integer" else "a number"
-    return v.choices or f"{kind} in [{v.min:g}, {v.max:g}]"
+    if v.type == "Integer":
+        return v.choices or f"an integer in [{int(v.min)}, {int(v.max)}]"
+    return f"a number in [{v.min:g}, {v.max:g}]"
 
 
 def _c_double(x: float) -> str:
