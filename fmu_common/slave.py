@@ -25,6 +25,7 @@ from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 
 from tapmp.errors import ModelInputError
+from tapmp.interface import DEFAULT_EXPERIMENT
 
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3  # FMI status codes of log records
 
@@ -57,7 +58,9 @@ class TapmpSlave(Fmi2Slave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         table = self.VARIABLES
-        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=2.5, step_size=1e-4)
+        self.default_experiment = DefaultExperiment(start_time=DEFAULT_EXPERIMENT["startTime"],
+                                                    stop_time=DEFAULT_EXPERIMENT["stopTime"],
+                                                    step_size=DEFAULT_EXPERIMENT["stepSize"])
         self.reals = array("d", [float(v.start) if v.type == "Real" else 0.0 for v in table])
         self.ints = array("i", [int(v.start) if v.type == "Integer" else 0 for v in table])
         self._records = []      # (status, category, message) for the FMI logger; the runtime empties it

@@ -5,8 +5,9 @@ tapmp/toolchain.py), no Python at run time. One C model (tapmp/c/tapmp_model.c) 
 fmu_controller/controller.c, fmu_controller/trajectory.c) map variables to the model.
 
 Everything about the interface is generated here from ``tapmp.interface`` (one source
-of truth): ``model_vars.h`` (value references, names, kinds, start values, ranges) and
-both modelDescription.xml files, so the native FMUs have exactly the names, causalities,
+of truth): ``model_vars.h`` (value references, names, kinds, start values, ranges and the
+reading of the parameters into the model's settings struct), ``tapmp_settings.h`` (the range
+checks) and both modelDescription.xml files, so the native FMUs have exactly the names, causalities,
 variabilities, units, descriptions, start values and value references of the pythonfmu
 FMUs, and an SSP accepts either family.
 
@@ -31,8 +32,9 @@ from xml.etree import ElementTree as ET
 
 from concurrent.futures import ThreadPoolExecutor
 
-from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
-                             dependencies, dependency_attributes)
+from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
+                             dependencies, dependency_attributes, settings_read_macro)
+from tapmp.native import SETTINGS_HEADER, settings_header
 
 from tapmp import toolchain
 from .families import default_build_dir
@@ -62,7 +64,6 @@ PLATFORM_DIRS = {"fmi2": {"x86_64-linux": "linux64", "aarch64-linux": "aarch64-l
                  "fmi3": {p: p for p in PLATFORMS}}
 ALL_PLATFORMS = tuple(PLATFORMS)
 SUFFIX = toolchain.SUFFIX
-STEP, STOP = 1e-4, 2.5
 DESCRIPTIONS = {
     PLANT: "Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
            "in, encoder positions and platform pose out (native C, no Python at run time)",
@@ -92,6 +93,7 @@ def instantiation_token(model: str) -> str:
         h.update(repr(tuple(v)).encode())
     for path in (*COMMON_SOURCES, *COMMON_HEADERS, *MODEL_FILES[model]):
         h.update(path.read_bytes())
+    h.update(settings_header().encode())
     return "{" + str(uuid.UUID(bytes=h.digest()[:16], version=5)) + "}"
 
 
@@ -119,7 +121,7 @@ def model_vars_header(model: str) -> str:
         lo = "-HUGE_VAL" if v.min is None else _c_number(v.min)
         lines.append(f"    {{\"{v.name}\", '{causality}', '{variability}', '{v.type[0]}', "
                      f"{_c_number(v.start)}, {lo}, {_c_number(v.max)}}}, \\")
-    lines += ["}", "#endif", ""]
+    lines += ["}", settings_read_macro(model), "#endif", ""]
     return "\n".join(lines)
 
 
@@ -152,6 +154,7 @@ def source_files(model: str, family: str, model_source: Path | None = None) -> d
     files = {p.name: p.read_bytes() for p in (*COMMON_SOURCES, *COMMON_HEADERS, header, API[family])}
     files[source.name] = Path(model_source or source).read_bytes()
     files["model_vars.h"] = model_vars_header(model).encode()
+    files[SETTINGS_HEADER] = settings_header().encode()
     files[UNITY] = unity_source(model, family).encode()
     files["buildDescription.xml"] = build_description(model)
     return files
@@ -173,7 +176,7 @@ def _categories_and_experiment(root: ET.Element, error_status: str) -> None:
     ET.SubElement(cats, "Category", name="logStatusWarning",
                   description=f"Log messages with {error_status.replace('Error', 'Warning')} status.")
     ET.SubElement(cats, "Category", name="logAll", description="Log all messages.")
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(STOP), stepSize=repr(STEP))
+    ET.SubElement(root, "DefaultExperiment", {k: repr(float(v)) for k, v in DEFAULT_EXPERIMENT.items()})
 
 
 def _common_attributes(v: Var, integer: bool) -> dict:

@@ -90,7 +90,7 @@ def test_the_messages_name_variable_value_time_and_what_is_allowed(built, native
     expected = {
         "gain that overflows": "Lambda_v1 = 1e+308 is invalid: allowed is a number in [0, 1e+12] (at t = 0 s)",
         "K_T that overflows": "K_T1 = 1e-320 is invalid: allowed is a number in [1e-12, 1e+12] (at t = 0 s)",
-        "substeps above its bound": "substeps = 20000 is invalid: allowed is a number in [1, 10000] (at t = 0 s)",
+        "substeps above its bound": "substeps = 20000 is invalid: allowed is an integer in [1, 10000] (at t = 0 s)",
         "input that overflows the command": "at t = 0.0002 s is invalid: allowed is a finite number (the output "
                                             "overflowed; check the inputs and parameters)",
         "time that is not finite": "currentCommunicationPoint = nan is invalid: allowed is a finite number (at t = 0 s)",
@@ -101,7 +101,7 @@ def test_the_messages_name_variable_value_time_and_what_is_allowed(built, native
         "exit without enter": "fmi2ExitInitializationMode is not allowed in Instantiated: allowed in "
                               "Initialization Mode",
         "enter in Step Mode": "fmi2EnterInitializationMode is not allowed in Step Mode: allowed in Instantiated",
-        "tunable gain refused at set": "Lambda_p1 = -5.0 is invalid: allowed is a finite number >= 0 (at t = 0.0001 s)",
+        "tunable gain refused at set": "Lambda_p1 = -5.0 is invalid: allowed is a number in [0, 1e+12] (at t = 0.0001 s)",
     }
     for case, text in expected.items():
         model, run = SEQUENCES[case]
