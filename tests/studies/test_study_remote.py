@@ -1,10 +1,12 @@
 """Studies on a real Dask cluster that shares no files with the client: `dask scheduler` and
-`dask worker` processes on loopback, the worker run as user nobody with its own HOME, in a mount
-namespace where the checkout is an empty folder, and tapmp installed there from a wheel; the
-output folder (under pytest's root-only temporary folder) is out of its reach too. The client is
-the real `tapmp study` (orchestrator.cli.main, or a child process where a signal is sent).
+`dask worker` processes on loopback, each in a mount namespace of its own where the checkout,
+pytest's temporary folder (the client's SSP, gain files and output folders) and the cache of
+the client's user are empty folders, with a HOME of its own and tapmp installed from a wheel of
+this checkout (its dependencies are the client's, bind-mounted read-only before the checkout is
+hidden, so the venv is made in seconds). The client is the real `tapmp study`
+(orchestrator.cli.main, or a child process where a signal is sent).
 
-Needs root (to start the worker as another user in its own mount namespace), as CI runs."""
+Needs root (mount namespaces), as CI runs."""
 
 import csv
 import json
@@ -13,6 +15,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
 from pathlib import Path
@@ -26,12 +29,11 @@ pytestmark = pytest.mark.slow  # a wheel venv, a Dask scheduler and workers in c
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
-NOBODY = 65534
 SKIP = shutil.ignore_patterns(".git", ".venv", "build", "results", "__pycache__", "*.egg-info", ".pytest_cache",
                               ".hypothesis", "dist")
 # A worker plugin loaded with `dask worker --preload`: every case that finishes on the worker is a
 # line in RUNS/runs.txt (appended, so a killed worker's lines stay), and the worker's pid a file
-# RUNS/pid-PID; the folder belongs to the worker's user.
+# RUNS/pid-PID.
 COUNT_RUNS = '''
 import os
 from distributed.diagnostics.plugin import WorkerPlugin
@@ -53,74 +55,67 @@ def dask_setup(worker):
 
 
 @pytest.fixture(scope="module")
-def remote_home():
-    """A folder the worker's user owns (its HOME, the wheel venv, its temporary files), outside
-    pytest's root-only temporary folder; removed at the end."""
+def wheel_venv(tmp_path_factory):
+    """A folder outside pytest's temporary folder holding a venv with tapmp installed from a wheel
+    of this checkout (the workers' installation) and the workers' HOME; removed at the end."""
     if os.geteuid() != 0:
-        pytest.fail("these tests start the Dask worker as user nobody: run them as root (as CI does)")
+        pytest.fail("these tests start the Dask workers in mount namespaces: run them as root (as CI does)")
     top = Path(tempfile.mkdtemp(prefix="tapmp_remote_", dir="/tmp"))
-    top.chmod(0o755)
-    yield top
-    shutil.rmtree(top, ignore_errors=True)
-
-
-@pytest.fixture(scope="module")
-def wheel_venv(remote_home, tmp_path_factory):
-    """A venv with tapmp installed from a wheel of this checkout (the worker's installation)."""
     tmp = tmp_path_factory.mktemp("wheel")
     shutil.copytree(ROOT, tmp / "src", ignore=SKIP)
     built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp / "dist"),
                             str(tmp / "src")], capture_output=True, text=True, timeout=600)
     assert built.returncode == 0, built.stderr
     (wheel,) = (tmp / "dist").glob("tapmp_cosim-*.whl")
-    venv = remote_home / "venv"
+    venv = top / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
-    installed = subprocess.run([str(venv / "bin" / "pip"), "install", "-q", str(wheel)], capture_output=True,
-                               text=True, timeout=1800)
+    installed = subprocess.run([str(venv / "bin" / "pip"), "install", "-q", "--no-deps", str(wheel)],
+                               capture_output=True, text=True, timeout=600)
     assert installed.returncode == 0, installed.stderr
-    home = remote_home / "home"
-    (home / "tmp").mkdir(parents=True)
-    (home / "count_runs.py").write_text(COUNT_RUNS)
-    for path in (home, home / "tmp"):
-        os.chown(path, NOBODY, NOBODY)
-    return venv
+    (top / "deps").mkdir()  # the client's site-packages are mounted here (after the wheel's tapmp on sys.path)
+    site = Path(sysconfig.get_paths()["purelib"].replace(sys.prefix, str(venv)))
+    (site / "client_deps.pth").write_text(str(top / "deps") + "\n")
+    (top / "home" / "tmp").mkdir(parents=True)
+    (top / "home" / "count_runs.py").write_text(COUNT_RUNS)
+    yield venv
+    shutil.rmtree(top, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
 def ssp(tmp_path_factory):
-    """The native FMI 2.0 FMUs for this machine and their SSP, in the client's (root-only) folder."""
+    """The native FMI 2.0 FMUs for this machine and their SSP, in the client's (hidden) folder."""
     from orchestrator.engine.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), families=("fmi2",), log=lambda *_: None,
                         windows=False)["fmi2"]["ssp"]
 
 
 class Cluster:
-    """A `dask scheduler` and `dask worker` processes of the wheel venv, as user nobody, each in a
-    mount namespace where the checkout is an empty folder."""
+    """A `dask scheduler` and `dask worker` processes of the wheel venv, each in a mount namespace
+    where the checkout, pytest's temporary folder and ~/.cache of the client's user are empty."""
 
-    def __init__(self, venv: Path, home: Path):
-        self.venv, self.home = venv, home
+    def __init__(self, venv: Path, hidden: list):
+        self.venv, self.home = venv, venv.parent / "home"
+        self.hidden = hidden
         self.procs = []
-        folder = Path(tempfile.mkdtemp(dir=home / "tmp"))
-        os.chown(folder, NOBODY, NOBODY)
-        self.folder = folder  # the worker's record of the cases it ran (COUNT_RUNS)
-        self.scheduler_file = folder / "scheduler.json"
+        self.folder = Path(tempfile.mkdtemp(dir=self.home / "tmp"))  # the worker's record (COUNT_RUNS)
+        self.scheduler_file = self.folder / "scheduler.json"
         self.scheduler = self._start("scheduler", "--scheduler-file", str(self.scheduler_file), "--host",
                                      "127.0.0.1", "--port", "0", "--no-dashboard")
-        for _ in range(600):
-            if self.scheduler_file.exists() and self.scheduler_file.stat().st_size:
-                break
+        while not (self.scheduler_file.exists() and self.scheduler_file.stat().st_size):
             assert self.scheduler.poll() is None, self.scheduler.stderr.read()
             time.sleep(0.1)
         self.address = json.loads(self.scheduler_file.read_text())["address"]
 
     def _start(self, *args, env=None) -> subprocess.Popen:
-        hidden = f"mount -t tmpfs -o mode=0755 tmpfs {ROOT} && exec \"$@\""  # the checkout: an empty folder
+        deps = sysconfig.get_paths()["purelib"]
+        mounts = [f"mount --bind -o ro {deps} {self.venv.parent / 'deps'}",
+                  *(f"mount -t tmpfs tmpfs {p}" for p in self.hidden)]
         environment = {"HOME": str(self.home), "PATH": f"{self.venv / 'bin'}:/usr/bin:/bin",
                        "TMPDIR": str(self.home / "tmp"), "TAPMP_TEST_RUNS": str(self.folder), **(env or {})}
-        command = ["unshare", "--mount", "--propagation", "private", "sh", "-c", hidden, "sh",
-                   "setpriv", f"--reuid={NOBODY}", f"--regid={NOBODY}", "--clear-groups", "env", "-i",
-                   *(f"{k}={v}" for k, v in environment.items()), str(self.venv / "bin" / "dask"), *args]
+        command = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+                   " && ".join(mounts) + ' && exec "$@"', "sh", "env", "-i",
+                   *(f"{k}={v}" for k, v in environment.items()), str(self.venv / "bin" / "python"), "-m", "dask",
+                   *args]
         proc = subprocess.Popen(command, cwd=self.home, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True, start_new_session=True)
         self.procs.append(proc)
@@ -145,12 +140,19 @@ class Cluster:
             proc.wait(timeout=60)
 
 
+@pytest.fixture(scope="module")
+def hidden(tmp_path_factory):
+    """What the workers must not see: the checkout, pytest's temporary folder, the client's cache."""
+    cache = Path.home() / ".cache"
+    return [ROOT, tmp_path_factory.getbasetemp(), *([cache] if cache.is_dir() else [])]
+
+
 @pytest.fixture
-def cluster_factory(wheel_venv, remote_home):
+def cluster_factory(wheel_venv, hidden):
     made = []
 
     def make() -> Cluster:
-        made.append(Cluster(wheel_venv, remote_home / "home"))
+        made.append(Cluster(wheel_venv, hidden))
         return made[-1]
 
     yield make
@@ -159,9 +161,9 @@ def cluster_factory(wheel_venv, remote_home):
 
 
 @pytest.fixture(scope="module")
-def cluster(wheel_venv, remote_home):
+def cluster(wheel_venv, hidden):
     """One scheduler with one worker of two processes, shared by the tests that do not break it."""
-    c = Cluster(wheel_venv, remote_home / "home")
+    c = Cluster(wheel_venv, hidden)
     c.worker(2)
     yield c
     c.stop()
@@ -182,19 +184,22 @@ def write_study(folder: Path, text: str, name: str) -> Path:
 
 
 def table(out: Path) -> dict:
-    """study.csv by case, without the columns that differ between runs (wall time, worker)."""
+    """study.csv by case, without the columns that differ between runs (wall time, worker); the
+    stability check's spectral radius to 12 digits (its eigenvalues come from LAPACK, whose last
+    bits differ between processes; the co-simulation's numbers are compared whole)."""
     with open(out / "study.csv", newline="") as f:
-        return {r["case"]: {k: v for k, v in r.items() if k not in ("wall_time_s", "worker")}
-                for r in csv.DictReader(f)}
+        return {r["case"]: {k: (f"{float(v):.12g}" if k == "spectral_radius" and v else v) for k, v in r.items()
+                            if k not in ("wall_time_s", "worker")} for r in csv.DictReader(f)}
 
 
 def case_files(out: Path) -> dict:
-    """{case/file: content} of every case folder, run.json without its wall times."""
+    """{case/file: content} of every case folder, run.json without its wall times, the output
+    folder's path as OUT (a tuning's comparison runs name the preset it wrote there)."""
     files = {}
     for path in sorted((out / "cases").glob("*/*")):
         if path.name == ".tapmp.lock":
             continue
-        data = path.read_text()
+        data = path.read_text().replace(str(out), "OUT")
         if path.name == "run.json":
             data = {k: v for k, v in json.loads(data).items() if k not in ("wall_time_s", "real_time_factor")}
         files[f"{path.parent.name}/{path.name}"] = data
