@@ -191,7 +191,8 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
     for law, r in results.items():
         st = [row["status"] for row in r["rows"]]
         tuned = ", ".join(f"{n} = {r['tuned_gains'][n][0]:.4g}" for n in spec["bounds"][law])
-        lines.append(f"| {law} | {r['evaluations']} | {st.count('rejected')} | {st.count('failed')} / {st.count('diverged')} | "
+        lines.append(f"| {law} | {r['evaluations']} | {st.count('rejected')} | "
+                     f"{st.count('failed')} / {st.count('diverged')} | "
                      f"{r['start']:.4f} | {r['tuned']:.4f} | {tuned} | `{Path(r['preset']).name}` |")
     start_desc = "; ".join(f"{law}: " + ", ".join(f"{n} = {r['start_gains'][n][0]:g}" for n in spec["bounds"][law])
                            for law, r in results.items())

@@ -197,7 +197,8 @@ def test_gains_file_errors_name_the_file_and_what_is_allowed(tmp_path):
 
 
 def test_a_study_whose_cases_fail_exits_1_after_every_row_counting_each_status(built, tmp_path, capsys):
-    path = write_study(tmp_path, '[set]\nstop_time = 0.02\n"gain_overrides.D" = 2e9\n[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
+    path = write_study(tmp_path, '[set]\nstop_time = 0.02\n"gain_overrides.D" = 2e9\n'
+                       '[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
     code = main(["study", path, "--ssp", built["ssp"], "--workers", "1", "--no-progress"])
     out = capsys.readouterr().out.splitlines()
     assert code == 1
