@@ -705,12 +705,9 @@ static int validate_model(const tapmp_instance *c, const double hidden[], char *
                      "number", i, tapmp_repr(hidden[i], v));
             return 0;
         }
-    char why[TAPMP_MESSAGE_MAX];
-    if (!model_check_hidden(c, hidden, why, sizeof why)) {
-        snprintf(msg, size, "FMU state: %s", why);
-        return 0;
-    }
-    return 1;
+    static const char prefix[] = "FMU state: ";  /* the model's message follows it in msg (size > the prefix) */
+    memcpy(msg, prefix, sizeof prefix - 1);
+    return model_check_hidden(c, hidden, msg + sizeof prefix - 1, size - (sizeof prefix - 1));
 }
 
 /* Check a state fully before any of it is applied; 0 + msg if it is not valid. */
