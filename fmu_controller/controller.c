@@ -119,3 +119,24 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
     inst->m.clock.has_sample = hidden[9] != 0.0;
     inst->m.clock.warned = hidden[10] != 0.0;
 }
+
+/* The loop state and clock of an FMU state (model_get_hidden's layout) for its settings and time. */
+int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size)
+{
+    ModelData m = state->m;
+    tapmp_controller_state st;
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    read_settings(state, &m);
+    for (int i = 0; i < 3; i++) {
+        st.integral[i] = hidden[i];
+        st.q_prev[i] = hidden[3 + i];
+    }
+    st.has_q_prev = hidden[6] != 0.0;
+    m.clock.t0 = hidden[7];
+    m.clock.k_last = hidden[8];
+    m.clock.has_sample = hidden[9] != 0.0;
+    int bad = tapmp_controller_state_check(&m.s.p, &m.s.g, m.s.k.law, m.s.k.force_limit, &st, &m.clock, state->time,
+                                           &name, &x, &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
+}
