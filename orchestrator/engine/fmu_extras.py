@@ -135,7 +135,7 @@ def closed_loop_stimulus(steps: int = REFERENCE_STEPS, h: float = SERVO_STEP) ->
             F = sampled[0]
         rows[PLANT].append((t, *F))
         plant.step(t, h, *F)
-        ref = reference((k + 1) * h, traj)
+        ref = reference(t + h, traj)  # t + h as tapmp.closed_loop (not (k + 1) h: another rounding)
         q, dq = plant.measured_positions(), plant.joint_velocities()
     rows[CONTROLLER].append((steps * h, *ref, *q, *dq))
     rows[PLANT].append((steps * h, *F))
