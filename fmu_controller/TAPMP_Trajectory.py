@@ -1,8 +1,8 @@
 """FMI adapter of the reference trajectory: maps FMU variables to tapmp.trajectory."""
 
 from fmu_common.slave import TapmpSlave
-from tapmp.errors import require_positive
-from tapmp.interface import TRAJECTORY_VARS
+from tapmp import native
+from tapmp.interface import TRAJECTORY, TRAJECTORY_VARS
 from tapmp.kinematics import inverse
 from tapmp.trajectory import TrajectoryParams, reference
 
@@ -22,8 +22,8 @@ class TAPMP_Trajectory(TapmpSlave):
         self.params = None
 
     def setup_model(self):
-        require_positive("L_1", self.L_1)
-        self.params = TrajectoryParams(*(getattr(self, n) for n in TrajectoryParams._fields)).validated()
+        self.params = TrajectoryParams(*(getattr(self, n) for n in TrajectoryParams._fields))
+        native.check_settings(TRAJECTORY, {**self.params._asdict(), "L_1": self.L_1})
         self.publish(self.time)
 
     def step(self, t, h):

@@ -9,46 +9,24 @@
 
 #include "instance.h"
 
-#define R(name) inst->reals[VR_##name]
-
-/* The parameters and gains into the model; the loop state (integral, previous q) and the
- * clock are kept. */
+/* Every parameter into the model's settings struct (generated from tapmp/interface.py); the
+ * loop state (integral, previous q) and the clock are kept, the clock takes the sample period. */
 static void read_settings(const tapmp_instance *inst, ModelData *m)
 {
-    m->p = (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
-    for (int i = 0; i < 3; i++) {
-        m->g.Lambda_p[i] = inst->reals[VR_Lambda_p1 + i];  /* motors 1..3 are consecutive in the table */
-        m->g.Lambda_v[i] = inst->reals[VR_Lambda_v1 + i];
-        m->g.b[i] = inst->reals[VR_b1 + i];
-        m->g.D[i] = inst->reals[VR_D1 + i];
-        m->g.K_T[i] = inst->reals[VR_K_T1 + i];
-    }
-    m->g.kp_c = R(kp_c);
-    m->g.kv_c = R(kv_c);
-    m->g.ki_c = R(ki_c);
-    m->g.kp_d = R(kp_d);
-    m->g.kv_d = R(kv_d);
-    m->g.ki_d = R(ki_d);
-    m->law = inst->ints[VR_law];
-    m->velocity_source = inst->ints[VR_velocity_source];
-    m->force_limit = R(force_limit);
-    m->clock.T_s = R(T_s);
+    MODEL_READ_SETTINGS(inst, &m->s);
+    m->clock.T_s = m->s.k.T_s;
 }
 
-/* tapmp.params.ModelParams.validated, tapmp.control.Gains.validated, ModalGains.validated,
- * ControllerModel.__init__: the C model's range checks on the settings as read_settings() takes them */
+/* The range check of the settings as read_settings() takes them: tapmp.control.ControllerModel
+ * and the Python model's validated() run the same. */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
-    ModelData m = inst->m;
     const char *name = NULL, *allowed = NULL;
     double x = 0.0;
-    read_settings(inst, &m);
-    int bad = tapmp_params_check(&m.p, &name, &x, &allowed);
-    if (!bad) bad = tapmp_motor_gains_check(&m.g, &name, &x, &allowed);
-    if (!bad) bad = tapmp_modal_gains_check(&m.g, &name, &x, &allowed);
-    if (!bad) bad = tapmp_controller_check(m.law, m.velocity_source, m.force_limit, m.clock.T_s, &name, &x,
-                                           &allowed);
-    return tapmp_range_text(bad, name, x, allowed, msg, size);
+    tapmp_controller_settings s;
+    MODEL_READ_SETTINGS(inst, &s);
+    return tapmp_range_text(tapmp_controller_settings_check(&s, &name, &x, &allowed), name, x, allowed, msg,
+                            size);
 }
 
 void model_setup(tapmp_instance *inst)
@@ -64,12 +42,12 @@ static int sample(tapmp_instance *inst, double t, double h, int advance, double 
     ModelData *m = &inst->m;
     double arg;
     const double *r = inst->reals;
-    if (tapmp_controller_sample(&m->p, &m->g, m->law, m->velocity_source, m->force_limit, &m->st, h,
+    if (tapmp_controller_sample(&m->s.p, &m->s.g, m->s.k.law, m->s.k.velocity_source, m->s.k.force_limit, &m->st, h,
                                 r + VR_X_d, r + VR_q1, r + VR_dq1, advance, out, &m->st, &arg))
         return 1;
     char a[40], q1[40], q2[40], q3[40], l1[40], allowed[256];
     snprintf(allowed, sizeof allowed, "|value| < 1 (q = [%s, %s, %s] m, L1 = %s m)", tapmp_repr(r[VR_q1], q1),
-             tapmp_repr(r[VR_q2], q2), tapmp_repr(r[VR_q3], q3), tapmp_repr(m->p.L_1, l1));
+             tapmp_repr(r[VR_q2], q2), tapmp_repr(r[VR_q3], q3), tapmp_repr(m->s.p.L_1, l1));
     tapmp_invalid_text(msg, size, "sqrt(3)/(2 L1)*(2 q2 - q1 - q3)", tapmp_repr(arg, a), allowed, 0, 0);
     (void)t;
     return 0;
@@ -140,4 +118,25 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
     inst->m.clock.k_last = hidden[8];
     inst->m.clock.has_sample = hidden[9] != 0.0;
     inst->m.clock.warned = hidden[10] != 0.0;
+}
+
+/* The loop state and clock of an FMU state (model_get_hidden's layout) for its settings and time. */
+int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size)
+{
+    ModelData m = state->m;
+    tapmp_controller_state st;
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    read_settings(state, &m);
+    for (int i = 0; i < 3; i++) {
+        st.integral[i] = hidden[i];
+        st.q_prev[i] = hidden[3 + i];
+    }
+    st.has_q_prev = hidden[6] != 0.0;
+    m.clock.t0 = hidden[7];
+    m.clock.k_last = hidden[8];
+    m.clock.has_sample = hidden[9] != 0.0;
+    int bad = tapmp_controller_state_check(&m.s.p, &m.s.g, m.s.k.law, m.s.k.force_limit, &st, &m.clock, state->time,
+                                           &name, &x, &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
 }

@@ -4,10 +4,7 @@
 #include "tapmp_model.h"
 
 typedef struct {
-    tapmp_params p;
-    tapmp_gains g;
-    int law, velocity_source;
-    double force_limit;
+    tapmp_controller_settings s;  /* the parameters (MODEL_READ_SETTINGS) */
     tapmp_controller_state st;
     tapmp_clock clock; /* the sample instants t0 + k T_s, t0 the start time */
 } ModelData;

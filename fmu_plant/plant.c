@@ -8,36 +8,15 @@
 
 #define R(name) inst->reals[VR_##name]
 
-/* The FMU's settings as the model's tapmp_plant_config. */
-static tapmp_plant_config config_of(const tapmp_instance *inst)
-{
-    return (tapmp_plant_config){R(encoder_resolution), {R(c_v1), R(c_v2), R(c_v3)},
-                                {R(F_c1), R(F_c2), R(F_c3)}, R(v_s), R(force_limit), R(k_pull),
-                                R(attraction_force), R(attraction_gap), R(cogging_amplitude),
-                                R(cogging_pitch), {R(cogging_phase1), R(cogging_phase2), R(cogging_phase3)},
-                                {R(disturbance_force1), R(disturbance_force2), R(disturbance_force3)},
-                                R(disturbance_time), R(noise_rms), inst->ints[VR_substeps],
-                                inst->ints[VR_noise_seed]};
-}
-
-/* The model's parameters (tapmp_params). */
-static tapmp_params params_of(const tapmp_instance *inst)
-{
-    return (tapmp_params){R(m_p), R(m_1), R(m_2), R(m_3), R(I_y), R(L_1), R(g)};
-}
-
-/* tapmp.params.ModelParams.validated, PlantConfig.validated, PlantModel.__init__ */
+/* Every parameter into the model's settings struct (generated from tapmp/interface.py) and its
+ * range check: tapmp.plant.PlantModel.__init__ and the Python model's validated() run the same. */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     const char *name = NULL, *allowed = NULL;
     double x = 0.0;
-    tapmp_params p = params_of(inst);
-    tapmp_plant_config c = config_of(inst);
-    const double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
-    int bad = tapmp_params_check(&p, &name, &x, &allowed);
-    if (!bad) bad = tapmp_plant_config_check(&c, &name, &x, &allowed);
-    if (!bad) bad = tapmp_initial_state_check(pose0, rate0, &name, &x, &allowed);
-    return tapmp_range_text(bad, name, x, allowed, msg, size);
+    tapmp_plant_settings s;
+    MODEL_READ_SETTINGS(inst, &s);
+    return tapmp_range_text(tapmp_plant_settings_check(&s, &name, &x, &allowed), name, x, allowed, msg, size);
 }
 
 static void publish(tapmp_instance *inst)
@@ -48,10 +27,11 @@ static void publish(tapmp_instance *inst)
 void model_setup(tapmp_instance *inst)
 {
     tapmp_plant *pl = &inst->m.plant;
-    pl->p = params_of(inst);
-    pl->c = config_of(inst);
-    double pose0[3] = {R(X0), R(Z0), R(B0)}, rate0[3] = {R(dX0), R(dZ0), R(dB0)};
-    tapmp_plant_init(pl, pose0, rate0);
+    tapmp_plant_settings s;
+    MODEL_READ_SETTINGS(inst, &s);
+    pl->p = s.p;
+    pl->c = s.c;
+    tapmp_plant_init(pl, s.x0.pose, s.x0.rate);
     publish(inst);
 }
 
@@ -92,4 +72,13 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
     for (int i = 0; i < 6; i++) inst->m.plant.s[i] = hidden[i];
     inst->m.plant.sample = hidden[6];
     publish(inst);
+}
+
+/* The plant state and sample count of an FMU state, with the outputs X..dB it holds. */
+int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size)
+{
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    int bad = tapmp_plant_state_check(hidden, hidden[6], state->reals + VR_X, &name, &x, &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
 }

@@ -380,8 +380,9 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_study(args) -> int:
+    """`tapmp study`: 0 if every case ran (completed, diverged or rejected), 1 if any failed (an error)."""
     from .studies.run import run_study
-    from .studies.study import close_client, load_study, open_client
+    from .studies.study import MAX_CASES, check_case_count, close_client, load_study, open_client
     study = load_study(args.study)
     every = record_every(args.record_every) if args.record_every is not None else None
     if args.write_docs and not study.tune:
@@ -392,6 +393,17 @@ def cmd_study(args) -> int:
                          "or tapmp build) or pass --ssp")
     if args.workers is not None:
         _check_workers(args.workers)
+    if args.scheduler and args.workers is not None:
+        raise StudyError("--workers is for the local cluster: with --scheduler the cluster's own workers run the cases")
+    if args.shared_fs and not args.scheduler:
+        raise StudyError("--shared-fs is for a cluster given by --scheduler (the local cluster shares this disk)")
+    max_cases = MAX_CASES if args.max_cases is None else args.max_cases
+    if max_cases < 1:
+        raise StudyError(f"--max-cases = {max_cases} is invalid: allowed is an integer >= 1")
+    if not args.worker_timeout > 0:
+        raise StudyError(f"--worker-timeout = {args.worker_timeout:g} is invalid: allowed is a number > 0 [s]")
+    if not study.tune:
+        check_case_count(study, max_cases)  # before the cases are listed
     if args.format or args.record_every is not None:  # scenario keys, applied like the study's [set]
         import dataclasses
         recording = {k: v for k, v in (("format", args.format), ("record_every", every)) if v is not None}
@@ -399,31 +411,39 @@ def cmd_study(args) -> int:
     out = Path(args.out or study.output)
     if study.keep_results and not study.tune:  # else each case deletes its result file once scored
         from .studies.study import cases
-        check_output_size([study.base_scenario()] * len(cases(study)), out, study.name, args.workers or 1)
+        check_output_size([study.base_scenario()] * len(cases(study, max_cases)), out, study.name, args.workers or 1)
+    remote = None
     with output_lock(out):  # before starting a cluster; run_study takes it again (re-entrant)
-        say(f"{study.name}: starting the Dask workers")
-        client = open_client(args.scheduler, args.workers)
+        if args.scheduler:
+            say(f"{study.name}: connecting to the Dask scheduler at {args.scheduler}")
+            remote = {"address": args.scheduler, "data": not args.shared_fs, "timeout": args.worker_timeout}
+        else:
+            say(f"{study.name}: starting the Dask workers")
+        client = open_client(args.scheduler, args.workers, args.worker_timeout)
         try:
             command = args.command_line
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
-                          not args.no_progress, command, args.write_docs)
+                          not args.no_progress, command, args.write_docs, remote, max_cases)
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped
+    for f in s["figures"]:
+        print(f"wrote {f}")
+    c = s["counts"]
+    counts = (f"{c['completed']} completed, {c['diverged']} diverged, {c['failed']} failed"
+              + (f", {c['rejected']} rejected (not stable, not run)" if c["rejected"] else ""))
     if study.tune:
         for law, r in s["tuning"].items():
             print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
                   f"{r['evaluations']} evaluations); preset {r['preset']}")
-        print(f"presets, comparison and objective plot in {s['write_to']}; every evaluation in "
+        print(f"presets, comparison and objective plot in {s['write_to']}")
+        print(f"{study.name}: {s['cases']} evaluations ({s['wall_time_s']:.1f} s): {counts} -> "
               f"{s['out'] / 'study.csv'}")
     else:
-        c = s["counts"]
-        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s): "
-              f"{c['completed']} completed, {c['failed']} failed -> {s['out'] / 'study.csv'}")
-    for f in s["figures"]:
-        print(f"wrote {f}")
-    return 0
+        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s): {counts} -> "
+              f"{s['out'] / 'study.csv'}")
+    return 1 if c["failed"] else 0
 
 
 def cmd_export(args) -> int:
@@ -612,6 +632,12 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 "
                     "(default: a LocalCluster on this machine)")
     st.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default: one per core)")
+    st.add_argument("--shared-fs", action="store_true", help="with --scheduler: the workers see this machine's "
+                    "files at the same paths (a shared file system); they read the SSP and write the case folders "
+                    "themselves instead of receiving the SSP and sending each case's files back")
+    st.add_argument("--worker-timeout", type=float, default=60.0, metavar="S", help="how long to wait for the "
+                    "scheduler and for its first worker [s] (default 60)")
+    st.add_argument("--max-cases", type=int, metavar="N", help="run a study of more than 100000 cases (up to N)")
     st.add_argument("--out", help="output folder (overrides the study's 'output')")
     fmu_args(st)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
@@ -691,8 +717,9 @@ def _signals_interrupt():
 
 
 def main(argv=None) -> int:
-    """The `tapmp` command; returns its exit code: 0, 1 (`check`: not stable), 2 (an error,
-    one line on stderr) or 128 + N after signal N (SIGINT 130, SIGHUP 129, SIGTERM 143)."""
+    """The `tapmp` command; returns its exit code: 0, 1 (`check`: not stable; `study`: a case
+    failed), 2 (an error, one line on stderr) or 128 + N after signal N (SIGINT 130, SIGHUP 129,
+    SIGTERM 143)."""
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     args = parser().parse_args(argv)
     args.command_line = "tapmp " + shlex.join(argv)  # what was typed, as comparison.md and study.json record it

@@ -13,7 +13,7 @@ from . import native
 from .dynamics import generalized_force
 from .errors import KinematicDomainError, ModelInputError, require_finite
 from .kinematics import forward, solve_transpose, task_velocity
-from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, ModelParams, scdc_modal_image
+from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, SERVO_STEP, ModelParams, scdc_modal_image
 
 SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
 APDDC = 1  # law: augmented PD with dynamics compensation (Eq. 38)
@@ -37,12 +37,14 @@ class Gains(NamedTuple):
     K_T: tuple[float, float, float]       # feedforward gain, K_T F = u
 
     def validated(self) -> "Gains":
-        """Return self if every gain is finite and >= 0 and K_T > 0 (ModelInputError otherwise;
-        the C model's tapmp_motor_gains_check, which the native FMU runs too)."""
-        native.require_in_ranges("tapmp_motor_gains_check", _c_gains(self, ModalGains()),
-                                 values={f"{n}{i}": v for n, vs in zip(self._fields, self)
-                                         for i, v in enumerate(vs, start=1)})
+        """Return self if every gain is within its range of the settings table (ModelInputError
+        otherwise; the C model's generated tapmp_controller_settings_check, which every FMU runs too)."""
+        _settings(self.per_motor())
         return self
+
+    def per_motor(self) -> dict:
+        """The gains by FMU variable name: Lambda_p1 .. K_T3."""
+        return {f"{n}{i}": v for n, vs in zip(self._fields, self) for i, v in enumerate(vs, start=1)}
 
     @classmethod
     def from_preset(cls, preset: dict) -> "Gains":
@@ -67,9 +69,9 @@ class ModalGains(NamedTuple):
     ki_d: float = _MG["ki_d"]
 
     def validated(self) -> "ModalGains":
-        """Return self if every gain is finite and >= 0 (ModelInputError otherwise; the C model's
-        tapmp_modal_gains_check, which the native FMU runs too)."""
-        native.require_in_ranges("tapmp_modal_gains_check", _c_gains(_UNIT_GAINS, self), values=self._asdict())
+        """Return self if every gain is within its range of the settings table (ModelInputError
+        otherwise; the C model's generated tapmp_controller_settings_check, which every FMU runs too)."""
+        _settings(self._asdict())
         return self
 
     @classmethod
@@ -80,13 +82,12 @@ class ModalGains(NamedTuple):
         return cls(*(image[n] for n in MODAL_GAIN_NAMES))
 
 
-_UNIT_GAINS = Gains(*((1.0, 1.0, 1.0),) * 5)  # valid per-motor gains, beside modal gains being checked
-
-
-def _c_gains(g: Gains, m: ModalGains):
-    """The gains as the C model's tapmp_gains (a new cffi struct)."""
-    ffi, _ = native.load()
-    return ffi.new("tapmp_gains *", (*(tuple(map(float, v)) for v in g), *map(float, m)))
+def _settings(values: dict):
+    """The C model's tapmp_controller_settings with ``values`` (name -> value) filled by name from
+    the settings table, the rest at their defaults; ModelInputError for the first setting outside
+    its range (tapmp_controller_settings_check)."""
+    from .interface import CONTROLLER
+    return native.check_settings(CONTROLLER, values)
 
 
 def sync_errors(e1: float, e2: float, e3: float) -> tuple[float, float, float]:
@@ -180,20 +181,17 @@ class ControllerModel:
 
     def __init__(self, params: ModelParams, gains: Gains, law: int = SCDC,
                  velocity_source: int = VELOCITY_DIFFERENCE, force_limit: float = 0.0,
-                 modal: ModalGains = ModalGains(), T_s: float = 1e-4, t0: float = 0.0):
-        self.p = params.validated()
-        self.g = gains.validated()
-        self.modal = modal.validated()
-        native.require_in_ranges("tapmp_controller_check", law, velocity_source, force_limit, T_s,
-                                 values={"law": law, "velocity_source": velocity_source,
-                                         "force_limit": force_limit, "T_s": T_s})
+                 modal: ModalGains = ModalGains(), T_s: float = SERVO_STEP, t0: float = 0.0):
+        self._s = _settings({**params._asdict(), **gains.per_motor(), **modal._asdict(), "law": law,
+                             "velocity_source": velocity_source, "force_limit": force_limit, "T_s": T_s})
+        self.p, self.g, self.modal = params, gains, modal
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
         ffi, self._lib = native.load()
         self._ffi = ffi
-        self._cp = ffi.new("tapmp_params *", tuple(float(v) for v in self.p))
-        self._cg = _c_gains(self.g, self.modal)
+        self._cp = ffi.addressof(self._s, "p")  # members of self._s, which keeps them alive
+        self._cg = ffi.addressof(self._s, "g")
         self._st = ffi.new("tapmp_controller_state *")
         self._out = ffi.new("double[12]")
         self._arg = ffi.new("double *")

@@ -1,15 +1,21 @@
-"""FMU interfaces: every variable's name, causality, unit and description, defined once.
+"""The settings table: every FMU variable's name, causality, unit, description, start value,
+range and C struct field, defined once.
 
-The FMU adapters register these, the build step writes units and model structure
-from them, the SSP writer takes the connections from here and the docs list them.
-Defaults come from the model's own parameter tuples, so nothing is typed twice.
+The FMU adapters register these, the build step writes units, ranges, model structure and the
+DefaultExperiment from them, the SSP writer takes the connections from here and the docs list
+them. Defaults come from the model's own parameter tuples, so nothing is typed twice. From the
+same rows come the C code that reads an FMU's parameters into the model's settings struct
+(:func:`settings_read_macro`, into model_vars.h), the C range checks every family and the Python
+model run (:func:`settings_check_source`, tapmp_settings.h) and the Python side's filling of
+those structs by field name (tapmp.native.settings).
 """
 
 from typing import NamedTuple
 
-from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, PAPER_MODEL, GAIN_PRESETS
+from .params import (DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
+                     SERVO_STEP, START_TIME, STOP_TIME)
 from .plant import PlantConfig
-from .trajectory import TrajectoryParams
+from .trajectory import TrajectoryParams, circle_reference
 
 PLANT = "TAPMP_Plant"
 CONTROLLER = "TAPMP_Controller"
@@ -23,6 +29,8 @@ ORDERINGS = ("gauss-seidel", "jacobi")
 # How connections start: outputs propagated in Initialization Mode, or every connection at 0
 # until the first step (FMPy's simulate_ssp).
 CONNECTION_STARTS = ("propagated", "zero")
+# Every modelDescription's DefaultExperiment [s]: the servo cycle as step, the paper's run as stop.
+DEFAULT_EXPERIMENT = {"startTime": START_TIME, "stopTime": STOP_TIME, "stepSize": SERVO_STEP}
 
 
 class Var(NamedTuple):
@@ -35,8 +43,10 @@ class Var(NamedTuple):
     start: float = 0.0
     type: str = "Real"      # "Real" or "Integer"
     variability: str = ""   # "" = continuous (in/out), "fixed" or "tunable" (parameters)
-    min: float | None = None  # declared range of a parameter (modelDescription min/max)
-    max: float | None = None
+    min: float | None = None  # a parameter's one range rule: min <= value <= max (modelDescription
+    max: float | None = None  # min/max; every family and the Python model refuse a value outside)
+    field: str = ""           # a parameter's member in the model's C settings struct (SETTINGS_STRUCT)
+    choices: str = ""         # an Integer parameter's allowed values in words, if they are named
 
 
 # SI base-unit exponents of every unit used, for modelDescription UnitDefinitions.
@@ -84,6 +94,12 @@ def _pose(suffix: str, causality: str, what: str) -> list[Var]:
 
 
 _CFG = PlantConfig()
+# The plant's default initial state (X0, Z0, B0 [m, m, rad], dX0, dZ0, dB0 [m/s, m/s, rad/s]):
+# the default reference's pose and velocity at the DefaultExperiment's start, so that the three
+# FMUs wired with their defaults run the paper's simulation (scenarios/paper_simulation.toml,
+# start_on_trajectory) with no start transient. The readable circle formula gives the same
+# doubles as the C model's tapmp_reference (dZ0 is -0.0), without loading the C library here.
+INITIAL_STATE: tuple[float, ...] = circle_reference(START_TIME, TrajectoryParams())[:6]
 _PLANT_CFG_DOC = {
     "encoder_resolution": ("m", "encoder (grating ruler) resolution of the measured q; 0 = no quantization"),
     "c_v1": ("N.s/m", "viscous friction coefficient of mover 1"),
@@ -117,8 +133,10 @@ PLANT_VARS: tuple[Var, ...] = tuple(
     + [Var(f"dq{i}", "output", "m/s", f"velocity of motor {i}") for i in (1, 2, 3)]
     + [v for v in _pose("", "output", "")[:6]]
     + _model_params("plant", "fixed")
-    + [Var(f"{a}0", "parameter", u, f"initial {d}", variability="fixed") for a, u, d in _AXES]
-    + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d}", variability="fixed") for a, u, d in _AXES]
+    + [Var(f"{a}0", "parameter", u, f"initial {d} (default: the reference's at the start time)",
+           x, variability="fixed") for (a, u, d), x in zip(_AXES, INITIAL_STATE[:3])]
+    + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d} (default: the reference's at the start time)",
+           x, variability="fixed") for (a, u, d), x in zip(_AXES, INITIAL_STATE[3:])]
     + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _PLANT_CFG_DOC.items()]
     + [Var("substeps", "parameter", "", "RK4 integration steps per communication step (>= 1)",
            _CFG.substeps, type="Integer", variability="fixed"),
@@ -171,7 +189,7 @@ CONTROLLER_VARS: tuple[Var, ...] = tuple(
     + [Var("T_s", "parameter", "s", "sample period: the controller samples only at communication points on "
            "its grid t0 + k T_s (within 1e-4 T_s; t0 = start time) and holds its outputs in between; the "
            "velocity estimate and the integral use the time between samples, (k - k_prev) T_s, never the "
-           "host's step; a host whose steps skip sample instants gets one logged warning", 1e-4,
+           "host's step; a host whose steps skip sample instants gets one logged warning", SERVO_STEP,
            variability="fixed")]
 )
 
@@ -202,11 +220,13 @@ TRAJECTORY_VARS: tuple[Var, ...] = tuple(
     + [Var("L_1", "parameter", "m", "platform width used for q_d", PAPER_MODEL.L_1, variability="fixed")]
 )
 
-# Declared range [min, max] of every parameter, by name (the same name means the same
-# quantity in every model). They keep each model's arithmetic finite: with errors within
-# the motor travel, no product of these values overflows a double. Every FMU family
-# checks them (at fmi2SetReal for a tunable parameter in Step Mode, else when the model
-# is set up) and writes them into modelDescription.xml as min/max.
+# The one range rule of every parameter, by name (the same name means the same quantity in
+# every model): min <= value <= max, so NaN and infinities are refused too. The bounds keep each
+# model's arithmetic finite: with errors within the motor travel, no product of these values
+# overflows a double. Every FMU family writes them into modelDescription.xml as min/max and
+# checks them with the C model's generated checks (settings_check_source), which the Python
+# model, scenarios, studies and `tapmp check` run too: at fmi2SetReal for a tunable parameter in
+# Step Mode, else when the model is set up.
 _MASS = (1e-6, 1e6)
 RANGES: dict[str, tuple[float, float]] = {
     "m_p": _MASS, "m_1": _MASS, "m_2": _MASS, "m_3": _MASS, "I_y": _MASS, "L_1": (1e-6, 1e3),
@@ -238,14 +258,98 @@ RANGES: dict[str, tuple[float, float]] = {
 }
 
 
-def _ranged(table: tuple[Var, ...]) -> tuple[Var, ...]:
-    return tuple(v._replace(min=RANGES[v.name][0], max=RANGES[v.name][1]) if v.causality == "parameter"
-                 else v for v in table)
+# Each model's C settings struct (tapmp_model.h), with a parameter's member in it (Var.field).
+SETTINGS_STRUCT = {PLANT: "tapmp_plant_settings", CONTROLLER: "tapmp_controller_settings",
+                   TRAJECTORY: "tapmp_trajectory_settings"}
+_ARRAYS = ("c_v", "F_c", "cogging_phase", "disturbance_force", *GAIN_NAMES)  # per-motor C arrays [3]
+_INITIAL = ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")
+_CHOICES = {"law": "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)",
+            "velocity_source": "0 (backward difference of q) or 1 (dq inputs)",
+            "profile": "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)"}
 
 
-PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(t) for t in (PLANT_VARS, CONTROLLER_VARS,
-                                                                     TRAJECTORY_VARS))
+def _field(model: str, name: str) -> str:
+    """The member of SETTINGS_STRUCT[model] that holds the parameter ``name``."""
+    if name[:-1] in _ARRAYS:                      # c_v1 -> c_v[0], D3 -> D[2]
+        member = f"{name[:-1]}[{int(name[-1]) - 1}]"
+    elif name[1:].startswith("_max_"):            # v_max_Z -> v_max[1]
+        member = f"{name[:5]}[{'XZB'.index(name[-1])}]"
+    elif name in _INITIAL:                        # X0 -> pose[0], dB0 -> rate[2]
+        member = f"{'rate' if name[0] == 'd' else 'pose'}[{'XZB'.index(name[-2])}]"
+    else:
+        member = name
+    if model == TRAJECTORY:
+        return member
+    if name in PAPER_MODEL._fields:
+        return f"p.{member}"
+    if model == PLANT:
+        return f"x0.{member}" if name in _INITIAL else f"c.{member}"
+    return f"k.{member}" if name in ("law", "velocity_source", "force_limit", "T_s") else f"g.{member}"
+
+
+def _ranged(model: str, table: tuple[Var, ...]) -> tuple[Var, ...]:
+    return tuple(v._replace(min=RANGES[v.name][0], max=RANGES[v.name][1], field=_field(model, v.name),
+                            choices=_CHOICES.get(v.name, "")) if v.causality == "parameter" else v
+                 for v in table)
+
+
+PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(m, t) for m, t in (
+    (PLANT, PLANT_VARS), (CONTROLLER, CONTROLLER_VARS), (TRAJECTORY, TRAJECTORY_VARS)))
 VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECTORY_VARS}
+
+
+def allowed_text(v: Var) -> str:
+    """What a parameter's range rule allows, as its refusal says: "a number in [0, 1e+09]", "an
+    integer in [1, 10000]" or the named values of an enumeration."""
+    if v.type == "Integer":
+        return v.choices or f"an integer in [{int(v.min)}, {int(v.max)}]"
+    return f"a number in [{v.min:g}, {v.max:g}]"
+
+
+def _c_double(x: float) -> str:
+    return repr(float(x))
+
+
+def _c_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def settings_check_source() -> str:
+    """tapmp_settings.h: the C model's range check of each model's settings struct, one line per
+    parameter in the order of its FMU variables (every value outside [min, max] refused with
+    allowed_text), then the relations between settings (trajectory_domain_check)."""
+    lines = ["/* Generated from the settings table (tapmp/interface.py, settings_check_source): do not edit.",
+             " * Included at the end of tapmp_model.c, after offender() and the relation checks. */"]
+    relations = {TRAJECTORY: "trajectory_domain_check"}
+    for model, table in VARIABLES.items():
+        struct = SETTINGS_STRUCT[model]
+        lines += ["", f"int {struct}_check(const {struct} *s, const char **name, double *value, const char **allowed)",
+                  "{"]
+        for v in table:
+            if v.causality != "parameter":
+                continue
+            x, kind = f"s->{v.field}", 2 if v.type == "Integer" else 1
+            lines.append(f"    if (!({x} >= {_c_double(v.min)} && {x} <= {_c_double(v.max)}))")
+            lines.append(f"        return offender({_c_string(v.name)}, {x}, {_c_string(allowed_text(v))}, {kind}, "
+                         "name, value, allowed);")
+        lines.append(f"    return {relations[model]}(s, name, value, allowed);" if model in relations
+                     else "    return 0;")
+        lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def settings_read_macro(model: str) -> str:
+    """The C macro MODEL_READ_SETTINGS(inst, s) of ``model``'s model_vars.h: every parameter's
+    value in the FMU instance ``inst`` (reals or ints, by value reference VR_<name>) into its
+    member of the settings struct ``*s`` (SETTINGS_STRUCT[model])."""
+    lines = [f"/* The parameters into the {SETTINGS_STRUCT[model]} *s (tapmp/interface.py: Var.field) */",
+             "#define MODEL_READ_SETTINGS(inst, s) do { \\"]
+    for v in VARIABLES[model]:
+        if v.causality == "parameter":
+            values = "ints" if v.type == "Integer" else "reals"
+            lines.append(f"    (s)->{v.field} = (inst)->{values}[VR_{v.name}]; \\")
+    lines.append("} while (0)")
+    return "\n".join(lines) + "\n"
 
 
 # (source model, source variable, destination model, destination variable)

@@ -15,10 +15,16 @@ The library is, in this order:
   folder and the library must belong to this user and be writable by no one else
   (tapmp.toolchain.build_cached), else CacheTrustError and nothing is loaded.
 Both names carry a hash of the C sources, so an edited model is never run from a stale library.
+
+The range checks of the settings are generated C too (``tapmp_settings.h``, from the settings
+table tapmp.interface), written beside the sources when the library is compiled and part of the
+hash; :func:`settings` fills a model's settings struct by field name from that table and
+:func:`check_settings` runs its check, so Python refuses what every FMU family refuses, alike.
 """
 
 import hashlib
 import re
+import tempfile
 from pathlib import Path
 
 C_DIR = Path(__file__).resolve().with_name("c")
@@ -46,9 +52,19 @@ def header_number(name: str) -> float:
     return float(m.group(1))
 
 
+SETTINGS_HEADER = "tapmp_settings.h"  # the generated range checks that tapmp_model.c includes
+
+
+def settings_header() -> str:
+    """The text of the generated tapmp_settings.h (tapmp.interface.settings_check_source)."""
+    from .interface import settings_check_source
+    return settings_check_source()
+
+
 def source_hash() -> str:
-    """16 hex digits of the SHA-256 of tapmp_model.c and tapmp_model.h."""
-    return hashlib.sha256(SOURCE.read_bytes() + b"\0" + HEADER.read_bytes()).hexdigest()[:16]
+    """16 hex digits of the SHA-256 of tapmp_model.c, tapmp_model.h and the generated tapmp_settings.h."""
+    data = b"\0".join((SOURCE.read_bytes(), HEADER.read_bytes(), settings_header().encode()))
+    return hashlib.sha256(data).hexdigest()[:16]
 
 
 def bundled_name() -> str:
@@ -62,10 +78,13 @@ def compile_library(output: Path) -> Path:
     from .toolchain import CFLAGS, ToolchainError, compile_c
     # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
     flags = [f for f in CFLAGS if not f.startswith("-fvisibility")]
-    try:
-        return compile_c([SOURCE], output, flags=flags, includes=[C_DIR], libs=["m"], what="the C model")
-    except ToolchainError as err:
-        raise NativeModelError(str(err)) from None
+    with tempfile.TemporaryDirectory(prefix="tapmp_settings_") as generated:
+        Path(generated, SETTINGS_HEADER).write_text(settings_header())
+        try:
+            return compile_c([SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
+                             what="the C model")
+        except ToolchainError as err:
+            raise NativeModelError(str(err)) from None
 
 
 def cached_library_path() -> Path:
@@ -114,8 +133,46 @@ def load():
     return _LOADED
 
 
+def settings(model: str, values: dict):
+    """A new cffi struct of ``model``'s settings (tapmp.interface.SETTINGS_STRUCT), every member
+    filled by field name from the settings table: the value of its parameter in ``values`` (name
+    -> value), else the parameter's start value. An Integer setting that is not an int in its
+    range goes in as min - 1, which the range check refuses by name."""
+    from .interface import SETTINGS_STRUCT, VARIABLES
+    ffi = load()[0]
+    s = ffi.new(f"{SETTINGS_STRUCT[model]} *")
+    for v in VARIABLES[model]:
+        if v.causality != "parameter":
+            continue
+        x = values.get(v.name, v.start)
+        if v.type == "Integer":
+            x = x if isinstance(x, int) and v.min <= x <= v.max else int(v.min) - 1
+        else:
+            x = float(x)
+        *path, last = re.split(r"[.\[]", v.field.replace("]", ""))
+        target = s
+        for member in path:
+            target = target[int(member)] if member.isdigit() else getattr(target, member)
+        if last.isdigit():
+            target[int(last)] = x
+        else:
+            setattr(target, last, x)
+    return s
+
+
+def check_settings(model: str, values: dict):
+    """``model``'s settings struct filled from ``values`` (:func:`settings`) after its range check
+    (tapmp_<model>_settings_check): ModelInputError for the first setting outside its range, as
+    every FMU family refuses it."""
+    from .interface import SETTINGS_STRUCT, VARIABLES
+    s = settings(model, values)
+    given = {v.name: values.get(v.name, v.start) for v in VARIABLES[model] if v.causality == "parameter"}
+    require_in_ranges(f"{SETTINGS_STRUCT[model]}_check", s, values=given)
+    return s
+
+
 def require_in_ranges(check: str, *args, values: dict) -> None:
-    """Run the C model's range check ``check`` (tapmp_params_check, tapmp_plant_config_check, ...)
+    """Run the C model's range check ``check`` (tapmp_plant_settings_check, ...)
     on ``args``; ModelInputError for the first offender it reports (KinematicDomainError for a
     value outside the kinematic domain), with its value as given in ``values`` (name -> value,
     so that the message shows it as the caller wrote it)."""

@@ -22,15 +22,21 @@ class ModelParams(NamedTuple):
     g: float = 9.8         # gravitational acceleration [m/s^2]
 
     def validated(self) -> "ModelParams":
-        """Return self after checking every field is finite and > 0 (ModelInputError otherwise;
-        the C model's tapmp_params_check, which the native FMUs run too)."""
-        ffi, _ = native.load()
-        native.require_in_ranges("tapmp_params_check", ffi.new("tapmp_params *", tuple(map(float, self))),
-                                 values=self._asdict())
+        """Return self after checking every field's range in the settings table (ModelInputError
+        otherwise; the C model's generated tapmp_plant_settings_check, which every FMU runs too)."""
+        from .interface import PLANT
+        native.check_settings(PLANT, self._asdict())
         return self
 
 
 PAPER_MODEL = ModelParams()
+
+# The servo cycle: the controller's sample period T_s and the communication step of every run
+# and FMU DefaultExperiment [s]; the paper's run ends at STOP_TIME [s] (one period of its 0.4 Hz
+# reference).
+SERVO_STEP = 1e-4
+START_TIME = 0.0
+STOP_TIME = 2.5
 
 # Gains per motor, (motor 1, motor 2, motor 3). For APD-DC (law 1) the same
 # parameters are read as k_p = Lambda_p, k_v = Lambda_v, K_T1 = K_T (Eq. 41).

@@ -71,9 +71,9 @@ class PlantConfig(NamedTuple):
     noise_seed: int = 0               # seed of the measurement noise
 
     def validated(self) -> "PlantConfig":
-        """Return self after checking the ranges (ModelInputError names the offender). The
-        ranges are the C model's (tapmp_plant_config_check), which the native FMUs check too."""
-        _check_config(self)
+        """Return self after checking the ranges of the settings table (ModelInputError names the
+        offender): the C model's generated tapmp_plant_settings_check, which every FMU runs too."""
+        _settings(self)
         return self
 
 
@@ -104,24 +104,12 @@ def _attraction(force: float, gap: float, d12: float, d23: float) -> tuple[float
     return force * (r12 * r12), force * (r23 * r23)
 
 
-def _c_config(cfg: PlantConfig):
-    """``cfg`` as the C model's tapmp_plant_config. An integer setting that is not an int in
-    the C range goes in as -1, which the C check refuses by name (the message shows cfg's value)."""
-    ffi = native.load()[0]
-
-    def c_int(v):
-        return v if isinstance(v, int) and 0 <= v <= NOISE_SEED_MAX else -1
-    return ffi.new("tapmp_plant_config *", (
-        cfg.encoder_resolution, (cfg.c_v1, cfg.c_v2, cfg.c_v3), (cfg.F_c1, cfg.F_c2, cfg.F_c3), cfg.v_s,
-        cfg.force_limit, cfg.k_pull, cfg.attraction_force, cfg.attraction_gap, cfg.cogging_amplitude,
-        cfg.cogging_pitch, (cfg.cogging_phase1, cfg.cogging_phase2, cfg.cogging_phase3),
-        (cfg.disturbance_force1, cfg.disturbance_force2, cfg.disturbance_force3), cfg.disturbance_time,
-        cfg.noise_rms, c_int(cfg.substeps), c_int(cfg.noise_seed)))
-
-
-def _check_config(cfg: PlantConfig) -> None:
-    """ModelInputError for the first setting of ``cfg`` outside its range (tapmp_plant_config_check)."""
-    native.require_in_ranges("tapmp_plant_config_check", _c_config(cfg), values=cfg._asdict())
+def _settings(cfg: PlantConfig, **others):
+    """The C model's tapmp_plant_settings with ``cfg`` and ``others`` (name -> value) filled by name
+    from the settings table, the rest at their defaults; ModelInputError for the first setting
+    outside its range (tapmp_plant_settings_check)."""
+    from .interface import PLANT
+    return native.check_settings(PLANT, {**others, **cfg._asdict()})
 
 
 class PlantModel:
@@ -135,15 +123,15 @@ class PlantModel:
 
     def __init__(self, params: ModelParams, config: PlantConfig,
                  pose0=(0.0, 0.0, 0.0), rate0=(0.0, 0.0, 0.0)):
-        self.p = params.validated()
+        given = dict(zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), (*pose0, *rate0)))
+        s = _settings(config, **params._asdict(), **given)
+        self.p = params
         ffi, self._lib = native.load()
         self._pl = ffi.new("tapmp_plant *")
-        self._pl.p = tuple(float(v) for v in self.p)
-        self.cfg = config
-        given = dict(zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), (*pose0, *rate0)))
-        pose0, rate0 = [float(v) for v in pose0], [float(v) for v in rate0]
-        native.require_in_ranges("tapmp_initial_state_check", pose0, rate0, values=given)
-        self._lib.tapmp_plant_init(self._pl, pose0, rate0)
+        self._pl.p = s.p
+        self._cfg = config
+        self._pl.c = s.c
+        self._lib.tapmp_plant_init(self._pl, s.x0.pose, s.x0.rate)
         # a plain list that callers may change in place; it goes into the C struct at each call
         self.state = list(self._pl.s)  # [X, Z, B, dX, dZ, dB] [m, m, rad, m/s, m/s, rad/s]
         self.sample = 0.0  # completed steps: the index of the measurement noise
@@ -157,8 +145,8 @@ class PlantModel:
 
     @cfg.setter
     def cfg(self, config: PlantConfig) -> None:
-        self._cfg = config.validated()
-        self._pl.c = _c_config(config)[0]
+        self._pl.c = _settings(config).c
+        self._cfg = config
 
     @property
     def gap12_0(self) -> float:

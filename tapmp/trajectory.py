@@ -79,11 +79,10 @@ class TrajectoryParams(NamedTuple):
     j_max_B: float = 1000.0
 
     def validated(self) -> "TrajectoryParams":
-        """Return self after range checks (ModelInputError names the offender; the C model's
-        tapmp_trajectory_check, which the native FMU runs too)."""
-        ffi, _ = native.load()
-        native.require_in_ranges("tapmp_trajectory_check", ffi.new("double[]", tuple(map(float, self))),
-                                 values=self._asdict())
+        """Return self after the range checks of the settings table (ModelInputError names the
+        offender; the C model's generated tapmp_trajectory_settings_check, which every FMU runs too)."""
+        from .interface import TRAJECTORY
+        native.check_settings(TRAJECTORY, self._asdict())
         return self
 
 
@@ -224,12 +223,12 @@ def move_reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
 
 @lru_cache(maxsize=64)
 def _c_trajectory(tp: TrajectoryParams):
-    """``tp`` as the C model's tapmp_trajectory, its move planned by tapmp_move_plan."""
+    """``tp`` as the C model's tapmp_trajectory (tapmp_trajectory_init: its move planned by
+    tapmp_move_plan), from its settings struct filled by name."""
+    from .interface import TRAJECTORY
     ffi, lib = native.load()
-    c = ffi.new("tapmp_trajectory *", (*(float(v) for v in tp[:9]), tp.profile, float(tp.t_move)))
-    lim = [tuple(float(_limit(tp, kind, i)) for i in range(3)) for kind in "vaj"]
-    if tp.profile:
-        lib.tapmp_move_plan(tp.profile, (tp.X_a, tp.Z_a, tp.B_a), (tp.X_b, tp.Z_b, tp.B_b), *lim, c.axis)
+    c = ffi.new("tapmp_trajectory *")
+    lib.tapmp_trajectory_init(c, native.settings(TRAJECTORY, tp._asdict()))
     return c
 
 

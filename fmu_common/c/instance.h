@@ -129,9 +129,14 @@ TAPMP_LINKAGE int model_initial_outputs(tapmp_instance *inst, char *msg, size_t 
  * order of the output block) without publishing; 1, or 0 + msg on error, or -status for a
  * status the model answers with itself (nothing published or logged: a Python model may). */
 TAPMP_LINKAGE int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
-/* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. */
+/* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. model_set_hidden also
+ * builds a deserialized state's model data; it must not touch any live instance's model. */
 TAPMP_LINKAGE void model_get_hidden(const tapmp_instance *inst, double hidden[]);
 TAPMP_LINKAGE void model_set_hidden(tapmp_instance *inst, const double hidden[]);
+/* Check the hidden values of an FMU state (hidden, in model_get_hidden's layout; finite) against
+ * the state's settings (already checked), outputs and time in `state`, without changing anything:
+ * inside the model's domain and the bounds the settings allow. 1, or 0 + msg naming the value. */
+TAPMP_LINKAGE int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size);
 
 /* A model whose instances hold resources outside the instance (the pythonfmu family: a
  * Python object) defines MODEL_OWN_RESOURCES in its header and these; for the others they

@@ -5,8 +5,9 @@ tapmp/toolchain.py), no Python at run time. One C model (tapmp/c/tapmp_model.c) 
 fmu_controller/controller.c, fmu_controller/trajectory.c) map variables to the model.
 
 Everything about the interface is generated here from ``tapmp.interface`` (one source
-of truth): ``model_vars.h`` (value references, names, kinds, start values, ranges) and
-both modelDescription.xml files, so the native FMUs have exactly the names, causalities,
+of truth): ``model_vars.h`` (value references, names, kinds, start values, ranges and the
+reading of the parameters into the model's settings struct), ``tapmp_settings.h`` (the range
+checks) and both modelDescription.xml files, so the native FMUs have exactly the names, causalities,
 variabilities, units, descriptions, start values and value references of the pythonfmu
 FMUs, and an SSP accepts either family.
 
@@ -31,8 +32,9 @@ from xml.etree import ElementTree as ET
 
 from concurrent.futures import ThreadPoolExecutor
 
-from tapmp.interface import (CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
-                             dependencies, dependency_attributes)
+from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
+                             dependencies, dependency_attributes, settings_read_macro)
+from tapmp.native import SETTINGS_HEADER, settings_header
 
 from tapmp import toolchain
 from .families import default_build_dir
@@ -62,7 +64,6 @@ PLATFORM_DIRS = {"fmi2": {"x86_64-linux": "linux64", "aarch64-linux": "aarch64-l
                  "fmi3": {p: p for p in PLATFORMS}}
 ALL_PLATFORMS = tuple(PLATFORMS)
 SUFFIX = toolchain.SUFFIX
-STEP, STOP = 1e-4, 2.5
 DESCRIPTIONS = {
     PLANT: "Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
            "in, encoder positions and platform pose out (native C, no Python at run time)",
@@ -92,6 +93,7 @@ def instantiation_token(model: str) -> str:
         h.update(repr(tuple(v)).encode())
     for path in (*COMMON_SOURCES, *COMMON_HEADERS, *MODEL_FILES[model]):
         h.update(path.read_bytes())
+    h.update(settings_header().encode())
     return "{" + str(uuid.UUID(bytes=h.digest()[:16], version=5)) + "}"
 
 
@@ -119,7 +121,7 @@ def model_vars_header(model: str) -> str:
         lo = "-HUGE_VAL" if v.min is None else _c_number(v.min)
         lines.append(f"    {{\"{v.name}\", '{causality}', '{variability}', '{v.type[0]}', "
                      f"{_c_number(v.start)}, {lo}, {_c_number(v.max)}}}, \\")
-    lines += ["}", "#endif", ""]
+    lines += ["}", settings_read_macro(model), "#endif", ""]
     return "\n".join(lines)
 
 
@@ -152,6 +154,7 @@ def source_files(model: str, family: str, model_source: Path | None = None) -> d
     files = {p.name: p.read_bytes() for p in (*COMMON_SOURCES, *COMMON_HEADERS, header, API[family])}
     files[source.name] = Path(model_source or source).read_bytes()
     files["model_vars.h"] = model_vars_header(model).encode()
+    files[SETTINGS_HEADER] = settings_header().encode()
     files[UNITY] = unity_source(model, family).encode()
     files["buildDescription.xml"] = build_description(model)
     return files
@@ -173,7 +176,7 @@ def _categories_and_experiment(root: ET.Element, error_status: str) -> None:
     ET.SubElement(cats, "Category", name="logStatusWarning",
                   description=f"Log messages with {error_status.replace('Error', 'Warning')} status.")
     ET.SubElement(cats, "Category", name="logAll", description="Log all messages.")
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(STOP), stepSize=repr(STEP))
+    ET.SubElement(root, "DefaultExperiment", {k: repr(float(v)) for k, v in DEFAULT_EXPERIMENT.items()})
 
 
 def _common_attributes(v: Var, integer: bool) -> dict:
@@ -362,12 +365,34 @@ def _binaries(tmp: Path, src: Path, model: str, family: str, platforms) -> dict[
     return members
 
 
+def _host_fmu(tmp: Path, src: Path, model: str, family: str, md: bytes, binaries: dict) -> Path:
+    """An FMU in ``tmp`` with the modelDescription and this machine's binary (compiled here if
+    ``binaries`` lack it), for running the reference experiment at build time."""
+    folder = PLATFORM_DIRS[family][toolchain.HOST]
+    name = f"binaries/{folder}/{model}{SUFFIX[toolchain.os_of(toolchain.HOST)]}"
+    if name not in binaries:
+        (tmp / "host").mkdir()
+        lib = compile_sources(src, model, family, tmp / "host" / Path(name).name, toolchain.HOST)
+        binaries = {name: lib.read_bytes()}
+    path = tmp / f"{model}.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        _zip_write(z, "modelDescription.xml", md)
+        _zip_write(z, name, binaries[name])
+    return path
+
+
 def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = True,
-                     model_source: Path | None = None, platforms=None) -> Path:
+                     model_source: Path | None = None, platforms=None, extras: bool = True,
+                     stimulus: dict | None = None) -> Path:
     """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic (a build that
     fails leaves no FMU of that name half written). ``platforms`` (names of
     toolchain.PLATFORMS) default to all, or the host's (x86_64-linux) alone if not ``windows``;
-    ``model_source`` replaces the model's C file (benchmarks/floor_model.c)."""
+    ``model_source`` replaces the model's C file (benchmarks/floor_model.c). With ``extras``
+    the FMU carries its reference experiment, documentation, license and (FMI 3.0) terminals
+    and icon (fmu_extras.extra_members; ``stimulus``: fmu_extras.closed_loop_stimulus(), computed
+    if None)."""
+    from . import fmu_extras
+
     out_dir = Path(out_dir)
     fmu = out_dir / f"{model}.fmu"
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
@@ -375,8 +400,14 @@ def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = Tru
         src = staged_sources(files, model, family)
         if platforms is None:
             platforms = ALL_PLATFORMS if windows else (toolchain.HOST,)
-        binaries = _binaries(Path(tmp), src, model, family, check_platforms(platforms))
+        platforms = check_platforms(platforms)
+        binaries = _binaries(Path(tmp), src, model, family, platforms)
         md = model_description_fmi2(model) if family == "fmi2" else model_description_fmi3(model)
+        extra = {}
+        if extras:
+            host = _host_fmu(Path(tmp), src, model, family, md, binaries)
+            folders = tuple(dict.fromkeys(PLATFORM_DIRS[family][p] for p in platforms))  # darwin64 once
+            extra = fmu_extras.extra_members(model, family, host, folders, stimulus)
         partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
         try:
             with zipfile.ZipFile(partial, "w") as z:
@@ -384,6 +415,8 @@ def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = Tru
                 for name, data in sorted(files.items()):
                     _zip_write(z, f"sources/{name}", data)
                 for name, data in binaries.items():
+                    _zip_write(z, name, data)
+                for name, data in sorted(extra.items()):
                     _zip_write(z, name, data)
             partial.replace(fmu)
         finally:
@@ -403,11 +436,14 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     if platforms is None:
         platforms = ALL_PLATFORMS if windows is not False else (toolchain.HOST,)
     platforms = check_platforms(platforms)
+    from .fmu_extras import closed_loop_stimulus
+    stimulus = closed_loop_stimulus()  # the reference experiments' inputs, the same for every family
     out = {}
     for family in families:
         folder = Path(out_dir) / family
         folder.mkdir(parents=True, exist_ok=True)
-        paths = {model: build_native_fmu(model, family, folder, platforms=platforms) for model in FMU_NAMES}
+        paths = {model: build_native_fmu(model, family, folder, platforms=platforms, stimulus=stimulus)
+                 for model in FMU_NAMES}
         for model in FMU_NAMES:
             log(f"built {paths[model]}")
         paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths)

@@ -34,7 +34,8 @@ from xml.etree import ElementTree as ET
 
 from fmpy import read_model_description
 
-from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, TIME, VARIABLES, Dependencies, dependencies
+from tapmp.interface import (CONNECTIONS, DEFAULT_EXPERIMENT, ELEMENT, FMU_NAMES, TIME, VARIABLES, Dependencies,
+                             dependencies)
 
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
@@ -43,7 +44,7 @@ RUNTIME_ID = "container_fmu"         # model identifier = the runtime library's 
 PLATFORMS = {"linux64": "x86_64-linux", "win64": "x86_64-windows", "darwin64": "x86_64-darwin"}
 _SUFFIX = {"linux64": ".so", "win64": ".dll", "darwin64": ".dylib"}
 _TYPES = {"Real": "Float64", "Integer": "Int32"}   # FMI 2 type -> container.json type
-STEP = 1e-4                                        # s, the servo cycle
+STEP = DEFAULT_EXPERIMENT["stepSize"]               # s, the servo cycle
 
 
 class ContainerError(RuntimeError):
@@ -127,7 +128,7 @@ def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
                        ("logNested", "messages of the nested FMUs"),
                        ("logFMICalls", "FMI calls to the nested FMUs")):
         ET.SubElement(cats, "Category", name=name, description=text)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="2.5", stepSize=repr(STEP))
+    ET.SubElement(root, "DefaultExperiment", {k: repr(float(v)) for k, v in DEFAULT_EXPERIMENT.items()})
     mvs = ET.SubElement(root, "ModelVariables")
     sv = ET.SubElement(mvs, "ScalarVariable", name="time", valueReference="0", causality="independent",
                        variability="continuous", description="simulation time")

@@ -6,35 +6,48 @@ the runner) <- study_plots <- tuning <- run.
 
 import sys
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 from ..experiments.folders import output_lock, write_json
-from .study import (STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, Study, StudyError, StudyTable, cases,
-                    fingerprint, prepare)
+from .study import (MAX_CASES, STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, Shipping, Study, StudyError,
+                    StudyTable, cases, fingerprint, prepare)
 from .study_plots import plot_study
 from .tuning import run_tuning
 
 
 def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
-              overwrite: bool = False, progress: bool = True, command: str = "", write_docs: bool = False) -> dict:
-    """Run a study on a Dask client; returns a summary (counts, paths, wall time). The
-    output folder is locked for the whole study (results.OutputInUseError if in use).
-    write_docs: a tuning writes its presets and comparison into its write_to folder (else out/tuning)."""
+              overwrite: bool = False, progress: bool = True, command: str = "", write_docs: bool = False,
+              remote: dict | None = None, max_cases: int = MAX_CASES) -> dict:
+    """Run a study on a Dask client; returns a summary (counts by status, paths, wall time,
+    bytes of case files received). The output folder is locked for the whole study
+    (results.OutputInUseError if in use).
+    write_docs: a tuning writes its presets and comparison into its write_to folder (else out/tuning).
+    remote: for a client of a running scheduler, {"address": str, "data": bool (False: the workers
+    share the client's files, --shared-fs), "timeout": how long to wait for a worker [s]}; the
+    workers are checked before the first case (orchestrator.studies.remote.shipping).
+    max_cases: a grid / Monte Carlo study with more cases is refused (StudyError)."""
     ssp = Path(ssp)
-    if not ssp.exists():
+    if not ssp.is_file():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
                          "tapmp build) or pass --ssp")
     out = Path(out or study.output)
-    with output_lock(out):  # one writer per study folder (cases lock their own folders)
+    if not study.tune:
+        case_list = cases(study, max_cases)  # before anything is written or sent
+    if remote:
+        from .remote import shipping
+        ship = shipping(client, ssp, remote["address"], remote["data"], remote["timeout"])
+    else:
+        ship = nullcontext(Shipping())
+    with output_lock(out), ship as ship:  # one writer per study folder (cases lock their own folders)
         if study.tune:
-            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command, write_docs)
-        return _run_cases(study, ssp, client, out, resume, overwrite, progress, command)
+            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command, write_docs, ship)
+        return _run_cases(study, case_list, ssp, client, out, resume, overwrite, progress, command, ship)
 
 
-def _run_cases(study: Study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
-               command: str) -> dict:
+def _run_cases(study: Study, case_list: list, ssp: Path, client, out: Path, resume: bool, overwrite: bool,
+               progress: bool, command: str, ship: Shipping) -> dict:
     """run_study for a grid / Monte Carlo study, in the locked output folder ``out``."""
-    case_list = cases(study)
     fp = fingerprint(study, case_list)
     prepare(study, out, resume, overwrite, fp)
     out.mkdir(parents=True, exist_ok=True)
@@ -47,13 +60,14 @@ def _run_cases(study: Study, ssp: Path, client, out: Path, resume: bool, overwri
               "end, e.g. the study was killed while writing it): dropped, its case runs again", file=sys.stderr)
     done_before = len(table.rows)
     start = time.perf_counter()
+    runner = CaseRunner(client, study.base_scenario(), ssp, out, table, study.keep_results, progress, study.name,
+                        ship)
     try:
-        rows = CaseRunner(client, study.base_scenario(), ssp, out, table, study.keep_results,
-                          progress, study.name).run(case_list)
+        rows = runner.run(case_list)
     finally:
         table.close()
     wall = time.perf_counter() - start
     figures = plot_study(out, study, params)
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     return {"out": out, "cases": len(case_list), "ran": len(case_list) - done_before, "counts": counts,
-            "wall_time_s": wall, "figures": figures}
+            "wall_time_s": wall, "figures": figures, "bytes_received": runner.bytes_received}

@@ -25,6 +25,7 @@ import dataclasses
 import hashlib
 import itertools
 import json
+import math
 import os
 import shutil
 import signal
@@ -42,7 +43,7 @@ from .study_file import Study, StudyError, apply_changes, base_value, load_study
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
-STATUSES = ("completed", "failed", "rejected")
+STATUSES = ("completed", "diverged", "failed", "rejected")  # a study.csv row's status
 METRIC_COLUMNS = ("objective", "tracking_mae_um_mean", "sync_mae_um_mean",
                   "tracking_mae_um_1", "tracking_mae_um_2", "tracking_mae_um_3",
                   "sync_mae_um_1", "sync_mae_um_2", "sync_mae_um_3", "saturation_fraction_max")
@@ -55,11 +56,31 @@ def _require(cond: bool, message: str) -> None:
 PENALTY_UM = 1e3  # objective of a rejected (not stable) or failed candidate [um]
 
 
-def cases(study: Study) -> list[dict]:
-    """The cases of a grid / Monte Carlo study, in a fixed order.
+MAX_CASES = 100_000  # a study's case count above which it is refused unless --max-cases allows it
+
+
+def case_count(study: Study) -> int:
+    """How many cases a grid / Monte Carlo study has (computed, not listed)."""
+    return math.prod(len(v) for v in study.grid.values()) * (study.samples or 1)
+
+
+def check_case_count(study: Study, limit: int = MAX_CASES) -> int:
+    """The study's case count; StudyError naming it and how to allow it if it is above ``limit``."""
+    n = case_count(study)
+    sizes = [f"{len(v)} values of {k}" for k, v in study.grid.items()] + (
+        [f"{study.samples} samples"] if study.samples else [])
+    _require(n <= limit, f"{study.name} has {n} cases ({' x '.join(sizes)}): allowed are at most {limit} cases; "
+             f"pass --max-cases {n} to run them all")
+    return n
+
+
+def cases(study: Study, limit: int = MAX_CASES) -> list[dict]:
+    """The cases of a grid / Monte Carlo study, in a fixed order (StudyError if more than
+    ``limit``, checked before any is made).
 
     Each is {"case": id, "params": {column: value}, "changes": {dotted key: value}}.
     """
+    check_case_count(study, limit)
     base = study.base_scenario()
     grid_keys = list(study.grid)
     combos = list(itertools.product(*study.grid.values())) if grid_keys else [()]
@@ -100,17 +121,25 @@ def case_value(row) -> float:
     return float(v)
 
 
-def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: bool = False,
-             reject_unstable: bool = False, stop_token: str | None = None) -> dict:
+def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results: bool = False,
+             reject_unstable: bool = False, stop_token: str | None = None, gain_files: dict | None = None,
+             plugin: str = "") -> dict:
     """Run one case in this process (a Dask worker): returns its row as plain data.
 
-    base: the base scenario as dataclasses.asdict; changes: dotted keys; ssp, case_dir:
-    paths. Never raises for a failing case: the row's status is "failed" with the error,
-    or "rejected" (not run) when reject_unstable and the stability check finds the loop
-    not stable. The row carries the full metrics under "metrics" (not a CSV column).
-    After stops.request_stop(stop_token) (the study was stopped) the case ends at a
-    step boundary, or does not start, with status "interrupted" (never a study.csv row).
+    base: the base scenario as scenario_data; changes: dotted keys; gain_files: {path: preset
+    or error text} of the gain preset files the case names (read by the client, case_scenario);
+    ssp: the SSP's path, or None to take it from the study's worker plugin ``plugin`` (data
+    mode: the SSP in this worker's cache); case_dir: the case's folder, or None to run in a
+    worker-local temporary folder whose files come back in the row's "files" ({name: zlib
+    bytes}, remote.pack_folder). With a ``plugin`` the worker is first checked against the
+    client (remote.StudyPlugin.check). Never raises for a failing case: the row's status is
+    "diverged" (the run left the envelope or stopped being finite), "failed" with the error,
+    or "rejected" (not run) when reject_unstable and the stability check finds the loop not
+    stable. The row carries the full metrics under "metrics" (not a CSV column). After
+    stops.request_stop(stop_token) (the study was stopped) the case ends at a step boundary,
+    or does not start, with status "interrupted" (never a study.csv row).
     """
+    from ..engine.errors import DivergenceError
     from ..experiments.results import run_scenario
     from ..experiments.stops import stop_requested
     from ..experiments.stability import check
@@ -119,8 +148,21 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
     row = {"status": "failed", "error": "", "worker": f"{os.uname().nodename}:{os.getpid()}"}
     if stop_requested(stop_token):
         return dict(row, status="interrupted", error="not run: the study was stopped", wall_time_s=0.0)
+    folder = None
     try:
-        scenario = apply_changes(create(**base), changes)
+        if plugin:
+            from .remote import case_folder, this_plugin
+            shipped = this_plugin(plugin)
+            if shipped is None:
+                raise StudyError(f"Dask worker {row['worker']} has not received the study's data (plugin {plugin}): "
+                                 "it is not a worker of this study's scheduler")
+            shipped.check()
+            if ssp is None:
+                ssp = shipped.ssp_path()
+            if case_dir is None:
+                folder = case_folder()
+                case_dir = folder / "case"
+        scenario = case_scenario(base, changes, gain_files or {})
         report = check(scenario)
         row["spectral_radius"] = report.spectral_radius
         if reject_unstable and not report.stable:
@@ -128,7 +170,7 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
                        f"{report.spectral_radius:.4g})")
         else:
             if not keep_results:  # rows that would be deleted: keep the first and last only (the metrics
-                scenario = scenario.with_changes(record_every=scenario.n_steps)  # use every step regardless)
+                scenario = replace_fields(scenario, record_every=scenario.n_steps)  # use every step regardless)
             m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token)
             row.update(_metric_columns(m), status="completed", metrics=m)
             if not keep_results:
@@ -137,10 +179,59 @@ def run_case(base: dict, changes: dict, ssp: str, case_dir: str, keep_results: b
     except KeyboardInterrupt as err:  # the study was stopped (Dask lets this through and dies)
         row.update(status="interrupted", error=" ".join(str(err).split()))
     except Exception as err:  # a case's failure is its row, never the end of the study
-        row["error"] = " ".join(f"{type(err).__name__}: {err}".split())
+        row["error"] = reason(err)
+        if isinstance(err, DivergenceError):
+            row["status"] = "diverged"
+    if folder is not None:
+        from .remote import pack_folder, remove_case_folder
+        try:
+            row["files"] = pack_folder(Path(case_dir))
+        finally:
+            remove_case_folder(folder)
     row["flag"] = case_flag(row.get("spectral_radius"), row.get("saturation_fraction_max"))
     row["wall_time_s"] = time.perf_counter() - start
     return row
+
+
+def replace_fields(scenario: Scenario, **fields) -> Scenario:
+    """A copy of ``scenario`` with top-level fields replaced and validated again, keeping the
+    gains_file's values it has (Scenario.with_changes would read the file again)."""
+    from ..experiments.config import build
+    from ..experiments.scenario import ScenarioError
+    return build(dataclasses.replace, ScenarioError, scenario, **fields)
+
+
+def reason(err: BaseException) -> str:
+    """An error as one line for a row: its type and message (never empty)."""
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text}" if text else f"{type(err).__name__} (no message)"
+
+
+def case_scenario(base: dict, changes: dict, gain_files: dict) -> Scenario:
+    """The case's scenario: ``base`` (scenario_data) with the dotted-key ``changes``, validated
+    (ScenarioError "case: ..." names the key), reading no file: a gains_file the changes name
+    takes its values from ``gain_files`` ({path: preset, or the error text of reading it}), the
+    base's own from base["gain_file_values"]."""
+    from ..experiments.config import build
+    from ..experiments.scenario import ScenarioError
+    fields = dict(base)
+    for key, value in changes.items():
+        section, dot, name = key.partition(".")
+        if not dot:
+            fields[key] = value
+            continue
+        table = dict(fields[section])
+        table[name] = list(value) if isinstance(value, (list, tuple)) else value
+        fields[section] = table
+    if "gains_file" in changes:
+        values = gain_files.get(changes["gains_file"], {}) if changes["gains_file"] else {}
+        if isinstance(values, str):
+            raise ScenarioError(f"case: {values}")
+        fields["gain_file_values"] = values
+    try:
+        return build(Scenario, ScenarioError, **fields)
+    except ScenarioError as err:
+        raise ScenarioError(f"case: {err}") from None
 
 
 def case_flag(spectral_radius: float | None, saturation_fraction_max: float | None) -> str:
@@ -171,13 +262,19 @@ def scenario_data(scenario: Scenario) -> dict:
     return dataclasses.asdict(scenario)
 
 
-def open_client(scheduler: str | None = None, workers: int | None = None):
-    """A Dask client: on the cluster at ``scheduler`` (address), or on a new LocalCluster of
-    ``workers`` single-threaded worker processes (default: one per core). Close it when done."""
+def open_client(scheduler: str | None = None, workers: int | None = None, timeout: float = 60.0):
+    """A Dask client: on the cluster at ``scheduler`` (address; StudyError if it cannot be reached
+    within ``timeout`` [s]), or on a new LocalCluster of ``workers`` single-threaded worker
+    processes (default: one per core). Close it when done."""
     import dask
     from dask.distributed import Client, LocalCluster
     if scheduler:
-        return Client(scheduler)
+        try:
+            return Client(scheduler, timeout=timeout)
+        except (OSError, ValueError, TypeError) as err:
+            raise StudyError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there within {timeout:g} s "
+                             f"({reason(err)}): start one with `dask scheduler` and pass the address it prints "
+                             "(tcp://HOST:8786)") from None
     n = workers or os.cpu_count() or 1
     _require(n >= 1, f"--workers = {n} is invalid: allowed is an integer >= 1")
     scratch = tempfile.mkdtemp(prefix="tapmp_dask_")  # Dask's scratch space, removed by close_client
@@ -276,18 +373,35 @@ class StudyTable:
 
 
 STOP_WAIT_S = 60.0  # how long a stopped study waits for its running cases to end [s]
+POLL_S = 0.05  # how often the client looks for finished cases when none is ready [s]
+WATCH_S = 2.0  # how often it asks the scheduler whether any worker is left while it waits [s]
+
+
+@dataclasses.dataclass
+class Shipping:
+    """How a study's cases reach its workers (orchestrator.studies.remote): ``plugin``, the name of
+    the study's worker plugin ("" on the local cluster: no check, no data); ``data``: the SSP and
+    the case files travel as data (else as paths on a shared file system); ``address``: the
+    scheduler's, for messages."""
+
+    plugin: str = ""
+    data: bool = False
+    address: str = ""
 
 
 class CaseRunner:
     """Runs cases on a Dask client and records their rows in a StudyTable.
 
+    A case's future is released as soon as its row is recorded (and, in data mode, its files
+    written into OUTPUT/cases/CASE), so the scheduler forgets it: a worker lost afterwards never
+    runs a recorded case again. While no worker is connected the runner says so once and waits.
     If the run is left by an exception (e.g. Interrupted by SIGTERM), the running cases are
     asked to stop at their next step boundary (stops.request_stop on every worker) and
     waited for, so they free their FMUs and temporary folders before the workers go.
     """
 
     def __init__(self, client, base: Scenario, ssp: Path, out: Path, table: StudyTable,
-                 keep_results: bool, progress: bool = True, desc: str = "cases"):
+                 keep_results: bool, progress: bool = True, desc: str = "cases", ship: Shipping | None = None):
         self.client = client
         self.base = scenario_data(base)
         self.ssp = str(Path(ssp).resolve())
@@ -296,38 +410,53 @@ class CaseRunner:
         self.keep_results = keep_results
         self.progress = progress
         self.desc = desc
+        self.ship = ship or Shipping()
         self.token = f"study-{os.getpid()}-{os.urandom(8).hex()}"
+        self.bytes_received = 0  # compressed case files received (data mode) [bytes]
+
+    def _submit(self, case: dict, reject_unstable: bool, gain_files: dict):
+        path = case["changes"].get("gains_file")
+        data = self.ship.data
+        return self.client.submit(run_case, self.base, case["changes"], None if data else self.ssp,
+                                  None if data else str(self.out / "cases" / case["case"]), self.keep_results,
+                                  reject_unstable, self.token, {path: gain_files[path]} if path else None,
+                                  self.ship.plugin, pure=False, key=f"case-{case['case']}-{os.urandom(4).hex()}")
 
     def run(self, cases: list, reject_unstable: bool = False) -> list:
         """Rows of ``cases`` in their order; cases that have a row already are not run again."""
         from dask.distributed import as_completed
         from tqdm import tqdm
 
+        from .remote import gain_values_of
+
         rows = {c["case"]: self.table.rows[c["case"]] for c in cases if c["case"] in self.table.rows}
         todo = [c for c in cases if c["case"] not in rows]
+        gain_files = gain_values_of(c["changes"].get("gains_file") for c in todo)
         bar = tqdm(total=len(cases), initial=len(rows), desc=self.desc, unit="case",
                    disable=not (self.progress and sys.stderr.isatty()),  # a bar on a terminal only
                    file=sys.stderr, leave=False)
         futures = {}
         try:
             for c in todo:
-                fut = self.client.submit(run_case, self.base, c["changes"], self.ssp,
-                                         str(self.out / "cases" / c["case"]), self.keep_results,
-                                         reject_unstable, self.token, pure=False,
-                                         key=f"case-{c['case']}-{os.urandom(4).hex()}")
-                futures[fut] = c
-            for fut in as_completed(futures):
-                c = futures[fut]
-                if fut.status == "finished":
-                    row = fut.result()
-                else:  # the worker died or the task could not run: still a row
-                    exc = fut.exception()
-                    row = {"status": "failed", "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
-                if row.get("status") not in STATUSES:  # interrupted: no row, --resume runs it
+                futures[self._submit(c, reject_unstable, gain_files)] = c
+            done = as_completed(list(futures))
+            waiting, watched = False, time.monotonic()
+            while futures:
+                batch = done.next_batch(block=False)
+                if not batch:
+                    if time.monotonic() - watched >= WATCH_S:
+                        waiting, watched = self._watch(waiting, len(futures)), time.monotonic()
+                    time.sleep(POLL_S)
                     continue
-                self.table.add(c, row)
-                rows[c["case"]] = self.table.rows[c["case"]]
-                bar.update(1)
+                for fut in batch:
+                    c = futures.pop(fut)
+                    row = self._row(fut)
+                    fut.release()
+                    if row.get("status") not in STATUSES:  # interrupted: no row, --resume runs it
+                        continue
+                    self._record(c, row)
+                    rows[c["case"]] = self.table.rows[c["case"]]
+                    bar.update(1)
         except BaseException as err:
             self._stop(futures, getattr(err, "signum", signal.SIGTERM))
             raise
@@ -337,23 +466,49 @@ class CaseRunner:
             bar.close()
         return [rows.get(c["case"], {"case": c["case"], "status": "interrupted"}) for c in cases]
 
+    def _row(self, fut) -> dict:
+        """The row of a finished future; a future that could not run (its worker died too often,
+        the task could not be sent) is a failed row naming what happened."""
+        if fut.status == "finished":
+            return fut.result()
+        exc = fut.exception()
+        return {"status": "failed", "error": reason(exc)}
+
+    def _record(self, case: dict, row: dict) -> None:
+        """The case's files into its folder (data mode), then its row into study.csv."""
+        files = row.pop("files", None)
+        if files:
+            from .remote import unpack_folder
+            self.bytes_received += unpack_folder(files, self.out / "cases" / case["case"], self.ssp)
+        self.table.add(case, row)
+
+    def _watch(self, waiting: bool, left: int) -> bool:
+        """Say once that no worker is connected (and the study waits for one); returns whether none is."""
+        none = not self.client.nthreads()
+        if none and not waiting:
+            where = f"the scheduler at {self.ship.address}" if self.ship.address else "the cluster"
+            print(f"{self.desc}: no Dask worker is connected to {where}; waiting for workers ({left} cases "
+                  "left; SIGINT or SIGTERM ends the study, --resume runs the rest)", file=sys.stderr)
+        return none
 
     def _stop(self, futures: dict, signum: int) -> None:
         """Stop the running cases (request_stop on every worker), wait up to STOP_WAIT_S for
-        them, and record the rows of cases that finished meanwhile."""
+        them (not at all when no worker is left), and record the rows of cases that finished
+        meanwhile."""
         from dask.distributed import wait
 
         from ..experiments.stops import request_stop
         try:
-            self.client.run(request_stop, self.token, signum, on_error="ignore")
-            wait(list(futures), timeout=STOP_WAIT_S)
+            if self.client.nthreads():
+                self.client.run(request_stop, self.token, signum, on_error="ignore")
+                wait(list(futures), timeout=STOP_WAIT_S)
         except Exception:
             pass  # a worker that does not answer is ended with the cluster
         for fut, c in futures.items():
             if fut.status == "finished" and c["case"] not in self.table.rows:
                 row = fut.result()
                 if row.get("status") in STATUSES:
-                    self.table.add(c, row)
+                    self._record(c, row)
 
 
 def fingerprint(study: Study, case_list: list) -> str:
@@ -369,7 +524,7 @@ def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> 
     meta = out / STUDY_JSON
     if resume:
         if meta.exists():
-            old = json.loads(meta.read_text()).get("fingerprint")
+            old = _recorded_fingerprint(meta)
             _require(old == fp, f"--resume: {out} holds a different study (fingerprint {old}, this one {fp}); "
                      "the study file or its base scenario changed: run it into another --out or pass --overwrite")
         return
@@ -379,6 +534,20 @@ def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> 
         csv_path.unlink()
         shutil.rmtree(out / "cases", ignore_errors=True)
     out.mkdir(parents=True, exist_ok=True)
+
+
+def _recorded_fingerprint(meta: Path) -> str:
+    """The fingerprint recorded in a study.json; StudyError if the file is damaged."""
+    try:
+        info = json.loads(meta.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        info = err
+    fp = info.get("fingerprint") if isinstance(info, dict) else None
+    _require(isinstance(fp, str), f"--resume: {meta} is damaged ("
+             + (f"{type(info).__name__}: {' '.join(str(info).split())}" if isinstance(info, Exception)
+                else "no fingerprint recorded") + "): the study cannot be matched with it; pass --overwrite to "
+             "start again")
+    return fp
 
 
 def read_study_csv(path) -> list[dict]:

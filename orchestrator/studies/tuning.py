@@ -31,7 +31,7 @@ from tapmp.params import GAIN_NAMES
 
 from ..experiments.config import require
 from ..experiments.scenario import load_gain_file
-from .study import PENALTY_UM, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, case_value, fingerprint, prepare
+from .study import PENALTY_UM, STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, case_value, fingerprint, prepare
 from .study_file import StudyError, apply_changes
 
 class TuneObjective:
@@ -81,9 +81,10 @@ def _preset_text(law, gains, objective_start, objective_tuned, base, command) ->
 
 
 def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
-               command: str, write_docs: bool = False) -> dict:
+               command: str, write_docs: bool = False, ship=None) -> dict:
     """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png
-    into out/tuning, or into the table's write_to folder if ``write_docs``."""
+    into out/tuning, or into the table's write_to folder if ``write_docs``. ``ship``: how the
+    cases reach the workers (study.Shipping; default the local cluster's)."""
     from ..experiments.folders import write_json
 
     spec = study.tune
@@ -108,7 +109,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
             hi = np.log10([spec["bounds"][law][n][1] for n in names])
             x0 = np.clip(np.log10([float(np.mean(getattr(g0, n))) for n in names]), lo, hi)
             runner = CaseRunner(client, scenario, ssp, out, table, study.keep_results, progress,
-                                f"{study.name} {law}")
+                                f"{study.name} {law}", ship)
             obj = TuneObjective(runner, law, names)
             res = differential_evolution(obj, list(zip(lo, hi)), x0=x0, popsize=spec["population"],
                                          maxiter=spec["generations"], seed=spec["seed"], polish=False,
@@ -126,7 +127,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
                             "evaluations": len(rows), "result_fun": float(res.fun),
                             "rows": rows, "start_gains": {n: list(getattr(g0, n)) for n in GAIN_NAMES},
                             "tuned_gains": tuned}
-        compare = _compare(study, ssp, client, out, table, results, spec, progress)
+        compare = _compare(study, ssp, client, out, table, results, spec, progress, ship)
     finally:
         table.close()
     from .study_plots import plot_objective
@@ -134,12 +135,13 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
     text = _comparison_md(write_to / "comparison.md", study, base, results, compare, spec, command)
     for r in results.values():
         r.pop("rows")
+    statuses = [row["status"] for row in table.rows.values()]
     return {"out": out, "write_to": write_to, "tuning": results, "comparison": text, "figures": [fig],
             "wall_time_s": time.perf_counter() - start,
-            "cases": len(table.rows), "counts": {}}
+            "cases": len(table.rows), "counts": {s: statuses.count(s) for s in STATUSES}}
 
 
-def _compare(study, ssp, client, out, table, results, spec, progress) -> dict:
+def _compare(study, ssp, client, out, table, results, spec, progress, ship=None) -> dict:
     """Run the starting and the tuned gains of each law over compare_stop_time.
 
     Returns {"base": scenario, "metrics": {(law, "start" | "tuned"): metrics.json or None}, "rows": {...}}.
@@ -155,7 +157,7 @@ def _compare(study, ssp, client, out, table, results, spec, progress) -> dict:
             gains = r["tuned_gains"] if which == "tuned" else r["start_gains"]
             params = {"law": law, **{n: gains[n][0] for n in table.columns if n in GAIN_NAMES}}
             cases.append({"case": f"compare-{law}-{which}", "params": params, "changes": changes})
-    runner = CaseRunner(client, base, ssp, out, table, study.keep_results, progress, f"{study.name} compare")
+    runner = CaseRunner(client, base, ssp, out, table, study.keep_results, progress, f"{study.name} compare", ship)
     rows = runner.run(cases)
     metrics, by_case = {}, {}
     for c, row in zip(cases, rows):
@@ -183,13 +185,14 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
              "Objective: (mean tracking MAE + mean synchronization MAE) / 2 over the three motors [um], "
              "on the plant's true positions. Candidates the stability check finds not stable are rejected "
              f"without running (scored {PENALTY_UM:g} um).", "",
-             "| law | evaluations | rejected (not stable) | failed | objective, start gains [um] | "
+             "| law | evaluations | rejected (not stable) | failed / diverged | objective, start gains [um] | "
              "objective, tuned [um] | tuned gains (all motors) | preset file |",
              "|---|---|---|---|---|---|---|---|"]
     for law, r in results.items():
         st = [row["status"] for row in r["rows"]]
         tuned = ", ".join(f"{n} = {r['tuned_gains'][n][0]:.4g}" for n in spec["bounds"][law])
-        lines.append(f"| {law} | {r['evaluations']} | {st.count('rejected')} | {st.count('failed')} | "
+        lines.append(f"| {law} | {r['evaluations']} | {st.count('rejected')} | "
+                     f"{st.count('failed')} / {st.count('diverged')} | "
                      f"{r['start']:.4f} | {r['tuned']:.4f} | {tuned} | `{Path(r['preset']).name}` |")
     start_desc = "; ".join(f"{law}: " + ", ".join(f"{n} = {r['start_gains'][n][0]:g}" for n in spec["bounds"][law])
                            for law, r in results.items())
@@ -199,7 +202,9 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
               "|---|---|---|---|---|"]
     for (law, which), m in compare["metrics"].items():
         if m is None:
-            lines.append(f"| {law} | {which} | failed: {compare['rows'][(law, which)].get('error', '')} | | |")
+            row = compare["rows"][(law, which)]
+            why = row.get("error") or f"status {row.get('status')}, no metrics.json in cases/compare-{law}-{which}"
+            lines.append(f"| {law} | {which} | {row.get('status')}: {why} | | |")
             continue
         lines.append(f"| {law} | {which} | {objective(m):.4f} | "
                      + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]) + " | "

@@ -180,79 +180,12 @@ double tapmp_noise_sample(int seed, double sample, int motor)
     return sqrt(-2.0 * log(u1)) * cos(TWO_PI * u2);
 }
 
-/* Names of the real settings of tapmp_plant_config in field order (PlantConfig's fields). */
-static const char *const CONFIG_NAMES[22] = {
-    "encoder_resolution", "c_v1", "c_v2", "c_v3", "F_c1", "F_c2", "F_c3", "v_s", "force_limit", "k_pull",
-    "attraction_force", "attraction_gap", "cogging_amplitude", "cogging_pitch", "cogging_phase1",
-    "cogging_phase2", "cogging_phase3", "disturbance_force1", "disturbance_force2", "disturbance_force3",
-    "disturbance_time", "noise_rms"};
-
-int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
-                             const char **allowed)
-{
-    const double v[22] = {c->encoder_resolution, c->c_v[0], c->c_v[1], c->c_v[2], c->F_c[0], c->F_c[1],
-                          c->F_c[2], c->v_s, c->force_limit, c->k_pull, c->attraction_force,
-                          c->attraction_gap, c->cogging_amplitude, c->cogging_pitch, c->cogging_phase[0],
-                          c->cogging_phase[1], c->cogging_phase[2], c->disturbance_force[0],
-                          c->disturbance_force[1], c->disturbance_force[2], c->disturbance_time,
-                          c->noise_rms};
-    static const int positive[3] = {7, 11, 13};  /* v_s, attraction_gap, cogging_pitch */
-    for (int i = 0; i < 22; i++) {
-        /* k_pull (< 0: negative stiffness), the phases and the force steps may be negative */
-        int finite_only = i == 9 || (i >= 14 && i <= 19);
-        if (!(isfinite(v[i]) && (finite_only || v[i] >= 0.0))) {
-            *name = CONFIG_NAMES[i], *value = v[i];
-            *allowed = finite_only ? "a finite number" : "a finite number >= 0";
-            return 1;
-        }
-    }
-    for (int k = 0; k < 3; k++)
-        if (v[positive[k]] <= 0.0) {
-            *name = CONFIG_NAMES[positive[k]], *value = v[positive[k]], *allowed = "a finite number > 0";
-            return 1;
-        }
-    if (c->substeps < 1) {
-        *name = "substeps", *value = c->substeps, *allowed = "an integer >= 1";
-        return 2;
-    }
-    if (c->noise_seed < 0) {  /* the int type caps it at 2147483647 */
-        *name = "noise_seed", *value = c->noise_seed, *allowed = "an integer in [0, 2147483647]";
-        return 2;
-    }
-    return 0;
-}
-
 /* One offender of a range check: its name, value and what is allowed; returns `kind`. */
 static int offender(const char *n, double x, const char *a, int kind, const char **name, double *value,
                     const char **allowed)
 {
     *name = n, *value = x, *allowed = a;
     return kind;
-}
-
-static const char *const PARAM_NAMES[7] = {"m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g"};
-
-/* params.ModelParams.validated */
-int tapmp_params_check(const tapmp_params *p, const char **name, double *value, const char **allowed)
-{
-    const double v[7] = {p->m_p, p->m_1, p->m_2, p->m_3, p->I_y, p->L_1, p->g};
-    for (int i = 0; i < 7; i++)
-        if (!(isfinite(v[i]) && v[i] > 0.0))
-            return offender(PARAM_NAMES[i], v[i], "a finite number > 0", 1, name, value, allowed);
-    return 0;
-}
-
-/* plant.PlantModel.__init__ */
-int tapmp_initial_state_check(const double pose0[3], const double rate0[3], const char **name, double *value,
-                              const char **allowed)
-{
-    static const char *const names[6] = {"X0", "Z0", "B0", "dX0", "dZ0", "dB0"};
-    for (int i = 0; i < 6; i++) {
-        double x = i < 3 ? pose0[i] : rate0[i - 3];
-        if (!isfinite(x)) return offender(names[i], x, "a finite number", 1, name, value, allowed);
-    }
-    if (!(fabs(pose0[2]) < HALF_PI)) return offender("B0", pose0[2], "|B0| < pi/2 rad", 3, name, value, allowed);
-    return 0;
 }
 
 /* plant.PlantModel.__init__ (state and reference gaps; ranges are checked by the caller) */
@@ -555,50 +488,82 @@ void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char
              "on its grid t0 + k T_s)", c->T_s, t, steps * c->T_s, steps);
 }
 
-static const char *const GAIN_NAMES[15] = {"Lambda_p1", "Lambda_p2", "Lambda_p3", "Lambda_v1", "Lambda_v2",
-                                           "Lambda_v3", "b1", "b2", "b3", "D1", "D2", "D3", "K_T1", "K_T2",
-                                           "K_T3"};
-static const char *const MODAL_NAMES[6] = {"kp_c", "kv_c", "ki_c", "kp_d", "kv_d", "ki_d"};
+/* --- the hidden values of an FMU state --- */
 
-/* control.Gains.validated */
-int tapmp_motor_gains_check(const tapmp_gains *g, const char **name, double *value, const char **allowed)
-{
-    const double *field[5] = {g->Lambda_p, g->Lambda_v, g->b, g->D, g->K_T};
-    for (int k = 0; k < 5; k++)
-        for (int i = 0; i < 3; i++) {
-            double x = field[k][i];
-            if (!(isfinite(x) && (k == 4 ? x > 0.0 : x >= 0.0)))
-                return offender(GAIN_NAMES[3 * k + i], x, k == 4 ? "a finite number > 0" : "a finite number >= 0",
-                                1, name, value, allowed);
-        }
-    return 0;
-}
+/* The largest sample count checked: every whole number up to it is a double. */
+#define SAMPLE_COUNT_MAX 9007199254740992.0  /* 2^53 */
 
-/* control.ModalGains.validated */
-int tapmp_modal_gains_check(const tapmp_gains *g, const char **name, double *value, const char **allowed)
+int tapmp_plant_state_check(const double s[6], double sample, const double out[6], const char **name,
+                            double *value, const char **allowed)
 {
-    const double v[6] = {g->kp_c, g->kv_c, g->ki_c, g->kp_d, g->kv_d, g->ki_d};
+    static const char *const names[6] = {"plant state X", "plant state Z", "plant state B", "plant state dX",
+                                         "plant state dZ", "plant state dB"};
+    static const char *const outputs[6] = {"output X", "output Z", "output B", "output dX", "output dZ",
+                                           "output dB"};
     for (int i = 0; i < 6; i++)
-        if (!(isfinite(v[i]) && v[i] >= 0.0))
-            return offender(MODAL_NAMES[i], v[i], "a finite number >= 0", 1, name, value, allowed);
+        if (!isfinite(s[i])) return offender(names[i], s[i], "a finite number", 1, name, value, allowed);
+    if (!(fabs(s[2]) < HALF_PI))
+        return offender(names[2], s[2], "|B| < pi/2 rad (the kinematic domain)", 3, name, value, allowed);
+    if (!(sample >= 0.0 && sample <= SAMPLE_COUNT_MAX && sample == floor(sample)))
+        return offender("plant sample count", sample, "a whole number in [0, 2^53] (the steps taken)", 1, name,
+                        value, allowed);
+    /* the outputs X..dB are the state itself (tapmp_plant_outputs): any difference is a forged state */
+    for (int i = 0; i < 6; i++)
+        if (!(out[i] == s[i]))
+            return offender(outputs[i], out[i], "the plant state's value it is computed from (the state and its "
+                            "outputs disagree)", 1, name, value, allowed);
     return 0;
 }
 
-/* control.ControllerModel.__init__ */
-int tapmp_controller_check(double law, double velocity_source, double force_limit, double T_s,
-                           const char **name, double *value, const char **allowed)
+int tapmp_controller_state_check(const tapmp_params *p, const tapmp_gains *g, int law, double force_limit,
+                                 const tapmp_controller_state *st, const tapmp_clock *c, double t,
+                                 const char **name, double *value, const char **allowed)
 {
-    if (!(law == TAPMP_SCDC || law == TAPMP_APDDC || law == TAPMP_PIDDC))
-        return offender("law", law, "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)", 2, name, value, allowed);
-    if (!(velocity_source == 0.0 || velocity_source == 1.0))
-        return offender("velocity_source", velocity_source, "0 (backward difference of q) or 1 (dq inputs)", 2,
+    static const char *const integral[3] = {"controller integral1", "controller integral2", "controller integral3"};
+    static const char *const q_prev[3] = {"controller previous q1", "controller previous q2",
+                                          "controller previous q3"};
+    for (int i = 0; i < 3; i++)
+        if (!isfinite(st->integral[i])) return offender(integral[i], st->integral[i], "a finite number [m s]", 1,
+                                                        name, value, allowed);
+    if (st->has_q_prev) {
+        for (int i = 0; i < 3; i++)
+            if (!isfinite(st->q_prev[i]))
+                return offender(q_prev[i], st->q_prev[i], "a finite number [m]", 1, name, value, allowed);
+        /* a previous q was a sample that passed tapmp_feedforward's domain check */
+        double a = SQRT3 / (2.0 * p->L_1) * (2.0 * st->q_prev[1] - st->q_prev[0] - st->q_prev[2]);
+        if (!(fabs(a) < 1.0))
+            return offender("sqrt(3)/(2 L1)*(2 q2 - q1 - q3) of the controller's previous q", a,
+                            "|value| < 1 (the kinematic domain)", 3, name, value, allowed);
+    }
+    /* The integral's bound: the force its term of the command commands alone (the command with every
+     * error, rate and feedforward zero: Lambda_v D b I / K_T for SC-DC, the modal ki terms / K_T for
+     * PID-DC) may not exceed the force limit, or TAPMP_FORCE_CAP with none. Beyond that the integral
+     * has wound up past what the motors may be sent: the command sits at the limit whatever the errors
+     * do until the integral unwinds, and without a limit it commands forces no setting allows. The
+     * scenarios' runs stay near 5 N (1e-8 of the cap). APD-DC has no integral term: finite suffices. */
+    if (law == TAPMP_SCDC || law == TAPMP_PIDDC) {
+        const double zero[3] = {0.0, 0.0, 0.0};
+        double u[3];
+        if (law == TAPMP_SCDC) tapmp_scdc_command(zero, zero, zero, st->integral, zero, g, u);
+        else tapmp_pid_command(zero, zero, st->integral, zero, g, u);
+        double cap = force_limit > 0.0 ? force_limit : TAPMP_FORCE_CAP;
+        for (int i = 0; i < 3; i++)
+            if (!(fabs(u[i] / g->K_T[i]) <= cap))
+                return offender(integral[i], st->integral[i], force_limit > 0.0 ?
+                                "an integral whose term alone commands at most force_limit (|u_I/K_T| <= "
+                                "force_limit)" :
+                                "an integral whose term alone commands at most 1e9 N (|u_I/K_T| <= 1e9 N, the "
+                                "largest force_limit, as force_limit = 0)", 1, name, value, allowed);
+    }
+    double tol = TAPMP_SAMPLE_TOLERANCE * c->T_s;
+    if (!(isfinite(c->t0) && c->t0 <= t + tol))
+        return offender("controller clock t0", c->t0, "the start time: a finite number <= the state's time", 1,
                         name, value, allowed);
-    if (!(isfinite(force_limit) && force_limit >= 0.0))
-        return offender("force_limit", force_limit, "a finite number >= 0 (0 = no limit)", 1, name, value,
-                        allowed);
-    if (!(isfinite(T_s) && T_s > 0.0))
-        return offender("T_s", T_s, "a finite number > 0 (the controller's sample period [s])", 1, name, value,
-                        allowed);
+    /* the last instant sampled, t0 + k_last T_s, lies at or before the state's time */
+    double k = c->k_last;
+    if (!(k >= 0.0 && k == floor(k) && k <= (t - c->t0) / c->T_s + TAPMP_SAMPLE_TOLERANCE))
+        return offender("controller clock k_last", k, "a whole number of sample periods with t0 + k_last T_s <= "
+                        "the state's time (0 <= k_last <= (t - t0)/T_s)", 1, name, value, allowed);
     return 0;
 }
 
@@ -740,41 +705,27 @@ void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9])
     }
 }
 
-/* TrajectoryParams's field names, in order. */
-static const char *const TRAJECTORY_NAMES[TAPMP_TRAJECTORY_N] = {
-    "X_c", "Z_c", "radius", "f_xz", "phase_xz", "B_amplitude", "f_B", "phase_B", "B_offset", "profile",
-    "X_a", "Z_a", "B_a", "X_b", "Z_b", "B_b", "t_move", "v_max_X", "v_max_Z", "v_max_B", "a_max_X",
-    "a_max_Z", "a_max_B", "j_max_X", "j_max_Z", "j_max_B"};
-
-enum { TR_RADIUS = 2, TR_F_XZ = 3, TR_B_AMPLITUDE = 5, TR_F_B = 6, TR_B_OFFSET = 8, TR_PROFILE = 9, TR_B_A = 12,
-       TR_B_B = 15, TR_LIMITS = 17 };
-
-/* trajectory.TrajectoryParams.validated */
-int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name, double *value,
-                           const char **allowed)
+/* The reference's one relation between settings (tapmp_settings.h calls it after the ranges). */
+static int trajectory_domain_check(const tapmp_trajectory_settings *s, const char **name, double *value,
+                                   const char **allowed)
 {
-    static const int nonnegative[4] = {TR_RADIUS, TR_F_XZ, TR_B_AMPLITUDE, TR_F_B};
-    static const int poses_B[2] = {TR_B_A, TR_B_B};
-    for (int i = 0; i < TAPMP_TRAJECTORY_N; i++)
-        if (!isfinite(v[i]))
-            return offender(TRAJECTORY_NAMES[i], v[i], "a finite number", 1, name, value, allowed);
-    for (int i = 0; i < 4; i++)
-        if (v[nonnegative[i]] < 0.0)
-            return offender(TRAJECTORY_NAMES[nonnegative[i]], v[nonnegative[i]], "a finite number >= 0", 1, name,
-                            value, allowed);
-    if (!(fabs(v[TR_B_OFFSET]) + v[TR_B_AMPLITUDE] < HALF_PI))
-        return offender("B_amplitude", v[TR_B_AMPLITUDE], "|B_offset| + B_amplitude < pi/2 rad (kinematic domain)",
-                        3, name, value, allowed);
-    double profile = v[TR_PROFILE];
-    if (!(profile == 0.0 || profile == 1.0 || profile == 2.0 || profile == 3.0))
-        return offender("profile", profile, "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)", 2, name,
-                        value, allowed);
-    for (int i = TR_LIMITS; i < TAPMP_TRAJECTORY_N; i++)
-        if (!(v[i] > 0.0))
-            return offender(TRAJECTORY_NAMES[i], v[i], "a finite number > 0", 1, name, value, allowed);
-    for (int i = 0; i < 2; i++)
-        if (!(fabs(v[poses_B[i]]) < HALF_PI))
-            return offender(TRAJECTORY_NAMES[poses_B[i]], v[poses_B[i]], "|B| < pi/2 rad (kinematic domain)", 3, name,
-                            value, allowed);
+    if (!(fabs(s->B_offset) + s->B_amplitude < HALF_PI))
+        return offender("B_amplitude", s->B_amplitude, "|B_offset| + B_amplitude < pi/2 rad (kinematic domain)", 3,
+                        name, value, allowed);
     return 0;
 }
+
+/* trajectory._c_trajectory: the settings and the planned move */
+void tapmp_trajectory_init(tapmp_trajectory *tp, const tapmp_trajectory_settings *s)
+{
+    const double a[3] = {s->X_a, s->Z_a, s->B_a}, b[3] = {s->X_b, s->Z_b, s->B_b};
+    /* designated: the axis plans, zero here, are filled by tapmp_move_plan below */
+    *tp = (tapmp_trajectory){.X_c = s->X_c, .Z_c = s->Z_c, .radius = s->radius, .f_xz = s->f_xz,
+                             .phase_xz = s->phase_xz, .B_amplitude = s->B_amplitude, .f_B = s->f_B,
+                             .phase_B = s->phase_B, .B_offset = s->B_offset, .profile = s->profile,
+                             .t_move = s->t_move};
+    tapmp_move_plan(tp->profile, a, b, s->v_max, s->a_max, s->j_max, tp->axis);
+}
+
+/* The range checks of every setting, generated from the settings table (tapmp/interface.py). */
+#include "tapmp_settings.h"

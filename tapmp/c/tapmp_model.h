@@ -88,6 +88,58 @@ typedef struct {
     tapmp_axis_plan axis[3];
 } tapmp_trajectory;
 
+/* The plant's initial state: pose (X0 [m], Z0 [m], B0 [rad]) and its rates [m/s, m/s, rad/s]. */
+typedef struct {
+    double pose[3], rate[3];
+} tapmp_initial_state;
+
+/* The controller's law (TAPMP_SCDC, TAPMP_APDDC, TAPMP_PIDDC), velocity source (0 backward
+ * difference of q, 1 the dq inputs), force command limit [N] (0 = none) and sample period [s]. */
+typedef struct {
+    int law, velocity_source;
+    double force_limit, T_s;
+} tapmp_controller_config;
+
+/* Every setting of each model: one member per parameter of its FMU, named by the column `field`
+ * of the settings table (tapmp/interface.py). From that table are generated the FMUs' reading of
+ * their variables into these structs (MODEL_READ_SETTINGS in model_vars.h), the Python side's
+ * filling by name (tapmp.native.settings) and the range checks below (tapmp_settings.h). */
+typedef struct {
+    tapmp_params p;
+    tapmp_plant_config c;
+    tapmp_initial_state x0;
+} tapmp_plant_settings;
+
+typedef struct {
+    tapmp_params p;
+    tapmp_gains g;
+    tapmp_controller_config k;
+} tapmp_controller_settings;
+
+/* The reference (tapmp.trajectory.TrajectoryParams: circle, sinusoid, profile, move from pose
+ * a to pose b, the limits per axis X, Z, B) and the platform width L_1 [m] of q_d. */
+typedef struct {
+    double X_c, Z_c, radius, f_xz, phase_xz, B_amplitude, f_B, phase_B, B_offset;
+    int profile;
+    double X_a, Z_a, B_a, X_b, Z_b, B_b, t_move;
+    double v_max[3], a_max[3], j_max[3];
+    double L_1;
+} tapmp_trajectory_settings;
+
+/* --- settings (generated from tapmp/interface.py into tapmp_settings.h) --- */
+/* The ranges of a model's settings, in the order of its FMU variables, then the relations
+ * between settings (the reference: |B_offset| + B_amplitude < pi/2): 0 if all are allowed, else
+ * 1 for a real setting, 2 for an integer one or 3 for a value outside the kinematic domain
+ * (Python's KinematicDomainError), with its name, its value and what is allowed (the text of the
+ * one-line message "NAME = VALUE is invalid: allowed is ALLOWED"). Every family and the Python
+ * model run these, so a value is refused alike everywhere. */
+TAPMP_LINKAGE int tapmp_plant_settings_check(const tapmp_plant_settings *s, const char **name, double *value,
+                                             const char **allowed);
+TAPMP_LINKAGE int tapmp_controller_settings_check(const tapmp_controller_settings *s, const char **name,
+                                                  double *value, const char **allowed);
+TAPMP_LINKAGE int tapmp_trajectory_settings_check(const tapmp_trajectory_settings *s, const char **name,
+                                                  double *value, const char **allowed);
+
 /* --- kinematics (tapmp/kinematics.py) --- */
 /* Eq. 2: pose (X [m], Z [m], B [rad]) -> motor positions q [m]. */
 TAPMP_LINKAGE void tapmp_inverse(double X, double Z, double B, double L1, double q[3]);
@@ -117,22 +169,6 @@ TAPMP_LINKAGE void tapmp_generalized_force(double B, double dB, const double xdd
 TAPMP_LINKAGE double tapmp_quantize(double q, double resolution);
 /* Standard normal number for (seed, sample index, motor 0..2), counter-based (plant.noise_sample). */
 TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
-/* The ranges of the plant's settings, in the order of tapmp.plant.PlantConfig's fields (its
- * validated() and the native FMU check with this): 0 if all are allowed, else 1 for a real
- * setting or 2 for an integer one (substeps, noise_seed), with its name, its value and what is
- * allowed (the text of the one-line message "NAME = VALUE is invalid: allowed is ALLOWED").
- * The other range checks below answer alike, and 3 for a value outside the kinematic domain
- * (a pose with |B| >= pi/2: Python's KinematicDomainError). */
-TAPMP_LINKAGE int tapmp_plant_config_check(const tapmp_plant_config *c, const char **name, double *value,
-                                           const char **allowed);
-/* The ranges of the rigid-body parameters (ModelParams.validated): every one finite and > 0;
- * returns and reports as tapmp_plant_config_check. */
-TAPMP_LINKAGE int tapmp_params_check(const tapmp_params *p, const char **name, double *value,
-                                     const char **allowed);
-/* The initial pose (X0, Z0, B0) and rates (dX0, dZ0, dB0) (PlantModel.__init__): finite, with
- * |B0| < pi/2 (3: outside the kinematic domain); returns and reports as tapmp_plant_config_check. */
-TAPMP_LINKAGE int tapmp_initial_state_check(const double pose0[3], const double rate0[3], const char **name,
-                                            double *value, const char **allowed);
 /* Set the initial state, the reference gaps of the pulling law and the sample count. */
 TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
 /* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
@@ -162,16 +198,6 @@ TAPMP_LINKAGE void tapmp_apd_command(const double e[3], const double de[3], cons
 TAPMP_LINKAGE void tapmp_pid_command(const double e[3], const double de[3], const double integral_e[3],
                        const double u_d[3], const tapmp_gains *g, double u[3]);
 
-/* The ranges of the controller's settings (tapmp.control.Gains.validated, ModalGains.validated,
- * ControllerModel), returned and reported as tapmp_plant_config_check: the gains per motor
- * (Lambda_p1..K_T3 in tapmp_gains's field order: finite, >= 0, K_T > 0), then the modal gains
- * (finite, >= 0); then law, velocity_source (integers: 2), force_limit and T_s. */
-TAPMP_LINKAGE int tapmp_motor_gains_check(const tapmp_gains *g, const char **name, double *value,
-                                          const char **allowed);
-TAPMP_LINKAGE int tapmp_modal_gains_check(const tapmp_gains *g, const char **name, double *value,
-                                          const char **allowed);
-TAPMP_LINKAGE int tapmp_controller_check(double law, double velocity_source, double force_limit, double T_s,
-                                         const char **name, double *value, const char **allowed);
 
 /* The discrete controller's state between samples. */
 typedef struct {
@@ -221,18 +247,34 @@ TAPMP_LINKAGE int tapmp_clock_sampled(tapmp_clock *c, double k, double steps);
 TAPMP_LINKAGE void tapmp_clock_missed_text(const tapmp_clock *c, double t, double due, char *text, size_t size);
 TAPMP_LINKAGE void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char *text, size_t size);
 
+/* --- the hidden values of an FMU state (fmu_common/c/instance.c checks a state whole before it
+ * applies any of it) --- */
+/* TAPMP_FORCE_CAP [N]: the largest force limit a setting may ask for (force_limit's declared maximum
+ * in tapmp/interface.py), the cap of an integral's force when the controller has no limit. */
+#define TAPMP_FORCE_CAP 1e9
+/* A plant state s (X, Z, B, dX, dZ, dB) [m, m, rad, m/s, m/s, rad/s] with its sample count, and the
+ * outputs X..dB the same FMU state holds (out, 6 values): every value finite, |B| < pi/2 (3: outside
+ * the kinematic domain), the sample count a whole number in [0, 2^53], every output equal to the
+ * state value it is computed from. Returned and reported as the settings checks are. */
+TAPMP_LINKAGE int tapmp_plant_state_check(const double s[6], double sample, const double out[6], const char **name,
+                                          double *value, const char **allowed);
+/* A controller's loop state and clock at the communication point t [s], for its settings (p, g, law,
+ * force_limit [N], the clock's T_s [s]): every value finite; the previous q [m] inside the kinematic
+ * domain (3); the integral [m s] no larger than the force its term alone commands, |F_I| <= the force
+ * limit (TAPMP_FORCE_CAP without one); t0 <= t; k_last a whole number with t0 + k_last T_s <= t
+ * (within TAPMP_SAMPLE_TOLERANCE T_s). Returned and reported as the settings checks are. */
+TAPMP_LINKAGE int tapmp_controller_state_check(const tapmp_params *p, const tapmp_gains *g, int law,
+                                               double force_limit, const tapmp_controller_state *st,
+                                               const tapmp_clock *c, double t, const char **name,
+                                               double *value, const char **allowed);
+
 /* --- trajectory (tapmp/trajectory.py) --- */
 /* The move of `profile` (1, 2 or 3) from pose a to pose b (X, Z, B) with the limits per axis
  * v_max, a_max, j_max, every axis ending when the slowest does (move_plan). */
 TAPMP_LINKAGE void tapmp_move_plan(int profile, const double a[3], const double b[3], const double v_max[3],
                                    const double a_max[3], const double j_max[3], tapmp_axis_plan plan[3]);
-/* The number of the reference's settings: tapmp.trajectory.TrajectoryParams's fields. */
-enum { TAPMP_TRAJECTORY_N = 26 };
-/* The ranges of the reference's settings v, in TrajectoryParams's field order (X_c .. B_offset,
- * profile, X_a .. t_move, v_max_X .. j_max_B), returned and reported as
- * tapmp_plant_config_check (the profile is the integer: 2). */
-TAPMP_LINKAGE int tapmp_trajectory_check(const double v[TAPMP_TRAJECTORY_N], const char **name, double *value,
-                                         const char **allowed);
+/* The reference of the settings s: the circle and sinusoid, or the move planned (tapmp_move_plan). */
+TAPMP_LINKAGE void tapmp_trajectory_init(tapmp_trajectory *tp, const tapmp_trajectory_settings *s);
 /* Desired pose and its first and second derivatives at t [s] (9 values). */
 TAPMP_LINKAGE void tapmp_reference(double t, const tapmp_trajectory *tp, double ref[9]);
 

@@ -61,7 +61,7 @@ def test_study_writes_one_row_per_case_with_the_numbers_of_its_metrics(built, tm
                 "--no-progress", tmp_path=tmp_path)
     assert res.returncode == 0, res.stderr
     out = tmp_path / "out"
-    assert re.search(r"2 cases \(2 run now, [0-9.]+ s\): 2 completed, 0 failed -> " + re.escape(str(out / "study.csv")),
+    assert re.search(r"2 cases \(2 run now, [0-9.]+ s\): 2 completed, 0 diverged, 0 failed -> " + re.escape(str(out / "study.csv")),
                      res.stdout)
     with open(out / "study.csv", newline="") as f:
         rows = list(csv.DictReader(f))

@@ -1,8 +1,11 @@
-"""Adding a force term to the plant is one edit of the C model, and every family follows it.
+"""Adding a force term with a setting to the plant is the struct field, the equation and one
+row of the settings table, and every family follows it.
 
-In a copy of the repository a constant extra force on mover 1 is added exactly as
-docs/architecture.md says (step 1: one line in tapmp_plant_rhs of tapmp/c/tapmp_model.c;
-step 2: the same line in PlantModel.joint_forces, the documented reference; step 3: build).
+In a copy of the repository an extra force on mover 1, the new setting extra_force (default
+7 N), is added exactly as docs/architecture.md says (step 1: the field in tapmp_plant_config;
+step 2: one line in tapmp_plant_rhs of tapmp/c/tapmp_model.c and the same line in
+PlantModel.joint_forces, the documented reference; step 3: the table row, its default in
+PlantConfig, its unit, description and range in tapmp/interface.py; step 4: build).
 Then the plant alone, from rest under zero commands, is stepped in the FMI-free Python model
 (tapmp.plant.PlantModel, what tapmp.closed_loop runs), in the pythonfmu FMU and in the native
 FMI 2.0 and 3.0 FMUs built in the copy: all four must give the same doubles, and differ from
@@ -24,12 +27,22 @@ ROOT = Path(__file__).resolve().parents[2]
 EXTRA_FORCE = 7.0  # [N] on mover 1
 STEPS, H = 20, 1e-4
 
-# Step 1: the term in the C model's right-hand side, after the friction of mover 3.
-C_ANCHOR = "    F3 -= c->c_v[2] * dq3 + c->F_c[2] * tanh(dq3 / vs);\n"
-C_TERM = f"    F1 += {EXTRA_FORCE!r};                                       /* extra force on mover 1 */\n"
-# Step 2: the same term in the composed Python reference (checked against the C by the tests).
-PY_ANCHOR = "        F3 -= c.c_v3 * dq[2] + c.F_c3 * math.tanh(dq[2] / vs)\n"
-PY_TERM = f"        F1 += {EXTRA_FORCE!r}  # extra force on mover 1\n"
+# Step 1: the struct field.
+EDITS = [("tapmp/c/tapmp_model.h", "    double noise_rms;           /* measurement noise rms per measured position [m] */\n",
+          "    double extra_force;         /* extra force on mover 1 [N] */\n"),
+         # Step 2: the term in the C model's right-hand side, after the friction of mover 3, and the
+         # same term in the composed Python reference (checked against the C by the tests).
+         ("tapmp/c/tapmp_model.c", "    F3 -= c->c_v[2] * dq3 + c->F_c[2] * tanh(dq3 / vs);\n",
+          "    F1 += c->extra_force;                               /* extra force on mover 1 */\n"),
+         ("tapmp/plant.py", "        F3 -= c.c_v3 * dq[2] + c.F_c3 * math.tanh(dq[2] / vs)\n",
+          "        F1 += c.extra_force  # extra force on mover 1\n"),
+         # Step 3: the row of the settings table: default, unit and description, range.
+         ("tapmp/plant.py", "    noise_rms: float = 0.0            # measurement noise, rms per measured position [m], 0 = off\n",
+          f"    extra_force: float = {EXTRA_FORCE!r}  # extra force on mover 1 [N]\n"),
+         ("tapmp/interface.py", '    "disturbance_time": ("s", "time at which the external force step starts"),\n',
+          '    "extra_force": ("N", "extra force on mover 1"),\n'),
+         ("tapmp/interface.py", '    "disturbance_time": (0.0, 1e9), "noise_rms": (0.0, 1e-3), "noise_seed": (0, 2147483647),\n',
+          '    "extra_force": (-1e6, 1e6),\n')]
 
 # Runs in a repository (its path first on sys.path): the X trajectories of the four plants.
 RUN = r"""
@@ -90,11 +103,11 @@ def add_term(path: Path, anchor: str, term: str) -> None:
     path.write_text(text.replace(anchor, anchor + term))
 
 
-def test_a_force_term_added_in_the_c_model_changes_every_family_identically(tmp_path):
+def test_a_force_term_with_a_setting_changes_every_family_identically(tmp_path):
     repo = copy_repository(tmp_path / "repo")
-    add_term(repo / "tapmp" / "c" / "tapmp_model.c", C_ANCHOR, C_TERM)   # step 1
-    add_term(repo / "tapmp" / "plant.py", PY_ANCHOR, PY_TERM)             # step 2
-    changed = run_plants(repo, tmp_path / "cache")                        # step 3: build and run
+    for path, anchor, line in EDITS:                                      # steps 1 to 3
+        add_term(repo / path, anchor, line)
+    changed = run_plants(repo, tmp_path / "cache")                        # step 4: build and run
     original = run_plants(ROOT, tmp_path / "cache")
     families = ("python", "pythonfmu", "fmi2", "fmi3")
     for result in (original, changed):

@@ -51,7 +51,7 @@ def test_noise_has_the_stated_rms_zero_mean_and_depends_only_on_seed_sample_and_
 
 
 def test_bad_noise_and_disturbance_values_are_refused_with_their_names(tmp_path):
-    with pytest.raises(ModelInputError, match="noise_rms = -1e-06 is invalid: allowed is a finite number >= 0"):
+    with pytest.raises(ModelInputError, match=r"noise_rms = -1e-06 is invalid: allowed is a number in \[0, 0.001\]"):
         PlantConfig(noise_rms=-1e-6).validated()
     with pytest.raises(ModelInputError, match="disturbance_force2 = inf is invalid"):
         PlantConfig(disturbance_force2=math.inf).validated()

@@ -33,10 +33,11 @@ def test_friction_saturation_and_pulling_forces_are_as_documented():
 
 
 @pytest.mark.parametrize("field,value,allowed", [
-    ("c_v2", -1.0, ">= 0"), ("encoder_resolution", -1e-7, ">= 0"), ("substeps", 0, "integer >= 1"),
-    ("attraction_force", -1.0, ">= 0"), ("attraction_gap", 0.0, "> 0"), ("cogging_amplitude", -2.0, ">= 0"),
-    ("cogging_pitch", 0.0, "> 0"), ("cogging_phase2", math.inf, "a finite number"),
-    ("k_pull", math.nan, "a finite number")])
+    ("c_v2", -1.0, r"a number in \[0, 1e\+09\]"), ("encoder_resolution", -1e-7, r"a number in \[0, 1\]"),
+    ("substeps", 0, r"an integer in \[1, 10000\]"), ("attraction_force", -1.0, r"a number in \[0, 1e\+06\]"),
+    ("attraction_gap", 0.0, r"a number in \[1e-06, 1\]"), ("cogging_amplitude", -2.0, r"a number in \[0, 1e\+06\]"),
+    ("cogging_pitch", 0.0, r"a number in \[1e-06, 1\]"), ("cogging_phase2", math.inf, r"a number in \[-1e\+06, 1e\+06\]"),
+    ("k_pull", math.nan, r"a number in \[-1e\+12, 1e\+12\]")])
 def test_invalid_plant_settings_are_named(field, value, allowed):
     with pytest.raises(ModelInputError, match=f"{field} = {value}.*{allowed}"):
         PlantModel(PAPER_MODEL, PlantConfig()._replace(**{field: value}))

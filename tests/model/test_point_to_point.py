@@ -2,6 +2,7 @@
 model, native FMI 2.0 and 3.0 FMUs, pythonfmu FMU), the move metrics, and bad input."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -197,10 +198,10 @@ def test_point_to_point_scenario_is_stable_and_does_not_saturate(native_built, t
 
 
 @pytest.mark.parametrize("setting,message", [
-    ("trajectory.v_max_X=0.0", "trajectory.v_max_X = 0.0 is invalid: allowed is a finite number > 0"),
-    ("trajectory.a_max_B=-2.0", "trajectory.a_max_B = -2.0 is invalid: allowed is a finite number > 0"),
-    ("trajectory.j_max_Z=inf", "trajectory.j_max_Z = inf is invalid: allowed is a finite number"),
-    ("trajectory.j_max_X=nan", "trajectory.j_max_X = nan is invalid: allowed is a finite number"),
+    ("trajectory.v_max_X=0.0", "trajectory.v_max_X = 0.0 is invalid: allowed is a number in [1e-12, 1e+09]"),
+    ("trajectory.a_max_B=-2.0", "trajectory.a_max_B = -2.0 is invalid: allowed is a number in [1e-12, 1e+09]"),
+    ("trajectory.j_max_Z=inf", "trajectory.j_max_Z = inf is invalid: allowed is a number in [1e-12, 1e+09]"),
+    ("trajectory.j_max_X=nan", "trajectory.j_max_X = nan is invalid: allowed is a number in [1e-12, 1e+09]"),
     ("trajectory.profile=7", "trajectory.profile = 7 is invalid: allowed is 0 (circle and sinusoid), 1 (step), "
                              "2 (ramp) or 3 (S-curve)"),
     ("stop_time=0.3", "stop_time = 0.3 is invalid: the s-curve move from t_move = 0.01 s ends at t = 0.304533 s: "
@@ -212,8 +213,7 @@ def test_point_to_point_scenario_is_stable_and_does_not_saturate(native_built, t
     ("settling_bands=[]", "settling_bands = [] is invalid: allowed is a non-empty list of numbers > 0"),
 ])
 def test_bad_move_input_is_one_line_and_exit_2(tmp_path, capsys, setting, message):
-    with pytest.raises(ScenarioError, match="^" + message.replace("(", r"\(").replace(")", r"\)")
-                       .replace(".", r"\.").replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(ScenarioError, match="^" + re.escape(message)):
         load(P2P, [setting])
     code = main(["run", str(P2P), "--set", setting, "--out", str(tmp_path / "r"), "--no-progress"])
     err = capsys.readouterr().err
@@ -221,9 +221,9 @@ def test_bad_move_input_is_one_line_and_exit_2(tmp_path, capsys, setting, messag
 
 
 def test_bad_limits_in_the_model():
-    with pytest.raises(ModelInputError, match=r"^v_max_Z = 0.0 is invalid: allowed is a finite number > 0$"):
+    with pytest.raises(ModelInputError, match=r"^v_max_Z = 0.0 is invalid: allowed is a number in \[1e-12, 1e\+09\]$"):
         TrajectoryParams(profile=3, v_max_Z=0.0).validated()
-    with pytest.raises(ModelInputError, match=r"^B_b = 1.6 is invalid: allowed is \|B\| < pi/2"):
+    with pytest.raises(ModelInputError, match=r"^B_b = 1.6 is invalid: allowed is a number in \[-1.5, 1.5\]$"):
         TrajectoryParams(profile=3, B_b=1.6).validated()
 
 

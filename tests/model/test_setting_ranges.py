@@ -1,13 +1,16 @@
-"""Every setting's range is checked once, by the C model (tapmp_*_check): the Python classes
-raise its verdict as ModelInputError with the value as the caller gave it, in the order of the
-fields, and the clock's warning texts are the C model's too."""
+"""Every setting's range is one rule of the settings table (tapmp.interface), checked by the C
+model's generated tapmp_<model>_settings_check: the Python classes raise its verdict as
+ModelInputError with the value as the caller gave it, in the order of the FMU variables, and the
+clock's warning texts are the C model's too."""
 
 import math
 
 import pytest
 
+from tapmp import native
 from tapmp.control import ControllerModel, Gains, ModalGains
 from tapmp.errors import KinematicDomainError, ModelInputError
+from tapmp.interface import PLANT, SETTINGS_STRUCT, VARIABLES
 from tapmp.params import PAPER_MODEL, ModelParams, gain_preset
 from tapmp.plant import PlantConfig, PlantModel
 from tapmp.trajectory import TrajectoryParams
@@ -22,58 +25,75 @@ def message(make) -> str:
 
 
 @pytest.mark.parametrize("make, text", [
-    (lambda: ModelParams(I_y=0).validated(), "I_y = 0 is invalid: allowed is a finite number > 0"),
-    (lambda: ModelParams(m_2=math.inf, g=-1.0).validated(), "m_2 = inf is invalid: allowed is a finite number > 0"),
-    (lambda: GAINS._replace(D=(1.0, -2, 1.0)).validated(), "D2 = -2 is invalid: allowed is a finite number >= 0"),
-    (lambda: GAINS._replace(K_T=(1.0, 1.0, 0.0)).validated(), "K_T3 = 0.0 is invalid: allowed is a finite number > 0"),
-    (lambda: ModalGains(kv_d=math.nan).validated(), "kv_d = nan is invalid: allowed is a finite number >= 0"),
+    (lambda: ModelParams(I_y=0).validated(), "I_y = 0 is invalid: allowed is a number in [1e-06, 1e+06]"),
+    (lambda: ModelParams(m_2=math.inf, g=-1.0).validated(), "m_2 = inf is invalid: allowed is a number in "
+     "[1e-06, 1e+06]"),
+    (lambda: GAINS._replace(D=(1.0, -2, 1.0)).validated(), "D2 = -2 is invalid: allowed is a number in [0, 1e+09]"),
+    (lambda: GAINS._replace(D=(2e9, 1.0, 1.0)).validated(), "D1 = 2000000000.0 is invalid: allowed is a number in "
+     "[0, 1e+09]"),
+    (lambda: GAINS._replace(K_T=(1.0, 1.0, 0.0)).validated(), "K_T3 = 0.0 is invalid: allowed is a number in "
+     "[1e-12, 1e+12]"),
+    (lambda: ModalGains(kv_d=math.nan).validated(), "kv_d = nan is invalid: allowed is a number in [0, 1e+15]"),
     (lambda: ControllerModel(PAPER_MODEL, GAINS, law=3), "law = 3 is invalid: allowed is 0 (SC-DC), 1 (APD-DC) "
      "or 2 (PID-DC)"),
     (lambda: ControllerModel(PAPER_MODEL, GAINS, velocity_source=2), "velocity_source = 2 is invalid: allowed is "
      "0 (backward difference of q) or 1 (dq inputs)"),
     (lambda: ControllerModel(PAPER_MODEL, GAINS, force_limit=-1.0), "force_limit = -1.0 is invalid: allowed is "
-     "a finite number >= 0 (0 = no limit)"),
-    (lambda: ControllerModel(PAPER_MODEL, GAINS, T_s=0.0), "T_s = 0.0 is invalid: allowed is a finite number > 0 "
-     "(the controller's sample period [s])"),
-    (lambda: PlantConfig(v_s=0.0).validated(), "v_s = 0.0 is invalid: allowed is a finite number > 0"),
-    # every field finite first, then the signs, then the cross-field and integer rules
-    (lambda: TrajectoryParams(radius=-1.0, X_a=math.nan).validated(), "X_a = nan is invalid: allowed is a finite "
-     "number"),
-    (lambda: TrajectoryParams(radius=-1.0, profile=7).validated(), "radius = -1.0 is invalid: allowed is a finite "
-     "number >= 0"),
-    (lambda: TrajectoryParams(B_offset=1.0, B_amplitude=0.6).validated(), "B_amplitude = 0.6 is invalid: allowed "
-     "is |B_offset| + B_amplitude < pi/2 rad (kinematic domain)"),
+     "a number in [0, 1e+09]"),
+    (lambda: ControllerModel(PAPER_MODEL, GAINS, T_s=0.0), "T_s = 0.0 is invalid: allowed is a number in "
+     "[1e-09, 1000]"),
+    (lambda: PlantConfig(v_s=0.0).validated(), "v_s = 0.0 is invalid: allowed is a number in [1e-12, 1000]"),
+    (lambda: PlantConfig(substeps=2.0).validated(), "substeps = 2.0 is invalid: allowed is an integer in [1, 10000]"),
+    # in the order of the FMU variables, then the relation between settings
+    (lambda: TrajectoryParams(radius=-1.0, X_a=math.nan).validated(), "radius = -1.0 is invalid: allowed is a "
+     "number in [0, 1]"),
     (lambda: TrajectoryParams(profile=7, j_max_B=0.0).validated(), "profile = 7 is invalid: allowed is 0 (circle "
      "and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)"),
-    (lambda: TrajectoryParams(j_max_B=0.0, B_b=2.0).validated(), "j_max_B = 0.0 is invalid: allowed is a finite "
-     "number > 0"),
-    (lambda: TrajectoryParams(B_b=-2.0).validated(), "B_b = -2.0 is invalid: allowed is |B| < pi/2 rad "
-     "(kinematic domain)"),
+    (lambda: TrajectoryParams(j_max_B=0.0, B_offset=1.0, B_amplitude=0.6).validated(), "j_max_B = 0.0 is invalid: "
+     "allowed is a number in [1e-12, 1e+09]"),
+    (lambda: TrajectoryParams(B_offset=1.0, B_amplitude=0.6).validated(), "B_amplitude = 0.6 is invalid: allowed "
+     "is |B_offset| + B_amplitude < pi/2 rad (kinematic domain)"),
+    (lambda: TrajectoryParams(B_b=-2.0).validated(), "B_b = -2.0 is invalid: allowed is a number in [-1.5, 1.5]"),
 ])
 def test_the_first_setting_out_of_range_is_named_with_its_value_and_what_is_allowed(make, text):
     assert message(make) == text
 
 
 @pytest.mark.parametrize("pose0, rate0, text", [
-    ((0.0, math.nan, 2.0), (0.0, 0.0, 0.0), "Z0 = nan is invalid: allowed is a finite number"),
-    ((0.0, 0.0, 0.0), (0.0, 0.0, math.inf), "dB0 = inf is invalid: allowed is a finite number"),
-    ((0.0, 0.0, -2), (0.0, 0.0, 0.0), "B0 = -2 is invalid: allowed is |B0| < pi/2 rad"),
+    ((0.0, math.nan, 2.0), (0.0, 0.0, 0.0), "Z0 = nan is invalid: allowed is a number in [-1, 1]"),
+    ((0.0, 0.0, 0.0), (0.0, 0.0, math.inf), "dB0 = inf is invalid: allowed is a number in [-1000, 1000]"),
+    ((0.0, 0.0, -2), (0.0, 0.0, 0.0), "B0 = -2 is invalid: allowed is a number in [-1.5, 1.5]"),
 ])
-def test_the_plants_initial_state_is_checked_finite_and_inside_the_kinematic_domain(pose0, rate0, text):
+def test_the_plants_initial_state_is_checked_within_its_ranges(pose0, rate0, text):
     assert message(lambda: PlantModel(PAPER_MODEL, PlantConfig(), pose0, rate0)) == text
 
 
-@pytest.mark.parametrize("make", [lambda: PlantModel(PAPER_MODEL, PlantConfig(), (0.0, 0.0, 1.6)),
-                                  lambda: TrajectoryParams(B_a=1.6).validated(),
-                                  lambda: TrajectoryParams(B_offset=1.0, B_amplitude=0.6).validated()])
-def test_a_pose_outside_the_kinematic_domain_is_a_kinematic_domain_error(make):
+def test_a_reference_outside_the_kinematic_domain_is_a_kinematic_domain_error():
     with pytest.raises(KinematicDomainError):
-        make()
+        TrajectoryParams(B_offset=1.0, B_amplitude=0.6).validated()
 
 
-def test_the_c_check_reads_as_many_trajectory_settings_as_trajectory_params_has():
-    from tapmp import native
-    assert len(TrajectoryParams._fields) == native.load()[1].TAPMP_TRAJECTORY_N == 26
+def test_every_pose_setting_allowed_by_its_range_lies_inside_the_kinematic_domain():
+    """|B| < pi/2 (Eq. 1) needs no check of its own: the ranges of B0, B_a, B_b, B_offset keep them inside."""
+    for table in VARIABLES.values():
+        for v in table:
+            if v.name in ("B0", "B_a", "B_b", "B_offset"):
+                assert -math.pi / 2 < v.min and v.max < math.pi / 2
+
+
+def test_the_settings_struct_is_filled_by_field_name_from_the_table():
+    """Each parameter lands in its own member (Var.field) of the C settings struct: set one
+    parameter to a marker and read it back by the field the table names."""
+    for v in VARIABLES[PLANT]:
+        if v.causality != "parameter":
+            continue
+        marker = int(v.max) if v.type == "Integer" else v.max
+        s = native.settings(PLANT, {v.name: marker})
+        member = s
+        for part in v.field.replace("]", "").replace("[", ".").split("."):
+            member = member[int(part)] if part.isdigit() else getattr(member, part)
+        assert member == marker, v.name
+    assert native.load()[0].typeof(native.settings(PLANT, {})).cname == f"{SETTINGS_STRUCT[PLANT]} *"
 
 
 def test_settings_inside_every_range_pass_unchanged():

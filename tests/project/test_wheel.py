@@ -106,3 +106,18 @@ def test_the_wheel_builds_runs_and_exports_from_an_empty_folder(tmp_path):
     assert snapshot(site) == package_before  # nothing written into the installed package
     assert snapshot(ROOT) == repo_before     # nor into the repository
     assert sorted(p.name for p in work.iterdir()) == ["b", "e", "py", "results"]
+
+
+def test_the_build_backend_warns_of_nothing(tmp_path):
+    """setuptools, run verbosely by pip for the wheel and for the editable install, prints no warning:
+    the license is an SPDX expression and every folder of C sources is a declared package."""
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=SKIP)
+    for command in (["wheel", "--no-deps", "-v", "-w", str(tmp_path / "dist"), str(src)],
+                    ["install", "--no-deps", "-v", "--target", str(tmp_path / "target"), "-e", str(src)]):
+        built = subprocess.run([sys.executable, "-m", "pip", *command], capture_output=True, text=True, timeout=600)
+        assert built.returncode == 0, built.stderr
+        # pip itself switches byte-compiling off in the build backend; that notice is pip's, not ours
+        warnings = [line.strip() for line in (built.stdout + built.stderr).splitlines()
+                    if "warning" in line.lower() and "byte-compiling is disabled" not in line]
+        assert warnings == [], f"pip {command[0]}: {warnings}"
