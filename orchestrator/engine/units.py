@@ -68,6 +68,7 @@ class Unit:
         self.has_event_mode = self.fmi3 and bool(getattr(self.md.coSimulation, "hasEventMode", False))
         self.event_mode = False       # instantiated with eventModeUsed (and earlyReturnAllowed)
         self.next_event = math.inf    # its next time event [s] (nextEventTime), inf if none
+        self.n_events = 0             # events handled (fmi3UpdateDiscreteStates rounds that settled)
         dll = self.slave.dll
         if self.fmi3:
             self._get_real, self._set_real, self._do_step3 = dll.fmi3GetFloat64, dll.fmi3SetFloat64, dll.fmi3DoStep
@@ -148,6 +149,7 @@ class Unit:
             again, _terminate, _, _, defined, next_time = self.slave.updateDiscreteStates()
             self.next_event = next_time if defined else math.inf
             if not again:
+                self.n_events += 1
                 return
         raise CoSimulationError(f"{self.name}: fmi3UpdateDiscreteStates still needs another update after 100 "
                                 "rounds: allowed is an FMU whose discrete states settle", self.name)
