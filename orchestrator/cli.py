@@ -14,7 +14,7 @@ from tapmp.errors import ModelInputError
 from tapmp.native import NativeModelError
 
 from .engine import build as build_mod
-from tapmp.toolchain import PLATFORMS
+from tapmp.toolchain import PLATFORMS, CacheTrustError
 from .engine.build_native import NativeBuildError
 from .engine.master import CoSimulationError
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
@@ -25,8 +25,8 @@ from .engine.tempdirs import remove_stale_folders
 from .errors import UsageError
 from .experiments.estimate import check_output_size
 from .experiments.export import ExportError
-from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, output_lock, prepare_output,
-                                  write_comparison_status)
+from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, check_output, output_lock,
+                                  prepare_output, write_comparison_status)
 from .experiments.progress import Progress
 from .experiments.reading import ResultFolderError
 from .experiments.results import one_line, run_scenario
@@ -39,7 +39,7 @@ from .studies.study import StudyError
 # disk, a scheduler address). Every other exception is a programming error and shows its traceback.
 USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
                ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, OSError)
+               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
 
 
 def _family(value: str) -> str:
@@ -98,14 +98,15 @@ def _load(args):
 
 
 def record_every(value) -> int:
-    """--record-every checked: an integer >= 1."""
+    """--record-every checked: an integer from 1 to MAX_INT (the scenario key's bound)."""
+    from .experiments.scenario import MAX_INT
     try:
         n = int(value)
     except ValueError:
         n = 0
-    if n < 1:
-        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer >= 1 "
-                                         "(keep every N-th step)")
+    if not 1 <= n <= MAX_INT:
+        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer from 1 to {MAX_INT} "
+                         "(keep every N-th step)")
     return n
 
 
@@ -120,10 +121,13 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
     """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
     for the duration; comparison.json records "running", then "completed", or "failed" /
     "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
-    an unfinished one is replaced, its runs with it."""
+    an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
+    unless empty (see folders.check_output)."""
     laws = {name: sc.law for name, sc in runs.items()}
+    # before the lock file is made: a refused folder stays as it was
+    check_output(out, overwrite, "comparison", laws, unmarked_only=True)
     with output_lock(out):
-        prepare_output(out, overwrite, "comparison")
+        prepare_output(out, overwrite, "comparison", laws)
         write_comparison_status(out, scenario.name, laws, "running")
         try:
             yield out
@@ -185,7 +189,7 @@ def cmd_check(args) -> int:
 
 def cmd_analyze(args) -> int:
     from .experiments.analysis import analyze, pole_table, table
-    scenario = load(args.scenario, args.set)
+    scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .experiments.baselines import compare_runs
     result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
@@ -290,10 +294,15 @@ def summary_table(results: dict) -> str:
     return "\n".join(lines)
 
 
+MAX_WORKERS = 4096  # processes one command may start; bounded before the number reaches the OS or Dask
+
+
 def _check_workers(workers: int) -> None:
-    """--workers: UsageError unless at least one process."""
+    """--workers: UsageError unless 1 to MAX_WORKERS processes."""
     if workers < 1:
         raise UsageError(f"--workers = {workers} is invalid: allowed is an integer >= 1")
+    if workers > MAX_WORKERS:
+        raise UsageError(f"--workers = {workers} is invalid: allowed is an integer from 1 to {MAX_WORKERS}")
 
 
 def _jobs(args) -> int:

@@ -66,7 +66,7 @@ from fmpy.ssp.ssd import read_ssd
 from tapmp.interface import CONNECTION_STARTS, ORDERINGS
 
 from . import stepper as stepper_core
-from .archive import MEMBER_RULE, inside_archive
+from .archive import ExtractBudget, ExtractLimitError, MEMBER_RULE, inside_archive
 from .clocks import Clock
 from .errors import CoSimulationError, DivergenceError
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
@@ -192,8 +192,15 @@ class CoSimulation:
         return False
 
     def _open(self):
+        if self.ssp_path.is_dir():
+            raise CoSimulationError(f"SSP file {self.ssp_path} is a folder: allowed is an SSP file (a zip archive "
+                                    "holding SystemStructure.ssd and the FMUs)")
         if not self.ssp_path.is_file():
             raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
+        try:
+            self._budget = ExtractBudget()  # of the SSP's members and the FMUs' together
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err)) from None
         ssd, members = self._read_ssp()
         elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
         self.tmp = make_folder()
@@ -207,7 +214,10 @@ class CoSimulation:
         addLoggerProxy(byref(self.callbacks))
         for name, (source, _) in elements.items():
             try:
-                unit = Unit(name, fmus[name], self.tmp / "fmu" / name, self.log)
+                unit = Unit(name, fmus[name], self.tmp / "fmu" / name, self.log, self._budget,
+                            f"SSP file {self.ssp_path}: the FMU {source} of element {name}")
+            except ExtractLimitError as err:
+                raise CoSimulationError(str(err), name) from None
             except Exception as err:
                 raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {source} of "
                                         f"element {name} (truncated or not an FMU): {err}", name) from err
@@ -317,9 +327,16 @@ class CoSimulation:
         """The SSD of the SSP file and its archive members {normalized name: member name};
         refuses an archive with a member named by an absolute path or one with ``..``."""
         try:
+            with zipfile.ZipFile(self.ssp_path) as z:  # the SSD is parsed in memory: its size counts too
+                size = z.getinfo("SystemStructure.ssd").file_size if "SystemStructure.ssd" in z.namelist() else 0
+            if size > self._budget.limit:
+                raise ExtractLimitError(str(self._budget.refuse(f"SSP file {self.ssp_path}", "SystemStructure.ssd",
+                                                                size)))
             ssd = read_ssd(str(self.ssp_path))
             with zipfile.ZipFile(self.ssp_path) as z:
                 names = [i.filename for i in z.infolist() if not i.is_dir()]
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err)) from None
         except Exception as err:
             raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
                                     "holding SystemStructure.ssd and the FMUs)") from err
@@ -375,11 +392,12 @@ class CoSimulation:
                                                 f"points outside the archive: {MEMBER_RULE}", name)
                     if not target.exists():
                         target.parent.mkdir(parents=True, exist_ok=True)
-                        with z.open(members[inside]) as src, open(target, "wb") as dst:
-                            shutil.copyfileobj(src, dst)
+                        self._budget.copy(z, z.getinfo(members[inside]), target, f"SSP file {self.ssp_path}")
                     paths[name] = target
         except CoSimulationError:
             raise
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err)) from None
         except OSError as err:
             raise CoSimulationError(f"cannot extract SSP file {self.ssp_path} into {self.tmp}: {err}") from err
         except Exception as err:
@@ -569,6 +587,10 @@ class CoSimulation:
         failure raises what :meth:`step` raises, after setting :attr:`filled` to the rows
         stored before it."""
         self.filled = 0
+        try:  # before any step, the same in both loops: the compiled core's int64 clock must not wrap
+            self.clock.require_steps(self.k + len(rows))
+        except ValueError as err:
+            raise CoSimulationError(str(err)) from None
         if self._core is None:  # the reference loop
             for i in range(len(rows)):
                 self.step()

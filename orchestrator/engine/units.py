@@ -8,10 +8,11 @@ import math
 from ctypes import byref, c_bool, c_double, c_uint
 from pathlib import Path
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
+from .archive import ExtractBudget, extract_archive
 from .errors import CoSimulationError
 
 _DESCRIPTIONS = {}  # sha-1 of an FMU archive -> its parsed modelDescription (read-only)
@@ -38,13 +39,15 @@ class Unit:
     (fmpy's getReal/setReal wrappers build new arrays and lists on every call).
     """
 
-    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
+    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list, budget=None, where: str = ""):
         self.name = name
+        # extracted first, counted against ``budget`` (archive.ExtractBudget): a member's size is
+        # checked before modelDescription.xml is read into memory
+        extract_archive(fmu_path, unzip_dir, budget or ExtractBudget(), where or f"FMU {fmu_path}")
         self.md = _model_description(fmu_path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.log = log
-        extract(str(fmu_path), unzipdir=str(unzip_dir))
         slave_type = FMU3Slave if self.fmi3 else FMU2Slave
         self.slave = slave_type(guid=self.md.guid, unzipDirectory=str(unzip_dir),
                                 modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)

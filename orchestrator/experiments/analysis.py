@@ -227,6 +227,9 @@ def poles(split: SplitLoop) -> list:
     return sorted(out, key=lambda p: (p["zeta"], p["f_n_hz"]))
 
 
+MAX_POINTS = 100_000  # frequencies: each one solves the loop at every break point (bounded work)
+
+
 def frequency_grid(h: float, f_min: float = F_MIN, f_max: float | None = None, points: int = POINTS) -> np.ndarray:
     """Log-spaced frequencies [Hz] from f_min to f_max (default: the Nyquist frequency 1/(2h));
     ScenarioError names a bound outside (0, Nyquist] or fewer than 2 points."""
@@ -238,8 +241,8 @@ def frequency_grid(h: float, f_min: float = F_MIN, f_max: float | None = None, p
                                 f"(up to the Nyquist frequency 1/(2 step), step = {h:g} s)")
     if not f_min < f_max:
         raise ScenarioError(f"--f-min = {f_min!r} is invalid: allowed is a frequency below --f-max = {f_max!r} Hz")
-    if not (isinstance(points, int) and points >= 2):
-        raise ScenarioError(f"--points = {points!r} is invalid: allowed is an integer >= 2")
+    if not (isinstance(points, int) and 2 <= points <= MAX_POINTS):
+        raise ScenarioError(f"--points = {points!r} is invalid: allowed is an integer from 2 to {MAX_POINTS}")
     return np.geomspace(f_min, min(f_max, nyq), points)
 
 

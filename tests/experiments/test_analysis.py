@@ -234,7 +234,9 @@ def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     (["--f-min", "-1"], "error: --f-min = -1.0 is invalid: allowed is a frequency in (0, 5000] Hz"),
     (["--f-max", "nan"], "error: --f-max = nan is invalid: allowed is a frequency in (0, 5000] Hz"),
     (["--f-min", "100", "--f-max", "10"], "error: --f-min = 100.0 is invalid: allowed is a frequency below"),
-    (["--points", "1"], "error: --points = 1 is invalid: allowed is an integer >= 2"),
+    (["--points", "1"], "error: --points = 1 is invalid: allowed is an integer from 2 to 100000"),
+    (["--points", "99999999999999999999"], "error: --points = 99999999999999999999 is invalid: allowed is an integer "
+                                          "from 2 to 100000"),
 ])
 def test_a_bad_frequency_grid_is_one_line_and_exit_2(tmp_path, capsys, args, message):
     code = main(["analyze", str(PAPER), "--out", str(tmp_path / "x"), *args])
