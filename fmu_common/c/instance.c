@@ -34,7 +34,7 @@
 
 TAPMP_DEFINITION const tapmp_var VARS[N_VARS] = MODEL_VARS_INIT;
 
-static const char *MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
+static const char *MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated", "Event Mode"};
 
 char *tapmp_repr(double x, char *buf)
 {
@@ -313,7 +313,8 @@ int tapmp_exit_initialization(tapmp_instance *inst)
 {
     if (inst->mode != MODE_INITIALIZATION)
         return tapmp_mode_error(inst, "ExitInitializationMode", "Initialization Mode");
-    inst->mode = MODE_STEP;
+    /* FMI 3.0: with eventModeUsed the instance leaves initialization into Event Mode */
+    inst->mode = inst->event_mode_used ? MODE_EVENT : MODE_STEP;
     inst->retune = inst->dirty = 0;
     if (inst->failed) return ST_ERROR;
     int status = setup(inst);
@@ -332,6 +333,8 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     char v[40], w[40], allowed[160], msg[TAPMP_MESSAGE_MAX];
     if (inst->mode != MODE_STEP) {
         const char *hint = inst->mode == MODE_TERMINATED ? " (the instance is terminated; reset it first)" :
+                           inst->mode == MODE_EVENT ? " (finish the event first: fmi3UpdateDiscreteStates, "
+                           "fmi3EnterStepMode)" :
                            " (leave initialization first: EnterInitializationMode, ExitInitializationMode)";
         return tapmp_fail(inst, "%sDoStep is not allowed in %s: allowed in Step Mode%s", inst->fmi,
                           MODE_NAMES[inst->mode], hint);
@@ -388,10 +391,100 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     return ST_OK;
 }
 
+/* --- events (FMI 3.0 Event Mode) ----------------------------------------------------- */
+
+int tapmp_enter_event_mode(tapmp_instance *inst)
+{
+    if (!inst->event_mode_used)
+        return tapmp_fail(inst, "%sEnterEventMode is not allowed: the instance was created with eventModeUsed = "
+                          "false (allowed: instantiate with eventModeUsed = true)", inst->fmi);
+    if (inst->mode == MODE_EVENT) return ST_OK;  /* the host may announce an event it is in already */
+    if (inst->mode != MODE_STEP) return tapmp_mode_error(inst, "EnterEventMode", "Step Mode");
+    if (inst->failed) return tapmp_fail(inst, "%sEnterEventMode refused after an earlier error: %s", inst->fmi,
+                                        inst->error);
+    inst->mode = MODE_EVENT;
+    return ST_OK;
+}
+
+int tapmp_update_discrete_states(tapmp_instance *inst, int *values_changed, int *next_defined, double *next_time)
+{
+    char v[40], msg[TAPMP_MESSAGE_MAX];
+    double out[MODEL_N_OUT];
+    if (inst->mode != MODE_EVENT) return tapmp_mode_error(inst, "UpdateDiscreteStates", "Event Mode");
+    if (inst->failed) return tapmp_fail(inst, "%sUpdateDiscreteStates at t = %.6g s refused after an earlier error: "
+                                        "%s", inst->fmi, inst->time, inst->error);
+    ModelData before = inst->m;
+    if (inst->retune) {  /* new tunable values take effect at this event */
+        inst->retune = 0;
+        if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg))
+            return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+    }
+    if (!model_event_update(inst, out, msg, sizeof msg)) {
+        inst->m = before;
+        return tapmp_fail(inst, "%s", msg);
+    }
+    int changed = 0;
+    for (int i = 0; i < MODEL_N_OUT; i++) {
+        if (!isfinite(out[i])) {
+            inst->m = before;
+            tapmp_invalid_text(msg, sizeof msg, VARS[MODEL_OUT_FIRST + i].name, tapmp_repr(out[i], v), OVERFLOW, 1,
+                               inst->time);
+            return tapmp_fail(inst, "%s", msg);
+        }
+        changed |= memcmp(&out[i], &inst->reals[MODEL_OUT_FIRST + i], sizeof out[i]) != 0;
+    }
+    memcpy(inst->reals + MODEL_OUT_FIRST, out, sizeof out);
+    *values_changed = changed;
+    *next_defined = model_next_event(inst, next_time);
+    if (!*next_defined) *next_time = 0.0;
+    return ST_OK;
+}
+
+int tapmp_enter_step_mode(tapmp_instance *inst)
+{
+    if (inst->mode != MODE_EVENT) return tapmp_mode_error(inst, "EnterStepMode", "Event Mode");
+    inst->mode = MODE_STEP;
+    return ST_OK;
+}
+
+int tapmp_do_step_events(tapmp_instance *inst, double t, double h, int *event_needed, int *early_return,
+                         double *last_time)
+{
+    double te;
+    *event_needed = *early_return = 0;
+    if (!inst->event_mode_used || inst->mode != MODE_STEP || inst->failed || !isfinite(t) ||
+        !(isfinite(h) && h > 0.0) || !model_next_event(inst, &te)) {
+        int status = tapmp_do_step(inst, t, h);  /* no event ahead, or its checks refuse the call */
+        *last_time = inst->time;
+        return status;
+    }
+    char v[40], w[40];
+    double tol = time_tolerance(te);
+    if (inst->time >= te - tol)  /* the event at te is due and was not handled */
+        return tapmp_fail(inst, "%sDoStep at t = %s s is not allowed: the event at t = %s s is pending (doStep "
+                          "returned eventHandlingNeeded = true): allowed is %sEnterEventMode, "
+                          "%sUpdateDiscreteStates, %sEnterStepMode first", inst->fmi, tapmp_repr(t, v),
+                          tapmp_repr(te, w), inst->fmi, inst->fmi, inst->fmi);
+    int passes = t + h > te + tol;
+    if (passes && !inst->early_return_allowed) {
+        char e[40];
+        return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a step that ends at or before the "
+                          "next event, t = %s s (nextEventTime; earlyReturnAllowed is false, so doStep cannot stop "
+                          "there; at t = %s s)", tapmp_repr(h, v), tapmp_repr(te, w), tapmp_repr(t, e));
+    }
+    int status = tapmp_do_step(inst, t, passes ? te - t : h);
+    if (status <= ST_WARNING && passes) inst->time = te;  /* exactly the event's time, not t + (te - t) */
+    *last_time = inst->time;
+    if (status > ST_WARNING) return status;
+    *early_return = passes;
+    *event_needed = passes || fabs(t + h - te) <= tol;  /* stopped at the event, or the step ends on it */
+    return status;
+}
+
 int tapmp_terminate(tapmp_instance *inst)
 {
-    if (inst->mode != MODE_STEP && !inst->failed)
-        return tapmp_mode_error(inst, "Terminate", "Step Mode");
+    if (!MODE_RUNNING(inst->mode) && !inst->failed)
+        return tapmp_mode_error(inst, "Terminate", inst->event_mode_used ? "Step Mode or Event Mode" : "Step Mode");
     inst->mode = MODE_TERMINATED;
     return ST_OK;
 }
@@ -508,7 +601,7 @@ static int settable(tapmp_instance *inst, unsigned vr, double x, const char *cal
     if (var->type == 'R') tapmp_repr(x, text);
     else snprintf(text, sizeof text, "%d", (int)x);
     if (var->causality == 'o') return tapmp_invalid(inst, var->name, text, "no value: it is an output", 0);
-    if (var->variability == 'f' && inst->mode == MODE_STEP)
+    if (var->variability == 'f' && MODE_RUNNING(inst->mode))
         return tapmp_invalid(inst, var->name, text, "no change after initialization: it is a fixed parameter", 0);
     return ST_OK;
 }
@@ -518,7 +611,7 @@ static int settable(tapmp_instance *inst, unsigned vr, double x, const char *cal
 static int check_tunable(tapmp_instance *inst, unsigned vr, double old_real, int old_int)
 {
     char msg[TAPMP_MESSAGE_MAX];
-    if (inst->mode != MODE_STEP || VARS[vr].variability != 't') return ST_OK;
+    if (!MODE_RUNNING(inst->mode) || VARS[vr].variability != 't') return ST_OK;
     if (model_validate(inst, msg, sizeof msg) && check_ranges(inst, msg, sizeof msg)) {
         inst->retune = 1;
         return ST_OK;
@@ -671,8 +764,8 @@ int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
 static int validate_values(const tapmp_instance *c, char *msg, size_t size)
 {
     char v[40];
-    if (c->mode < MODE_INSTANTIATED || c->mode > MODE_TERMINATED) {
-        snprintf(msg, size, "FMU state: mode = %d is invalid: allowed are 0 to 3", (int)c->mode);
+    if (c->mode < MODE_INSTANTIATED || c->mode > MODE_LAST) {
+        snprintf(msg, size, "FMU state: mode = %d is invalid: allowed are 0 to %d", (int)c->mode, (int)MODE_LAST);
         return 0;
     }
     /* EnterInitializationMode builds the model or fails: every later mode has one unless an error
@@ -818,7 +911,7 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
     tapmp_instance *c = &st->copy;
     if (ok) {
         *c = *inst;
-        c->mode = s->mode >= MODE_INSTANTIATED && s->mode <= MODE_TERMINATED ? (tapmp_mode)s->mode : MODE_INSTANTIATED;
+        c->mode = s->mode >= MODE_INSTANTIATED && s->mode <= MODE_LAST ? (tapmp_mode)s->mode : MODE_INSTANTIATED;
         c->failed = s->failed != 0;
         c->retune = s->retune != 0;
         c->has_model = s->has_model != 0;  /* as claimed: validate_values checks it against the mode */
@@ -829,7 +922,7 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
         memcpy(c->error, s->error, sizeof c->error);
         memset(&c->m, 0, sizeof c->m);
         if (s->mode != (int)c->mode) {
-            snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to 3", s->mode);
+            snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to %d", s->mode, (int)MODE_LAST);
             ok = 0;
         } else if ((ok = validate_values(c, msg, sizeof msg)) && c->has_model &&
                    (ok = validate_model(c, s->hidden, msg, sizeof msg))) {

@@ -230,6 +230,21 @@ def model_description_fmi2(model: str) -> bytes:
     return to_bytes(root)
 
 
+# The models with time events (their C header defines MODEL_HAS_EVENTS): the controller, whose
+# sample instants t0 + k T_s are time events in FMI 3.0's Event Mode. The plant is continuous and
+# the trajectory a function of time: neither has an instant at which something jumps.
+EVENT_MODELS = frozenset({"TAPMP_Controller"})
+
+
+def event_mode_attributes(model: str) -> dict:
+    """The FMI 3.0 co-simulation attributes of Event Mode for ``model``: hasEventMode and
+    mightReturnEarlyFromDoStep (doStep stops at the next sample instant when the host allows early
+    return); canReturnEarlyAfterIntermediateUpdate stays false (no intermediate update)."""
+    events = "true" if model in EVENT_MODELS else "false"
+    return {"mightReturnEarlyFromDoStep": events, "canReturnEarlyAfterIntermediateUpdate": "false",
+            "hasEventMode": events}
+
+
 def model_description_fmi3(model: str) -> bytes:
     """modelDescription.xml (FMI 3.0 co-simulation) of the native ``model``."""
     table = VARIABLES[model]
@@ -242,8 +257,8 @@ def model_description_fmi3(model: str) -> bytes:
         "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
         "providesDirectionalDerivatives": "false", "providesAdjointDerivatives": "false",
         "canHandleVariableCommunicationStepSize": "true", "maxOutputDerivativeOrder": "0",
-        "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false",
-        "hasEventMode": "false", "providesEvaluateDiscreteStates": "false"})
+        "providesIntermediateUpdate": "false", **event_mode_attributes(model),
+        "providesEvaluateDiscreteStates": "false"})
     root.append(unit_definitions(v.unit for v in table if v.unit))
     _categories_and_experiment(root, "fmi3Error")
     variables = ET.SubElement(root, "ModelVariables")
