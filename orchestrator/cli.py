@@ -10,36 +10,43 @@ import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
-from tapmp.errors import ModelInputError
-from tapmp.native import NativeModelError
+from tapmp.toolchain import PLATFORMS
 
-from .engine import build as build_mod
-from tapmp.toolchain import PLATFORMS, CacheTrustError
-from .engine.build_native import NativeBuildError
-from .engine.master import CoSimulationError
-from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
-                               resolve_ssp)
-from .engine.schedule import ScheduleError
-from .engine.ssp import ParameterAddressError
-from .engine.tempdirs import remove_stale_folders
+from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, data_dir,
+                               default_build_dir, resolve_ssp)
 from .errors import UsageError
-from .experiments.estimate import check_output_size
-from .experiments.export import ExportError
-from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, check_output, output_lock,
-                                  prepare_output, write_comparison_status)
-from .experiments.progress import Progress
-from .experiments.reading import ResultFolderError
-from .experiments.results import one_line, run_scenario
-from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
-from .experiments.scenario import RESULT_FORMATS, ScenarioError, load
-from .studies.study import StudyError
 
-# What `tapmp` prints as one line (exit code 2): bad input (an option, a file's content), a run or
-# build that failed for a reason it names, and OSError (a file or folder the user named, a full
-# disk, a scheduler address). Every other exception is a programming error and shows its traceback.
-USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
-               ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
+# Only light modules above: `tapmp --help` and a refused option print before numpy, fmpy, pydantic
+# or matplotlib are loaded; each command imports what it runs.
+
+
+def user_errors() -> tuple:
+    """What `tapmp` prints as one line (exit code 2): bad input (an option, a file's content), a run
+    or build that failed for a reason it names, and OSError (a file or folder the user named, a full
+    disk, a scheduler address). Every other exception is a programming error and shows its traceback."""
+    from tapmp.errors import ModelInputError
+    from tapmp.native import NativeModelError
+    from tapmp.toolchain import CacheTrustError
+    from .engine.build import BuildError
+    from .engine.build_native import NativeBuildError
+    from .engine.master import CoSimulationError
+    from .engine.schedule import ScheduleError
+    from .engine.ssp import ParameterAddressError
+    from .experiments.export import ExportError
+    from .experiments.folders import OutputExistsError, OutputInUseError, ResultsWriteError
+    from .experiments.reading import ResultFolderError
+    from .experiments.scenario import ScenarioError
+    from .studies.study import StudyError
+    return (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
+            ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
+            ResultsWriteError, BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
+
+
+def __getattr__(name):
+    """``USER_ERRORS``: :func:`user_errors`, imported only when asked for."""
+    if name == "USER_ERRORS":
+        return user_errors()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _family(value: str) -> str:
@@ -50,20 +57,57 @@ def _family(value: str) -> str:
     return value
 
 
+# The result file formats (experiments.scenario.RESULT_FORMATS, which loads pydantic and numpy;
+# tests/cli/test_cli_parser.py checks the two agree).
+RESULT_FORMATS = ("csv", "mat")
+
+
+def _result_format(value: str) -> str:
+    """--format: a result file format, else the one-line refusal with the closest names."""
+    if value not in RESULT_FORMATS:
+        from tapmp.errors import allowed_are
+        raise argparse.ArgumentTypeError(f"format = {value!r} is invalid: {allowed_are(value, RESULT_FORMATS)}")
+    return value
+
+
 def _ssp(args, scenario=None) -> Path:
     """--ssp, else the SSP of --fmus, else of the scenario's ``fmus`` (default native)."""
     fmus = args.fmus or (scenario.fmus if scenario is not None else DEFAULT_FAMILY)
     return resolve_ssp(args.ssp, fmus, getattr(args, "fmus_dir", None))
 
 
+def shipped_names(kind: str) -> list[str]:
+    """The names of the files shipped with the package of ``kind`` "scenarios" or "studies"."""
+    return sorted(f.stem for f in data_dir(kind).glob("*.toml"))
+
+
+def named_file(name: str, kind: str) -> str:
+    """A scenario or study argument (``kind`` "scenarios" or "studies"): a file path, or the name of
+    a file shipped with the package (``paper_simulation``, ``gain_sweep``) if no such file exists.
+    Neither: UsageError listing the shipped names and the closest ones."""
+    from tapmp.errors import suggestion
+    path = Path(name)
+    if path.exists():
+        return name
+    shipped = data_dir(kind) / f"{name}.toml"
+    if not path.suffix and len(path.parts) == 1 and shipped.is_file():
+        return str(shipped)
+    what = kind[:-1] if kind == "scenarios" else "study"
+    names = shipped_names(kind)
+    raise UsageError(f"{what} {name!r} is neither a file nor a shipped {what}: shipped are {', '.join(names)}"
+                     f"{suggestion(path.stem, names)}")
+
+
 def scenario_file(name: str) -> str:
     """A scenario argument: a file path, or the name of a scenario shipped with the package
-    (e.g. ``paper_simulation``, found in its scenarios folder) if no such file exists."""
-    path = Path(name)
-    if path.exists() or path.suffix or len(path.parts) > 1:
-        return name
-    shipped = SCENARIOS_DIR / f"{name}.toml"
-    return str(shipped) if shipped.is_file() else name
+    (e.g. ``paper_simulation``, found in its scenarios folder); see :func:`named_file`."""
+    return named_file(name, "scenarios")
+
+
+def study_file(name: str) -> str:
+    """A study argument: a file path, or the name of a study shipped with the package (e.g.
+    ``gain_sweep``); see :func:`named_file`."""
+    return named_file(name, "studies")
 
 
 def _progress_bar(desc: str, enabled: bool):
@@ -71,11 +115,13 @@ def _progress_bar(desc: str, enabled: bool):
     second), else one line per 10 % of a run longer than two seconds; nothing if not enabled."""
     if not enabled:
         return None, lambda: None
+    from .experiments.progress import Progress
     bar = Progress(desc, "step")
     return bar, bar.close
 
 
 def _run_one(scenario, ssp, out, overwrite, progress, label):
+    from .experiments.results import run_scenario
     update, close = _progress_bar(label, progress)
     try:
         return run_scenario(scenario, ssp, out, overwrite, update)
@@ -94,6 +140,7 @@ def _recording(args, scenario):
 
 def _load(args):
     """The scenario of a run/compare command: the file, its --set overrides, --format and --record-every."""
+    from .experiments.scenario import load
     return _recording(args, load(scenario_file(args.scenario), args.set))
 
 
@@ -123,6 +170,9 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
     "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
     an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
     unless empty (see folders.check_output)."""
+    from .experiments.folders import (ResultsWriteError, check_output, output_lock, prepare_output,
+                                      write_comparison_status)
+    from .experiments.results import one_line
     laws = {name: sc.law for name, sc in runs.items()}
     # before the lock file is made: a refused folder stays as it was
     check_output(out, overwrite, "comparison", laws, unmarked_only=True)
@@ -154,7 +204,8 @@ def cmd_build(args) -> int:
     for p in args.platform or ():  # before building anything
         if p not in PLATFORMS:
             raise UsageError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
-    build_mod.build_all(out)
+    from .engine.build import build_all
+    build_all(out)
     build_native(out / "native", platforms=args.platform)
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
@@ -173,6 +224,7 @@ def warn_if_unstable(scenario) -> None:
 
 
 def cmd_check(args) -> int:
+    from .experiments.scenario import load
     from .experiments.stability import check
     if args.fmus is not None:
         raise UsageError(f"--fmus = {args.fmus!r} is not an option of check: the check linearizes the FMI-free model, "
@@ -189,6 +241,7 @@ def cmd_check(args) -> int:
 
 def cmd_analyze(args) -> int:
     from .experiments.analysis import analyze, pole_table, table
+    from .experiments.scenario import load
     scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .experiments.baselines import compare_runs
@@ -207,6 +260,7 @@ def cmd_run(args) -> int:
     warn_if_implausible(scenario)
     warn_if_unstable(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / scenario.law
+    from .experiments.estimate import check_output_size
     check_output_size([scenario], out, scenario.name)
     m = _run_one(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
@@ -242,6 +296,7 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
     returns (runs, results, checks, comparison.md text)."""
     from .experiments.plots import plot
     from .experiments.pool import run_many
+    from .experiments.estimate import check_output_size
     from .experiments.report import write_comparison
 
     runs = compare_runs(scenario)
@@ -336,7 +391,9 @@ def cmd_compare(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
+    from .experiments.estimate import check_output_size
     from .experiments.reproduction import reproduce
+    from .experiments.scenario import load
     command = args.command_line
     jobs = _jobs(args)
 
@@ -382,8 +439,11 @@ def cmd_reproduce(args) -> int:
 def cmd_study(args) -> int:
     """`tapmp study`: 0 if every case ran (completed, diverged or rejected), 1 if any failed (an error)."""
     from .studies.run import run_study
-    from .studies.study import MAX_CASES, check_case_count, close_client, load_study, open_client
-    study = load_study(args.study)
+    from .engine.tempdirs import remove_stale_folders
+    from .experiments.estimate import check_output_size
+    from .experiments.folders import output_lock
+    from .studies.study import MAX_CASES, StudyError, check_case_count, close_client, load_study, open_client
+    study = load_study(study_file(args.study))
     every = record_every(args.record_every) if args.record_every is not None else None
     if args.write_docs and not study.tune:
         raise StudyError(f"--write-docs: {args.study} has no [tune] table; only a tuning writes a write_to folder")
@@ -449,6 +509,7 @@ def cmd_study(args) -> int:
 def cmd_export(args) -> int:
     """`tapmp export`: the scenario's SSP with its parameter set, and the container's start values."""
     from .experiments.export import export
+    from .experiments.scenario import load
     scenario = load(scenario_file(args.scenario), args.set)
     source = _ssp(args, scenario)
     ssp, values = export(scenario, source, Path(args.out), args.overwrite)
@@ -504,13 +565,29 @@ def fmu_args(sp) -> None:
 
 def scenario_arg(sp, example: str) -> None:
     """The scenario file and its --set overrides (``example``: a KEY=VALUE shown in the help)."""
-    sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml")
+    sp.add_argument("scenario", help="scenario TOML file, e.g. scenarios/paper_simulation.toml, or the name of a "
+                    f"scenario shipped with the package: {', '.join(shipped_names('scenarios'))}")
     sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help=f"override a scenario value, e.g. {example}")
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's parser with its errors as one line, ``error: ...`` (the closest names for an
+    invalid choice) and where the usage is (``see tapmp run --help``), exit code 2."""
+
+    def error(self, message):
+        import re
+        from tapmp.errors import suggestion
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)$", message)
+        if m:  # argparse lists the choices but names none of them as the closest
+            choices = [c.strip().strip("'") for c in m.group(2).split(",")]
+            message = message[:m.start()] + f"{m.group(1)!r} is invalid: allowed are {', '.join(choices)}" \
+                + suggestion(m.group(1), choices)
+        self.exit(2, f"error: {self.prog}: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="tapmp", description=(
+    p = Parser(prog="tapmp", description=(
         "Co-simulate the TAPMP (three-axis parallel motion platform) FMUs: build them, run "
         "scenarios, compare SC-DC with APD-DC, plot results."), epilog=PATHS_HELP)
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
@@ -536,7 +613,7 @@ def parser() -> argparse.ArgumentParser:
 
     def recording_args(sp):
         """--format and --record-every: what the result files keep."""
-        sp.add_argument("--format", choices=RESULT_FORMATS, help="result files: csv (results.csv, text) or mat "
+        sp.add_argument("--format", type=_result_format, metavar="{" + ",".join(RESULT_FORMATS) + "}", help="result files: csv (results.csv, text) or mat "
                         "(results.mat, MATLAB 5 MAT-file, about 40 %% of the size and faster to write); overrides "
                         "the scenario's format (default csv)")
         sp.add_argument("--record-every", metavar="N", help="keep every N-th step (and the last) "
@@ -628,7 +705,8 @@ def parser() -> argparse.ArgumentParser:
     st = sub.add_parser("study", help="run a parameter study on Dask",
                         description="Run every case of a study file (grid, Monte Carlo or tuning) as an "
                         "independent co-simulation on Dask workers; one row per case in OUTPUT/study.csv.")
-    st.add_argument("study", help="study TOML file, e.g. studies/robustness.toml")
+    st.add_argument("study", help="study TOML file, e.g. studies/robustness.toml, or the name of a study "
+                    f"shipped with the package: {', '.join(shipped_names('studies'))}")
     st.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 "
                     "(default: a LocalCluster on this machine)")
     st.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default: one per core)")
@@ -699,6 +777,7 @@ def _signals_interrupt():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
     command = os.getpid()
 
     def interrupt(signum, frame):
@@ -723,6 +802,8 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     args = parser().parse_args(argv)
     args.command_line = "tapmp " + shlex.join(argv)  # what was typed, as comparison.md and study.json record it
+    errors = user_errors()
+    from .experiments.results import one_line
     try:
         with _signals_interrupt():
             return args.func(args)
@@ -730,7 +811,7 @@ def main(argv=None) -> int:
         print(f"{one_line(err) if str(err) else 'interrupted'}: the results so far are in the output folder",
               file=sys.stderr)
         return getattr(err, "exit_code", 130)
-    except USER_ERRORS as err:
+    except errors as err:
         if args.debug:
             traceback.print_exc()
         print(f"error: {one_line(err)}", file=sys.stderr)

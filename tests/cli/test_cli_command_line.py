@@ -38,9 +38,9 @@ def test_the_shared_fmu_options_are_one_definition_on_every_command(tmp_path, ca
         with pytest.raises(SystemExit) as exit_:
             main([*argv, "--fmus", "nativ"])
         assert exit_.value.code == 2
-        err = capsys.readouterr().err.strip().splitlines()[-1]
-        assert err.endswith("argument --fmus: fmus = 'nativ' is invalid: allowed are python, native, fmi3; "
-                            "did you mean native?"), (argv, err)
+        err = capsys.readouterr().err
+        assert err == (f"error: tapmp {argv[0]}: argument --fmus: fmus = 'nativ' is invalid: allowed are python, "
+                       f"native, fmi3; did you mean native? (see tapmp {argv[0]} --help)\n"), (argv, err)
     helps = {}
     for name, sub in cli.parser()._subparsers._group_actions[0].choices.items():
         for action in sub._actions:

@@ -127,5 +127,5 @@ def test_an_unknown_family_on_the_command_line_gets_the_closest_name(tmp_path):
                           "--fmus", "nativ", "--out", str(tmp_path / "out")], capture_output=True, text=True,
                          cwd=tmp_path)
     assert res.returncode == 2 and not (tmp_path / "out").exists()
-    assert res.stderr.splitlines()[-1].endswith(
-        "argument --fmus: fmus = 'nativ' is invalid: allowed are python, native, fmi3; did you mean native?")
+    assert res.stderr == ("error: tapmp run: argument --fmus: fmus = 'nativ' is invalid: allowed are python, native, "
+                          "fmi3; did you mean native? (see tapmp run --help)\n")

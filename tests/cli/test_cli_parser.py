@@ -1,0 +1,96 @@
+"""What a new user meets first: `tapmp --help` answers before any numerical library is loaded, an
+argparse error is one line saying where the help is, and a shipped scenario or study is found by
+name (a misspelled one gets the shipped names and the closest ones). Every case runs the real
+command (`python -m orchestrator`) in a child process from a folder that is not the checkout."""
+
+import subprocess
+import sys
+
+import pytest
+
+from orchestrator import cli
+from orchestrator.engine.families import data_dir
+from orchestrator.experiments.scenario import RESULT_FORMATS
+
+pytestmark = pytest.mark.slow  # child processes
+
+HEAVY = ("numpy", "scipy", "matplotlib", "fmpy", "dask", "pydantic")
+
+
+def _tapmp(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "orchestrator", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def _modules_loaded_by(argv, cwd) -> set[str]:
+    """The top-level modules `tapmp ARGV` has loaded when it exits (here: through --help or an error)."""
+    code = ("import sys\nfrom orchestrator.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n"
+            "    pass\nprint(' '.join(sorted({m.split('.')[0] for m in sys.modules})), file=sys.stderr)\n")
+    res = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=cwd, timeout=600)
+    return set(res.stderr.strip().splitlines()[-1].split())
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["study", "--help"], ["run", "--fmus", "natve", "x"]])
+def test_help_and_a_refused_option_load_no_numerical_library(tmp_path, argv):
+    loaded = _modules_loaded_by(argv, tmp_path)
+    assert "orchestrator" in loaded and "argparse" in loaded
+    assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
+
+
+def test_the_help_lists_every_subcommand_and_the_shipped_names(tmp_path):
+    res = _tapmp("--help", cwd=tmp_path)
+    assert res.returncode == 0 and res.stderr == ""
+    for command in ("build", "run", "check", "compare", "reproduce", "study", "export", "plot"):
+        assert command in res.stdout
+    run = _tapmp("run", "--help", cwd=tmp_path).stdout
+    assert "paper_simulation" in run and "point_to_point" in run
+    study = _tapmp("study", "--help", cwd=tmp_path).stdout
+    assert "gain_sweep" in study and "robustness" in study
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["run", "x.toml", "--fmus", "natve"],
+     "error: tapmp run: argument --fmus: fmus = 'natve' is invalid: allowed are python, native, fmi3; did you mean "
+     "native? (see tapmp run --help)"),
+    (["run"], "error: tapmp run: the following arguments are required: scenario (see tapmp run --help)"),
+    (["compare", "x.toml", "--format", "cvs"],
+     "error: tapmp compare: argument --format: format = 'cvs' is invalid: allowed are csv, mat; did you mean csv? "
+     "(see tapmp compare --help)"),
+    (["rnu"], "error: tapmp: argument command: 'rnu' is invalid: allowed are build, run, check, analyze, compare, "
+              "reproduce, study, export, plot; did you mean run? (see tapmp --help)"),
+    (["run", "x.toml", "--no-such-option"], "error: tapmp: unrecognized arguments: --no-such-option "
+                                            "(see tapmp --help)"),
+    (["reproduce", "--workers", "two"], "error: tapmp reproduce: argument --workers: invalid int value: 'two' "
+                                        "(see tapmp reproduce --help)"),
+])
+def test_an_argparse_error_is_one_line_naming_the_help_exit_2(tmp_path, argv, expected):
+    res = _tapmp(*argv, cwd=tmp_path)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr == expected + "\n"
+
+
+def test_the_format_option_offers_the_scenario_formats():
+    assert cli.RESULT_FORMATS == RESULT_FORMATS
+
+
+@pytest.mark.parametrize("kind, argv, close", [
+    ("scenario", ["run", "paper_simulaton"], "paper_simulation"),
+    ("scenario", ["check", "point_to_pont.toml"], "point_to_point"),
+    ("study", ["study", "gain_swep"], "gain_sweep"),
+])
+def test_a_missing_scenario_or_study_gets_the_shipped_names_and_the_closest(tmp_path, kind, argv, close):
+    res = _tapmp(*argv, cwd=tmp_path)
+    names = sorted(f.stem for f in data_dir("scenarios" if kind == "scenario" else "studies").glob("*.toml"))
+    assert res.returncode == 2 and len(res.stderr.splitlines()) == 1, res.stderr
+    assert res.stderr.startswith(f"error: {kind} '{argv[1]}' is neither a file nor a shipped {kind}: shipped are "
+                                 f"{', '.join(names)}; did you mean {close}"), res.stderr
+
+
+def test_a_shipped_study_is_found_by_name_like_a_shipped_scenario(tmp_path):
+    # from a folder without studies/: the name finds the shipped file, which then reaches the next check
+    res = _tapmp("study", "gain_sweep", "--ssp", "none.ssp", cwd=tmp_path)
+    assert res.returncode == 2
+    assert res.stderr == ("error: SSP file none.ssp does not exist: build the FMUs first (bash build_fmus.sh, or "
+                          "tapmp build) or pass --ssp\n")
+    res = _tapmp("check", "paper_simulation", "--set", "stop_time=0.01", cwd=tmp_path)
+    assert res.returncode == 0 and res.stdout.startswith("paper_simulation: "), res.stderr
