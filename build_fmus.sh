@@ -8,12 +8,20 @@
 # no gcc, no mingw-w64. The one thing pip cannot provide is Python's C headers (Python.h, for
 # the pythonfmu family's binary): if this Python has none, Debian's python3-dev is installed
 # with apt-get (as root, or through sudo), else the script stops with one line naming it.
-# Usage: bash build_fmus.sh [OUT_DIR]   (default: build/, relative to the repository root).
+# Usage: bash build_fmus.sh [--host] [OUT_DIR]   (default: build/, relative to the repository root).
+#  --host: the native FMUs with this machine's x86_64-linux binaries (and their C sources) only,
+#  the quick start's choice: seconds on a new machine, where every platform takes minutes the
+#  first time (Zig builds each target's C runtime once, the two Windows ones longest).
 # Needs the package installed (pip install -e .); uses .venv/bin/python if present, else python3.
 set -euo pipefail
 cd "$(dirname "$0")"
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] && PY=.venv/bin/python
+platforms=()
+if [ "${1:-}" = "--host" ]; then
+    platforms=(--platform x86_64-linux)
+    shift
+fi
 OUT=${1:-build}
 
 headers=$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
@@ -30,7 +38,8 @@ if [ ! -f "$headers/Python.h" ]; then
         || { "${as_root[@]}" apt-get update && "${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y python3-dev; }
 fi
 
-"$PY" -m orchestrator build --out "$OUT"
+"$PY" -m orchestrator build --out "$OUT" "${platforms[@]}"
+echo "fmpy validate: every FMU"
 # `fmpy validate` of every FMU, in one process (fmpy's validate_fmu is what the command runs)
 "$PY" - "$OUT"/TAPMP_*.fmu "$OUT"/native/fmi2/TAPMP_*.fmu "$OUT"/native/fmi3/TAPMP_*.fmu <<'PYTHON'
 import sys

@@ -199,18 +199,36 @@ def warn_if_implausible(scenario) -> None:
 
 
 def cmd_build(args) -> int:
+    from .engine.build import build_all
     from .engine.build_native import build_native
     out = Path(args.out or default_build_dir())
     for p in args.platform or ():  # before building anything
         if p not in PLATFORMS:
             raise UsageError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
-    from .engine.build import build_all
-    build_all(out)
-    build_native(out / "native", platforms=args.platform)
+    if args.clean_cache:
+        from tapmp.toolchain import cache_dir, clean_cache
+        removed = clean_cache(cache_sources())
+        print(f"removed {len(removed)} stale file(s) from the compiled-code cache {cache_dir()}", flush=True)
+
+    def log(line):
+        print(line, flush=True)  # progress, also when the output is a pipe
+    build_all(out, log)
+    build_native(out / "native", platforms=args.platform, log=log)
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")
+    built = args.platform or PLATFORMS
+    if set(built) != set(PLATFORMS):
+        print(f"the native FMUs hold binaries for {', '.join(p for p in PLATFORMS if p in built)} only (and their "
+              f"C sources); `tapmp build` without --platform adds {', '.join(p for p in PLATFORMS if p not in built)}")
     return 0
+
+
+def cache_sources() -> list[Path]:
+    """The C sources of the libraries tapmp compiles into its cache (the C model, the stepping core)."""
+    from tapmp import native
+    from .engine import stepper
+    return [native.SOURCE, native.HEADER, stepper.SOURCE]
 
 
 def warn_if_unstable(scenario) -> None:
@@ -604,6 +622,9 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--platform", action="append", metavar="P",
                    help="build the native FMUs' binaries for these platforms only (repeatable): "
                    f"{', '.join(PLATFORM_NAMES)} (default: all)")
+    b.add_argument("--clean-cache", action="store_true", help="first remove from the compiled-code cache "
+                   "($TAPMP_CACHE, else ~/.cache/tapmp) the libraries and lock files older than this package's C "
+                   "sources (left by earlier versions, checkouts and environments; rebuilt when used again)")
     b.set_defaults(func=cmd_build)
 
     def source_args(sp):

@@ -68,6 +68,24 @@ def zig_command() -> list[str]:
     return [sys.executable, "-m", "ziglang", "cc"]
 
 
+def zig_cache() -> Path:
+    """Zig's cache of compiled C runtimes and objects: $ZIG_GLOBAL_CACHE_DIR, else Zig's own default
+    ($XDG_CACHE_HOME/zig, else ~/.cache/zig), which depends on no install path."""
+    if os.environ.get("ZIG_GLOBAL_CACHE_DIR"):
+        return Path(os.environ["ZIG_GLOBAL_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "zig"
+
+
+def zig_environment() -> dict:
+    """The environment of a zig cc process: Zig's global cache (:func:`zig_cache`) for everything,
+    also what Zig would otherwise put in a local .zig-cache beside a build.zig above the working
+    folder, so the checkout, every venv and the wheel share one cache: a platform's C runtime is
+    built once per machine, and an unchanged file compiles once."""
+    cache = str(zig_cache())
+    return {**os.environ, "ZIG_GLOBAL_CACHE_DIR": cache,
+            "ZIG_LOCAL_CACHE_DIR": os.environ.get("ZIG_LOCAL_CACHE_DIR") or cache}
+
+
 def compiler(platform: str = HOST) -> list[str]:
     """The compiler command for ``platform``: $CC for the host platform if set, else zig cc
     with the platform's target."""
@@ -115,7 +133,8 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
     # the output appears under its name only when complete.
     with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:
         try:
-            proc = subprocess.run(args, capture_output=True, text=True, cwd=tmp)
+            proc = subprocess.run(args, capture_output=True, text=True, cwd=tmp,
+                                  env=zig_environment())
         except FileNotFoundError:
             raise ToolchainError(f"{label} ({platform}): C compiler {cmd[0]!r} not found "
                                  "(unset CC to use zig cc from the ziglang package)") from None
@@ -212,6 +231,34 @@ def check_private_file(path: Path) -> Path:
         raise CacheTrustError(f"the compiled-code cache: {problem}, so it may be a library another user planted; "
                               f"tapmp does not load it: delete it, or {CACHE_FIX}")
     return path
+
+
+# What tapmp writes into its cache: libraries named <kind>_<hash>.so, a lock file beside each, and
+# a library being written (build_cached's temporary name). Anything else there is left alone.
+CACHE_PATTERNS = ("tapmp_*.so", ".tapmp_*.lock", ".tapmp_*.*.so")
+
+
+def clean_cache(sources) -> list[Path]:
+    """Remove from the cache folder the libraries and lock files older than the newest of ``sources``
+    (the C files they are compiled from): those of earlier sources, other checkouts and
+    environments, which tapmp would compile again if it needed them. The folder is checked first
+    (:func:`private_folder`: CacheTrustError if another user could write it); only regular files
+    and symbolic links matching CACHE_PATTERNS are removed, nothing is followed. Returns the
+    removed paths."""
+    import stat
+    folder = cache_dir()
+    if not folder.exists():
+        return []
+    folder = private_folder(folder)
+    newest = max(Path(s).stat().st_mtime for s in sources)
+    removed = []
+    for pattern in CACHE_PATTERNS:
+        for path in sorted(folder.glob(pattern)):
+            st = os.lstat(path)
+            if st.st_mtime < newest and not stat.S_ISDIR(st.st_mode):
+                path.unlink(missing_ok=True)
+                removed.append(path)
+    return removed
 
 
 def build_cached(path: Path, compile_into) -> Path:

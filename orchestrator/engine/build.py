@@ -242,6 +242,7 @@ def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {}
     with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:
+        log(f"pythonfmu: compiling the FMI front and the three Python bindings ({toolchain.HOST})")
         binaries = compile_binaries(Path(tmp))
         for model in (PLANT, CONTROLLER, TRAJECTORY):
             paths[model] = build_fmu(model, out_dir, binaries)

@@ -358,16 +358,16 @@ def check_platforms(platforms) -> tuple[str, ...]:
     return tuple(p for p in ALL_PLATFORMS if p in set(platforms))
 
 
-def _binaries(tmp: Path, src: Path, model: str, family: str, platforms) -> dict[str, bytes]:
-    """Compile every platform (in parallel: each is its own compiler process) and return
-    {member name in the FMU: bytes}; FMI 2.0's darwin64 is the universal file of both Macs."""
-    def one(platform):
-        (tmp / platform).mkdir()
-        lib = tmp / platform / f"{model}{SUFFIX[toolchain.os_of(platform)]}"  # the name a dylib records
-        return platform, compile_sources(src, model, family, lib, platform).read_bytes()
+def _compile_one(tmp: Path, src: Path, model: str, family: str, platform: str) -> bytes:
+    """The bytes of ``model``'s binary for ``platform``, compiled in a folder of its own under ``tmp``."""
+    folder = Path(tempfile.mkdtemp(prefix=f"{family}-{model}-{platform}-", dir=tmp))
+    lib = folder / f"{model}{SUFFIX[toolchain.os_of(platform)]}"  # the name a dylib records
+    return compile_sources(src, model, family, lib, platform).read_bytes()
 
-    with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1)) as pool:
-        built = dict(pool.map(one, platforms))
+
+def _members(built: dict[str, bytes], model: str, family: str) -> dict[str, bytes]:
+    """{member name in the FMU: bytes} of the binaries ``built`` ({platform: bytes}); FMI 2.0's
+    darwin64 is the universal file of both Macs."""
     members = {}
     for platform, data in built.items():
         folder = PLATFORM_DIRS[family][platform]
@@ -378,6 +378,63 @@ def _binaries(tmp: Path, src: Path, model: str, family: str, platforms) -> dict[
         else:
             members[name] = data
     return members
+
+
+def compile_every_binary(units: dict, platforms, tmp: Path, log=print, every: float = 10.0) -> dict:
+    """Compile each unit ({(model, family): staged sources folder}) for each platform, all in one pool of
+    compiler processes; returns {(model, family): {platform: bytes}}.
+
+    The host's binaries come first (they are what runs here; the reference experiments need them),
+    then one unit per platform at a time, so that every platform's first compile, which builds Zig's
+    C runtime for that target into its cache (minutes for Windows on a cold cache), starts early and
+    runs beside the others. ``log`` gets one line per family and platform when its binaries are
+    done, and a line naming the platforms still compiling whenever ``every`` seconds pass without one."""
+    import threading
+    import time
+    ordered = [toolchain.HOST] if toolchain.HOST in platforms else []
+    ordered += [p for p in platforms if p != toolchain.HOST]
+    jobs = [(unit, p) for p in ordered[:1] for unit in units]
+    jobs += [(unit, p) for unit in units for p in ordered[1:]]  # round robin over the other platforms
+    left = {(family, p): sum(1 for (m, f) in units if f == family) for (_, family) in units for p in ordered}
+    built = {unit: {} for unit in units}
+    start, lock = time.monotonic(), threading.Lock()
+    last = [start]
+    done = threading.Event()
+
+    def say(line):
+        with lock:
+            last[0] = time.monotonic()
+            log(line)
+
+    def one(job):
+        (model, family), platform = job
+        data = _compile_one(tmp, units[(model, family)], model, family, platform)
+        with lock:
+            built[(model, family)][platform] = data
+            left[(family, platform)] -= 1
+            finished = left[(family, platform)] == 0
+        if finished:
+            say(f"native {family}: {platform} binaries done ({time.monotonic() - start:.0f} s)")
+
+    def heartbeat():
+        while not done.wait(1.0):
+            now = time.monotonic()
+            if now - last[0] >= every:
+                with lock:
+                    busy = sorted({p for (f, p), n in left.items() if n}, key=ordered.index)
+                say(f"native: still compiling for {', '.join(busy)} ({now - start:.0f} s; a platform's first "
+                    "build also builds Zig's C runtime for it, once per machine)")
+
+    watcher = threading.Thread(target=heartbeat, daemon=True)
+    watcher.start()
+    try:
+        # one compiler process per core beside the one waiting for its target's C runtime
+        with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1) + 1) as pool:
+            list(pool.map(one, jobs))
+    finally:
+        done.set()
+        watcher.join()
+    return built
 
 
 def _host_fmu(tmp: Path, src: Path, model: str, family: str, md: bytes, binaries: dict) -> Path:
@@ -398,14 +455,15 @@ def _host_fmu(tmp: Path, src: Path, model: str, family: str, md: bytes, binaries
 
 def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = True,
                      model_source: Path | None = None, platforms=None, extras: bool = True,
-                     stimulus: dict | None = None) -> Path:
+                     stimulus: dict | None = None, built: dict | None = None) -> Path:
     """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic (a build that
     fails leaves no FMU of that name half written). ``platforms`` (names of
     toolchain.PLATFORMS) default to all, or the host's (x86_64-linux) alone if not ``windows``;
     ``model_source`` replaces the model's C file (benchmarks/floor_model.c). With ``extras``
     the FMU carries its reference experiment, documentation, license and (FMI 3.0) terminals
     and icon (fmu_extras.extra_members; ``stimulus``: fmu_extras.closed_loop_stimulus(), computed
-    if None)."""
+    if None). ``built`` ({platform: bytes}) are binaries already compiled from these sources
+    (:func:`compile_every_binary`); the platforms missing from it are compiled here."""
     from . import fmu_extras
 
     out_dir = Path(out_dir)
@@ -416,7 +474,13 @@ def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = Tru
         if platforms is None:
             platforms = ALL_PLATFORMS if windows else (toolchain.HOST,)
         platforms = check_platforms(platforms)
-        binaries = _binaries(Path(tmp), src, model, family, platforms)
+        built = dict(built or {})
+        missing = [p for p in platforms if p not in built]
+        if missing:
+            with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1)) as pool:
+                built.update(zip(missing, pool.map(lambda p: _compile_one(Path(tmp), src, model, family, p),
+                                                   missing)))
+        binaries = _members({p: built[p] for p in platforms}, model, family)
         md = model_description_fmi2(model) if family == "fmi2" else model_description_fmi3(model)
         extra = {}
         if extras:
@@ -453,11 +517,19 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     platforms = check_platforms(platforms)
     from .fmu_extras import closed_loop_stimulus
     stimulus = closed_loop_stimulus()  # the reference experiments' inputs, the same for every family
+    units = {(model, family): staged_sources(source_files(model, family), model, family)
+             for family in families for model in FMU_NAMES}
+    log(f"native: compiling {len(units)} FMUs ({', '.join(families)}) for {len(platforms)} platform(s): "
+        f"{', '.join(platforms)}")
+    with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
+        built = compile_every_binary(units, platforms, Path(tmp), log)
     out = {}
     for family in families:
         folder = Path(out_dir) / family
         folder.mkdir(parents=True, exist_ok=True)
-        paths = {model: build_native_fmu(model, family, folder, platforms=platforms, stimulus=stimulus)
+        log(f"native {family}: writing the FMUs (each runs its reference experiment)")
+        paths = {model: build_native_fmu(model, family, folder, platforms=platforms, stimulus=stimulus,
+                                         built=built[(model, family)])
                  for model in FMU_NAMES}
         for model in FMU_NAMES:
             log(f"built {paths[model]}")
