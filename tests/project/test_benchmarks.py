@@ -131,3 +131,10 @@ def test_bench_compare_times_the_stages_of_a_comparison(native_built, tmp_path):
     assert list(rows) == ["imports", "stability checks", "runs", "figures", "whole comparison"]
     parts = sum(float(rows[k]) for k in ("stability checks", "runs", "figures"))
     assert 0 < parts <= float(rows["whole comparison"]) + 0.02
+
+
+def test_bench_quick_start_prints_the_build_time_and_the_load(tmp_path):
+    out = bench("bench_quick_start.py", "--warm-only", tmp_path=tmp_path)
+    assert out.splitlines()[0] == f"bash build_fmus.sh --host on {os.cpu_count()} cores"
+    rows = table(out, "cache ")
+    assert [r[0] for r in rows] == ["warm"] and all(re.fullmatch(NUMBER, v) for v in rows[0][1:])
