@@ -16,8 +16,9 @@ Shorter horizons, where the full one takes minutes (the commands are otherwise a
 * `tapmp study FILE`: FILE's copy beside it with `stop_time = 0.05` in its [set] table and at
   most 4 Monte Carlo samples;
 * `python -m orchestrator.experiments.calibration`: `--horizon 0.05 --max-nfev 1`;
-* the quick start's `python3 -m venv .venv && .venv/bin/pip install -e . && bash build_fmus.sh &&`
-  prefix is what the clone's set-up already did.
+* the quick start's `python3 -m venv .venv && .venv/bin/pip install -e '.[tools]' && bash build_fmus.sh
+  --host &&` prefix is what the clone's set-up already did (every platform, the `test` extra, which
+  holds the `tools` extra).
 
 Not run (NOT_RUN below, each with its reason): the test suite itself, installs outside the
 checkout and the timing benchmarks.
@@ -48,7 +49,7 @@ NOT_RUN = {
 # Commands whose answer is their exit code: tapmp check exits 1 for an unstable loop (the docs show
 # unstable gains on purpose); 2, bad input, fails the test as for any command.
 ANSWER_CODES = {r"\.venv/bin/tapmp check ": (0, 1)}
-QUICK_START_SETUP = "python3 -m venv .venv && .venv/bin/pip install -e . && bash build_fmus.sh && "
+QUICK_START_SETUP = "python3 -m venv .venv && .venv/bin/pip install -e '.[tools]' && bash build_fmus.sh --host && "
 
 
 def commands(text: str) -> list[list[str]]:
@@ -170,3 +171,17 @@ def test_the_commands_of_the_docs_run_as_typed(doc, clone):
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=1800)
         assert res.returncode == 0, f"{doc}:\n{res.stdout[-4000:]}"
     print(f"\n{doc}: {len(ran)} commands", *ran, sep="\n  ")
+
+
+def test_every_package_the_docs_import_is_installed_by_the_quick_start():
+    # the Python snippets of the docs import only the package, its dependencies and the quick start's extras
+    import tomllib
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    quick = re.search(r"pip install -e '\.\[(\w+)\]'", (ROOT / "README.md").read_text()).group(1)
+    installed = {re.split(r"[<>=\[ ]", d)[0] for d in project["dependencies"] + project["optional-dependencies"][quick]}
+    modules = {"libcosimpy": "libcosimpy", "ecospy": "ecospy", "lief": "lief", "hypothesis": "hypothesis"}
+    for doc in DOCS:
+        text = (ROOT / doc).read_text()
+        for module, package in modules.items():
+            if re.search(rf"^\s*(from|import) {module}\b|import {module}\b", text, re.M):
+                assert package in installed, f"{doc} imports {module}, which the quick start does not install"
