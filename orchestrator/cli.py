@@ -184,7 +184,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    from .experiments.analysis import analyze, pole_table, table
+    from .experiments.analysis import analyze, pole_table, robustness_table, table
     scenario = load(args.scenario, args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .experiments.baselines import compare_runs
@@ -193,6 +193,9 @@ def cmd_analyze(args) -> int:
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
           "input force, one motor or mode at a time")
     print(table(result))
+    print("robustness on the same loop: disk margins (symmetric), all three motors' forces scaled at once, "
+          "a delay in one loop, a first-order actuator on every motor")
+    print(robustness_table(result))
     print(pole_table(result))
     print(f"analysis.json and figures in {out}")
     return 0
@@ -283,10 +286,14 @@ def summary_table(results: dict) -> str:
     """The short table `tapmp compare` prints: one row per run (see summary_rows)."""
     rows = summary_rows(results)
     w = max(len("run"), *(len(r[0]) for r in rows))
+    hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), 0.0)
+    head = f"F RMS > {hz:g} Hz [N]"
     lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'vs APD-DC: tracking':>19}  "
-             f"{'sync':>8}"]
+             f"{'sync':>8}  {head:>19}"]
     for name, t, y, rt, ry in rows:
-        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%")
+        f = results[name].get("force_hf_rms_n")
+        effort = f"{sum(f) / len(f):.4g}" if f else "n/a"  # the mean over the motors
+        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%  {effort:>19}")
     return "\n".join(lines)
 
 

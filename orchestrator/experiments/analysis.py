@@ -289,7 +289,13 @@ def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
         rho = float(max(abs(linalg.eigvals(split.closed_loop()))))
         verdict = verdict_for(rho)
         loops = analyze_loop(split, freqs)
-        if verdict != "stable":
+        every = None
+        if verdict == "stable":
+            rob = robustness(split, freqs)
+            for b, x in rob["loops"].items():
+                loops[b].update(x)
+            every = rob["all_loops"]
+        else:
             # margins, peaks and bandwidth describe a stable loop's distance to instability; the
             # responses of an unstable loop are no steady state that any run would show
             for x in loops.values():
@@ -297,7 +303,7 @@ def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
                                             "bandwidth_hz", "compliance_peak_m_per_n", "compliance_peak_hz",
                                             "compliance_low_m_per_n")})
         out[name] = {"law": sc.law, "spectral_radius": rho, "verdict": verdict, "poles": poles(split),
-                     "loops": loops}
+                     "loops": loops, "all_loops": every}
     return out
 
 
@@ -339,6 +345,38 @@ def table(result: dict, breaks=BREAK_POINTS) -> str:
                          f"| {_fmt(x['compliance_peak_m_per_n'] * 1e6, '.4g')} "
                          f"| {_fmt(x['compliance_low_m_per_n'] * 1e6, '.4g')} |")
     return "\n".join(lines)
+
+
+def robustness_table(result: dict, breaks=BREAK_POINTS) -> str:
+    """Markdown table: per run, the disk margins of each break point (alpha, as gain [dB] and phase
+    [deg]) and of all three motors at once, the all-loops gain margin with the K_T error it covers,
+    the smallest delay margin [ms] and the lowest actuator bandwidth [Hz]."""
+    lines = ["| run | disk margin per loop: " + ", ".join(breaks) + " | all loops: disk margin (gain dB, phase deg) "
+             "| all-loops gain margin (K_T error) | delay margin [ms] (loop) | lowest actuator bandwidth [Hz] |",
+             "|---" * 6 + "|"]
+    for run, r in result["runs"].items():
+        if r["verdict"] != "stable":
+            lines.append(f"| {run} | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}) "
+                         "| - | - | - | - |")
+            continue
+        lines.append("| " + " | ".join(robustness_cells(run, r, breaks)) + " |")
+    return "\n".join(lines)
+
+
+def robustness_cells(run: str, r: dict, breaks=BREAK_POINTS) -> list[str]:
+    """The cells of robustness_table for one stable run of analyze_runs."""
+    a = r["all_loops"]
+    kt = a["kt_error_pct"]
+    low = f"{a['gm_lower']:.3g}x ({kt[0]:+.0f} %)" if a["gm_lower"] is not None else f"below {GAIN_SPAN[0]:g}x"
+    up = f"{a['gm_upper']:.3g}x ({kt[1]:+.0f} %)" if a["gm_upper"] is not None else f"above {GAIN_SPAN[1]:g}x"
+    delays = {b: r["loops"][b]["delay_margin_s"] for b in breaks}
+    worst = min(delays, key=delays.get)
+    bw = a["actuator_bandwidth_hz"]
+    return [run, ", ".join(f"{r['loops'][b]['disk_margin']:.3f}" for b in breaks),
+            f"{a['disk_margin']:.3f} ({_fmt(a['disk_gm_db'], '.2f')}, {a['disk_pm_deg']:.1f})",
+            f"{low} to {up}",
+            f"{_fmt(delays[worst] * 1e3, '.4g')} ({worst})",
+            f"{bw:.4g}" if bw > ACTUATOR_SPAN[0] else f"below {ACTUATOR_SPAN[0]:g}"]
 
 
 def pole_table(result: dict, count: int = 3) -> str:
