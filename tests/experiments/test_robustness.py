@@ -38,6 +38,18 @@ def test_the_peaks_equal_those_tapmp_analyze_reports():
             assert np.isclose(peaks[mode], result[run]["loops"][mode]["Ms"], rtol=1e-9), (run, mode)
 
 
+@pytest.mark.parametrize("name", ["paper_simulation", "paper_simulation_calibrated", "paper_experiment_calibrated"])
+def test_the_full_integral_pid_has_scdc_peak_sensitivity_on_every_mode_within_one_percent(name):
+    sc = load(ROOT / "scenarios" / f"{name}.toml")
+    runs = compare_runs(sc)
+    full = runs["pid-dc-full"].controller
+    assert full["ki_c"] == full["ki_d"] > 0.0
+    freqs = analysis.frequency_grid(sc.step)
+    scdc, pid = mode_peaks(runs["sc-dc"], freqs), mode_peaks(runs["pid-dc-full"], freqs)
+    for mode in MODES:
+        assert abs(pid[mode] - scdc[mode]) <= 0.01 * scdc[mode], (mode, pid, scdc)
+
+
 def test_an_unstable_scdc_loop_keeps_the_mode_matched_gains_and_says_why():
     sc = load(ROOT / "scenarios" / "paper_simulation.toml", ['gains="paper_simulation"'])  # Eq. 40 at 0.1 ms
     m = robustness_matched(sc)
