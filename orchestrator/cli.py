@@ -411,7 +411,8 @@ def cmd_study(args) -> int:
             remove_stale_folders()  # of local workers that were killed, not stopped
     if study.tune:
         for law, r in s["tuning"].items():
-            print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
+            start = f"{r['start']:.4f} um" if r["start"] is not None else "not run (start gains rejected)"
+            print(f"{law}: objective {start} (start gains) -> {r['tuned']:.4f} um (tuned, "
                   f"{r['evaluations']} evaluations); preset {r['preset']}")
         print(f"presets, comparison and objective plot in {s['write_to']}; every evaluation in "
               f"{s['out'] / 'study.csv'}")
