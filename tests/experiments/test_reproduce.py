@@ -55,7 +55,7 @@ def page(built, tmp_path_factory):
                           "--results", str(results), "--out", str(out), "--ssp", str(built["ssp"]),
                           "--paper-gains-stop-time", str(PG_STOP), "--workers", "1", "--no-progress"],
                          cwd=tmp, env=dict(os.environ, TMPDIR=str(tmpdir)), capture_output=True, text=True,
-                         timeout=600)
+                         timeout=1800)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().splitlines()[-1] == f"wrote {out}"
     return out.read_text(), results
