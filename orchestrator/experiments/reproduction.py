@@ -240,21 +240,28 @@ def run_noise(scenarios: dict, ssp: Path, work: Path, say=lambda line: None) -> 
 def noise_lines(noise: dict) -> list[str]:
     """Markdown: per scenario and noise run, mean tracking and sync MAE [um] and force RMS above the
     effort band [N] at each noise level, and SC-DC's sync reduction against the run at each level."""
-    from .report import effort_text
     levels = (0.0, *NOISE_LEVELS)
-    head = " | ".join(f"{1e9 * x:g} nm" for x in levels)
+    head = ", ".join(f"{1e9 * x:g}" for x in levels) + " nm"
     lines = []
     for name, entry in noise.items():
-        hz = entry["sc-dc"][0.0].get("force_rms_above_hz", "?")
+        hz = entry["sc-dc"][0.0].get("force_rms_above_hz")
         lines += [f"**`{name}`**", "",
-                  f"| run | tracking MAE [um]: {head} | sync MAE [um]: {head} | force RMS above {hz} Hz [N] per motor, "
-                  f"{1e9 * NOISE_LEVELS[-1]:g} nm | SC-DC's sync reduction [%]: {head} |", "|---" * 5 + "|"]
+                  f"| run | tracking MAE [um] at {head} | sync MAE [um] at {head} | force RMS above "
+                  + (f"{hz:g} Hz" if hz else "the band") + f" [N], mean over the motors, at {head} "
+                  f"| SC-DC's sync reduction [%] at {head} |", "|---" * 5 + "|"]
         sc = entry["sc-dc"]
         for run, by in entry.items():
             t = ", ".join(f"{_mean(by[x]['tracking_mae_um']):.4f}" for x in levels)
             y = ", ".join(f"{_mean(by[x]['sync_mae_um']):.4f}" for x in levels)
+            f = ", ".join(f"{_mean(by[x]['force_hf_rms_n']):.3g}" if by[x].get("force_hf_rms_n") else "n/a"
+                          for x in levels)
             r = ", ".join(f"{reduction(_mean(by[x]['sync_mae_um']), _mean(sc[x]['sync_mae_um'])):+.1f}" for x in levels)
-            lines.append(f"| `{run}` | {t} | {y} | {effort_text(by[NOISE_LEVELS[-1]])} | {r} |")
+            lines.append(f"| `{run}` | {t} | {y} | {f} | {r} |")
+        if "apd-dc-ms-matched" in entry:
+            ms = entry["apd-dc-ms-matched"]
+            r0, r1 = (reduction(_mean(ms[x]["sync_mae_um"]), _mean(sc[x]["sync_mae_um"])) for x in (0.0, levels[-1]))
+            lines += ["", f"SC-DC's synchronization advantage over the robustness-matched PD is {r0:+.1f} % without "
+                      f"noise and {r1:+.1f} % at {1e9 * levels[-1]:g} nm rms."]
         lines.append("")
     return lines
 
