@@ -1,6 +1,7 @@
 """Command-line tool ``tapmp`` (also ``python -m orchestrator``)."""
 
 import argparse
+import math
 import os
 import shlex
 import signal
@@ -185,9 +186,14 @@ def cmd_check(args) -> int:
 
 def cmd_analyze(args) -> int:
     from .experiments.analysis import analyze, pole_table, robustness_table, table
+    from .experiments.stability import verdict_for
     scenario = load(args.scenario, args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .experiments.baselines import compare_runs
+    for key, v in (("--delay", args.delay), ("--actuator-bandwidth", args.actuator_bandwidth)):
+        if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
+            raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
+                "a delay >= 0 s" if key == "--delay" else "a bandwidth > 0 Hz (finite)"))
     result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
                      responses=args.responses)
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
@@ -196,6 +202,15 @@ def cmd_analyze(args) -> int:
     print("robustness on the same loop: disk margins (symmetric), all three motors' forces scaled at once, "
           "a delay in one loop, a first-order actuator on every motor")
     print(robustness_table(result))
+    if args.delay or args.actuator_bandwidth is not None:
+        from .experiments.analysis import inserted_radius
+        what = " and ".join(x for x in (f"a delay of {args.delay:g} s on every motor's force" if args.delay else "",
+                                        f"a first-order actuator of {args.actuator_bandwidth:g} Hz on every motor"
+                                        if args.actuator_bandwidth is not None else "") if x)
+        print(f"spectral radius of the sampled loop with {what} (each inserted alone; stable if < 1 - 1e-6):")
+        for name, sc in compare_runs(scenario).items():
+            r = inserted_radius(sc, args.delay or 0.0, args.actuator_bandwidth)
+            print(f"  {name}: " + ", ".join(f"{k} {v:.6f} ({verdict_for(v)})" for k, v in r.items() if v is not None))
     print(pole_table(result))
     print(f"analysis.json and figures in {out}")
     return 0
@@ -566,6 +581,11 @@ def parser() -> argparse.ArgumentParser:
     an.add_argument("--f-max", type=float, default=None, metavar="HZ",
                     help="highest frequency (default: the Nyquist frequency 1/(2 step))")
     an.add_argument("--points", type=int, default=400, help="frequencies, log-spaced (default 400)")
+    an.add_argument("--delay", type=float, default=None, metavar="SECONDS",
+                    help="also report each run's spectral radius with this delay on every motor's force")
+    an.add_argument("--actuator-bandwidth", type=float, default=None, metavar="HZ",
+                    help="also report each run's spectral radius with a first-order actuator (current loop) of "
+                    "this bandwidth on every motor")
     an.add_argument("--responses", action="store_true", help="also write frequency_response.csv: magnitude and "
                     "phase of L, S, T and e/d per run and break point at every frequency")
     an.set_defaults(func=cmd_analyze)

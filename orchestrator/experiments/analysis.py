@@ -627,28 +627,34 @@ def _input_response(split: SplitLoop, Ac, Bc, duration: float, after: float, dec
 def delayed_loop(split: SplitLoop, v, delay: float, rates=None) -> np.ndarray:
     """The one-step matrix of the split loop with the force in direction v delayed by ``delay`` [s]
     = (m + phi) h: during a step the plant gets the command of m + 1 samples before for the first
-    phi h, then that of m samples before (the other directions as they run). State: the loop's,
-    then v^T y of the last m + 1 samples."""
+    phi h, then that of m samples before (the other directions as they run). v: a unit vector, or
+    a 3 x k matrix of orthonormal directions delayed alike (the identity: every motor). State: the
+    loop's, then V^T y of the last m + 1 samples."""
     Ac, Bc = plant_rates(split) if rates is None else rates
     h = split.h
     m = int(math.floor(delay / h + 1e-12))
     phi = delay / h - m
-    v = np.asarray(v, dtype=float).reshape(3, 1)
+    V = np.asarray(v, dtype=float).reshape(3, -1)
+    k = V.shape[1]
     A, B, C = split.A, split.B, split.C
     N = A.shape[0]
-    c = v.T @ C
-    Bv = B @ v
-    Gv = _input_response(split, Ac, Bc, phi * h, (1.0 - phi) * h) @ v if phi > 0.0 else np.zeros((N, 1))
-    M = np.zeros((N + m + 1, N + m + 1))
-    M[:N, :N] = A + B @ (np.eye(3) - v @ v.T) @ C
+    c = V.T @ C
+    Bv = B @ V
+    Gv = _input_response(split, Ac, Bc, phi * h, (1.0 - phi) * h) @ V if phi > 0.0 else np.zeros((N, k))
+    M = np.zeros((N + (m + 1) * k, N + (m + 1) * k))
+    M[:N, :N] = A + B @ (np.eye(3) - V @ V.T) @ C
+
+    def reg(j):  # the columns of register j (V^T y of j + 1 samples before)
+        return slice(N + j * k, N + (j + 1) * k)
+
     if m == 0:
         M[:N, :N] += (Bv - Gv) @ c
     else:
-        M[:N, N + m - 1:N + m] += Bv - Gv
-    M[:N, N + m:N + m + 1] += Gv
-    M[N:N + 1, :N] = c
+        M[:N, reg(m - 1)] += Bv - Gv
+    M[:N, reg(m)] += Gv
+    M[reg(0), :N] = c
     for j in range(1, m + 1):
-        M[N + j, N + j - 1] = 1.0
+        M[reg(j), reg(j - 1)] = np.eye(k)
     return M
 
 
@@ -695,6 +701,16 @@ def actuator_bandwidth(split: SplitLoop, rates=None) -> float | None:
                         list(np.geomspace(top, ACTUATOR_SPAN[0], int(math.log(top / ACTUATOR_SPAN[0]) / math.log(1.25)))),
                         rtol=1e-6)
     return ACTUATOR_SPAN[0] if f is None else f
+
+
+def inserted_radius(scenario, delay: float = 0.0, actuator_hz: float | None = None) -> dict:
+    """The spectral radius of the scenario's sampled loop with ``delay`` [s] on every motor's force
+    (delayed_loop) and, separately, with a first-order actuator of ``actuator_hz`` [Hz] on every
+    motor (actuator_loop): {"delay": rho or None, "actuator": rho or None} (None: not asked)."""
+    split = SplitLoop(scenario)
+    rates = plant_rates(split)
+    return {"delay": _radius(delayed_loop(split, np.eye(3), delay, rates)) if delay > 0.0 else None,
+            "actuator": _radius(actuator_loop(split, actuator_hz, rates)) if actuator_hz is not None else None}
 
 
 def robustness(split: SplitLoop, freqs: np.ndarray) -> dict:

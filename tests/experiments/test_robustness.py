@@ -221,3 +221,54 @@ def test_the_lowest_actuator_bandwidth_is_where_the_loop_with_the_actuator_inser
     f = analysis.actuator_bandwidth(analysis.SplitLoop(sc))
     assert 10.0 < f < 0.5 / sc.step * 10
     assert _with_actuator(sc, 0.999 * f) > 1.0 > _with_actuator(sc, 1.001 * f)
+
+
+def _delayed_all(sc, delay):
+    """The loop with every motor's force delayed by ``delay`` [s] (whole steps plus a fraction)."""
+    h = sc.step
+    m = int(np.floor(delay / h + 1e-12))
+    phi = delay / h - m
+
+    def forces(regs, y):  # regs: the forces y of the last m + 1 samples, 3 each
+        hist = [np.asarray(y, dtype=float)] + [regs[3 * j:3 * j + 3] for j in range(m + 1)]
+        pieces = [(phi * h, hist[m + 1])] if phi > 0 else []
+        return pieces + [((1.0 - phi) * h, hist[m])], np.concatenate(hist[:m + 1])
+
+    ins = _Inserted(sc, 3 * (m + 1), forces, 1e-3)
+    ins.start_extra = lambda y0: np.tile(np.asarray(y0, dtype=float), m + 1)
+    return ins.radius()
+
+
+@pytest.mark.slow
+def test_analyze_reports_the_loop_with_a_delay_and_an_actuator_on_every_motor(tmp_path, capsys):
+    from orchestrator.cli import main
+    code = main(["analyze", str(ROOT / "scenarios" / "paper_simulation.toml"), "--out", str(tmp_path),
+                 "--points", "40", "--delay", "1.3e-4", "--actuator-bandwidth", "600"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "with a delay of 0.00013 s on every motor's force and a first-order actuator of 600 Hz on every motor" in out
+    runs = compare_runs(load(ROOT / "scenarios" / "paper_simulation.toml"))
+    for name in ("sc-dc", "apd-dc"):
+        line = next(x for x in out.splitlines() if x.startswith(f"  {name}: "))
+        delay = float(line.split("delay ")[1].split()[0])
+        actuator = float(line.split("actuator ")[1].split()[0])
+        assert delay == pytest.approx(_delayed_all(runs[name], 1.3e-4), abs=2e-6)
+        assert actuator == pytest.approx(_with_actuator(runs[name], 600.0), abs=2e-6)
+    # SC-DC needs more than 600 Hz (its lowest bandwidth is about 825 Hz); APD-DC does not
+    assert "sc-dc: delay" in out and "actuator" in out
+    sc_line = next(x for x in out.splitlines() if x.startswith("  sc-dc: "))
+    apd_line = next(x for x in out.splitlines() if x.startswith("  apd-dc: "))
+    assert sc_line.endswith("(unstable)") and apd_line.endswith("(stable)")
+
+
+@pytest.mark.parametrize("option, value, allowed", [("--delay", "-1e-4", "a delay >= 0 s"),
+                                                    ("--delay", "nan", "a delay >= 0 s"),
+                                                    ("--actuator-bandwidth", "-5", "a bandwidth > 0 Hz (finite)"),
+                                                    ("--actuator-bandwidth", "inf", "a bandwidth > 0 Hz (finite)")])
+def test_a_negative_delay_or_bandwidth_is_one_line_naming_it(tmp_path, capsys, option, value, allowed):
+    from orchestrator.cli import main
+    assert main(["analyze", str(ROOT / "scenarios" / "paper_simulation.toml"), "--out", str(tmp_path / "a"),
+                 f"{option}={value}"]) == 2  # one argument: argparse would read -1e-4 as an option
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {option} = {float(value)!r} is invalid: allowed is {allowed}"]
+    assert not (tmp_path / "a").exists()
