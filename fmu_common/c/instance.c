@@ -233,8 +233,10 @@ int tapmp_range_text(int kind, const char *name, double value, const char *allow
 {
     char v[40];
     if (!kind) return 1;
-    if (kind == 2) snprintf(v, sizeof v, "%d", (int)value);
-    return tapmp_invalid_text(msg, size, name, kind == 2 ? v : tapmp_repr(value, v), allowed, 0, 0);
+    /* an integer setting's value may lie outside int (that is why it is refused): printed, not converted */
+    if (kind == 2) snprintf(v, sizeof v, "%.0f", value);
+    return tapmp_invalid_text(msg, size, name ? name : "a setting", kind == 2 ? v : tapmp_repr(value, v),
+                              allowed ? allowed : "a value in its range", 0, 0);
 }
 
 /* Range of a parameter, declared as min/max in the modelDescription (tapmp/interface.py). */
