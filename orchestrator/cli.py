@@ -234,11 +234,11 @@ def cache_sources() -> list[Path]:
 
 def warn_if_unstable(scenario) -> None:
     """One line on stderr if the stability pre-check finds the scenario's loop unstable."""
-    from .experiments.stability import check
+    from .experiments.stability import check, radius_text
     report = check(scenario)
     if not report.stable:
         print(f"warning: {scenario.name}: the sampled closed loop is {report.verdict} (spectral radius "
-              f"{report.spectral_radius:.4g}, stable needs < 1 - 1e-6, at h = {scenario.step:g} s, {scenario.ordering}); "
+              f"{radius_text(report.spectral_radius)}, stable needs < 1 - 1e-6, at h = {scenario.step:g} s, {scenario.ordering}); "
               f"see `tapmp check`", file=sys.stderr, flush=True)
 
 
@@ -315,13 +315,13 @@ def compare_runs(scenario):
 def check_runs(runs: dict) -> dict:
     """The stability pre-check of every run ({name: StabilityReport}); one warning line on stderr
     for each run that is not stable (it runs anyway)."""
-    from .experiments.stability import check
+    from .experiments.stability import check, radius_text
     checks = {}
     for name, sc in runs.items():
         r = checks[name] = check(sc)
         if not r.stable:
             print(f"warning: {sc.name} {name}: the sampled closed loop is {r.verdict} (spectral radius "
-                  f"{r.spectral_radius:.4g}, stable needs < 1 - 1e-6); it runs anyway", file=sys.stderr, flush=True)
+                  f"{radius_text(r.spectral_radius)}, stable needs < 1 - 1e-6); it runs anyway", file=sys.stderr, flush=True)
     return checks
 
 

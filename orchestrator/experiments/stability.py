@@ -62,6 +62,14 @@ from tapmp.trajectory import TrajectoryParams, reference
 from .scenario import Scenario, model_tuple
 
 MARGIN = 1e-6  # verdict band around rho = 1, above the finite-difference error
+
+
+def radius_text(rho: float) -> str:
+    """The spectral radius ``rho`` (per step) with the digits that tell it from 1: at least six
+    decimals, and two significant digits of |rho - 1| beyond (1.000019, not "1")."""
+    gap = abs(rho - 1.0)
+    digits = 6 if gap == 0.0 or not math.isfinite(gap) else max(6, 1 - math.floor(math.log10(gap)))
+    return f"{rho:.{digits}f}"
 # Finite-difference steps per kind of state (also the scaling of the coordinates).
 _DELTA = {"pose": 1e-8, "rate": 1e-6, "integral": 1e-10, "q_prev": 1e-8, "F_held": 1e-3}
 
@@ -106,8 +114,9 @@ class StabilityReport:
         """One line: verdict, spectral radius, margin and what it means in time."""
         tc = self.time_constant
         what = (f"slowest mode decays with time constant {tc * 1e3:.4g} ms" if tc > 0
-                else f"worst mode grows x{self.spectral_radius:.4g} per step (e-fold time {-tc * 1e3:.4g} ms)")
-        return (f"{self.verdict}: spectral radius {self.spectral_radius:.6f} (margin 1 - rho = "
+                else f"worst mode grows x{radius_text(self.spectral_radius)} per step (e-fold time "
+                f"{-tc * 1e3:.4g} ms)")
+        return (f"{self.verdict}: spectral radius {radius_text(self.spectral_radius)} (margin 1 - rho = "
                 f"{self.margin:.3g}; stable if rho < 1 - {MARGIN:g}) at h = {self.h:g} s, "
                 f"{self.ordering}, {self.law}; {what}")
 
