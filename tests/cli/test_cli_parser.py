@@ -94,3 +94,21 @@ def test_a_shipped_study_is_found_by_name_like_a_shipped_scenario(tmp_path):
                           "tapmp build) or pass --ssp\n")
     res = _tapmp("check", "paper_simulation", "--set", "stop_time=0.01", cwd=tmp_path)
     assert res.returncode == 0 and res.stdout.startswith("paper_simulation: "), res.stderr
+
+
+def test_check_prints_a_growth_factor_just_above_1_with_the_digits_that_show_it(tmp_path):
+    # Theorem 1's counterexample at a 1 us step: the worst mode grows by about 2e-5 per step
+    from test_theorem1 import COUNTER
+    from orchestrator.experiments.scenario import load
+    from orchestrator.experiments.stability import check
+    scenario = tmp_path / "theorem1.toml"
+    scenario.write_text('name = "theorem1"\nstop_time = 0.01\nstep = 1e-6\n[gain_overrides]\n'
+                        + "".join(f"{k} = {v[0]!r}\n" for k, v in COUNTER.items()))
+    rho = check(load(str(scenario))).spectral_radius
+    assert 1.0 < rho < 1.001
+    res = _tapmp("check", str(scenario), cwd=tmp_path)
+    assert res.returncode == 1, res.stderr
+    printed = res.stdout.split("spectral radius ")[1].split()[0]
+    factor = res.stdout.split("worst mode grows x")[1].split()[0]
+    assert factor == printed
+    assert abs((float(factor) - 1.0) - (rho - 1.0)) <= 0.05 * (rho - 1.0), (factor, rho)  # the growth is there
