@@ -165,12 +165,13 @@ def result_base(scenario) -> Path:
 
 
 @contextmanager
-def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
+def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict, written_by: str = "compare"):
     """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
     for the duration; comparison.json records "running", then "completed", or "failed" /
     "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
     an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
-    unless empty (see folders.check_output)."""
+    unless empty (see folders.check_output). comparison.json records ``written_by``, the command
+    ("compare" or "reproduce") that wrote it."""
     from .experiments.folders import (ResultsWriteError, check_output, output_lock, prepare_output,
                                       write_comparison_status)
     from .experiments.results import one_line
@@ -179,17 +180,18 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
     check_output(out, overwrite, "comparison", laws, unmarked_only=True)
     with output_lock(out):
         prepare_output(out, overwrite, "comparison", laws)
-        write_comparison_status(out, scenario.name, laws, "running")
+        write_comparison_status(out, scenario.name, laws, "running", written_by=written_by)
         try:
             yield out
         except BaseException as err:
             status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
             try:
-                write_comparison_status(out, scenario.name, laws, status, error=one_line(err))
+                write_comparison_status(out, scenario.name, laws, status, error=one_line(err),
+                                        written_by=written_by)
             except (OSError, ResultsWriteError):
                 pass  # e.g. a full disk: the error itself is raised all the same
             raise
-        write_comparison_status(out, scenario.name, laws, "completed")
+        write_comparison_status(out, scenario.name, laws, "completed", written_by=written_by)
 
 
 def warn_if_implausible(scenario) -> None:
@@ -326,7 +328,7 @@ def check_runs(runs: dict) -> dict:
 
 
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None):
+                   show: list | None = None, written_by: str = "compare"):
     """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
     out/comparison.md and the figures (of the runs ``show``, default see plots.select_runs);
     returns (runs, results, checks, comparison.md text)."""
@@ -338,7 +340,7 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
     runs = compare_runs(scenario)
     check_output_size(runs.values(), out, scenario.name, jobs)  # before anything is written
     checks = check_runs(runs)
-    with comparison_folder(out, overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
+    with comparison_folder(out, overwrite, scenario, runs, written_by):  # runs in subfolders; comparison.md, figures here
         say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
             f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
         bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
@@ -355,6 +357,37 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
 def say(line: str) -> None:
     """One line on stderr saying what a long command starts doing."""
     print(line, file=sys.stderr, flush=True)
+
+
+@contextmanager
+def heartbeat(tell=say, every: float = 10.0):
+    """A ``tell(line)`` for the duration that also repeats the last line with the seconds since it
+    whenever ``every`` seconds pass without one, so a long phase is never silent."""
+    import time
+    last = {"line": None, "since": time.monotonic(), "beat": time.monotonic()}
+    lock, done = threading.Lock(), threading.Event()
+
+    def told(line):
+        with lock:
+            now = time.monotonic()
+            last.update(line=line, since=now, beat=now)
+            tell(line)
+
+    def watch():
+        while not done.wait(1.0):
+            with lock:
+                now = time.monotonic()
+                if last["line"] is not None and now - last["beat"] >= every:
+                    tell(f"{last['line']} (still running, {now - last['since']:.0f} s)")
+                    last["beat"] = now
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        yield told
+    finally:
+        done.set()
+        watcher.join()
 
 
 def summary_rows(results: dict) -> list[tuple]:
@@ -430,6 +463,23 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def check_reproduce_may_replace(folder: Path, overwrite: bool) -> None:
+    """OutputExistsError (one line) if ``folder`` holds a completed comparison that `tapmp reproduce`
+    did not write (comparison.json's written_by), unless ``overwrite``; reproduce replaces its own."""
+    import json
+    from .experiments.folders import COMPARISON_JSON, OutputExistsError, folder_completed, marked_kind
+    if overwrite or marked_kind(folder) != "comparison" or not folder_completed(folder):
+        return
+    try:
+        written_by = json.loads((folder / COMPARISON_JSON).read_text()).get("written_by", "compare")
+    except (OSError, ValueError, AttributeError):
+        written_by = "compare"
+    if written_by != "reproduce":
+        raise OutputExistsError(f"output folder {folder} holds a completed comparison that tapmp reproduce did "
+                                f"not write (by tapmp {written_by}): pass --overwrite to replace it, or --results "
+                                "another folder")
+
+
 def cmd_reproduce(args) -> int:
     from .experiments.estimate import check_output_size
     from .experiments.reproduction import reproduce
@@ -456,14 +506,19 @@ def cmd_reproduce(args) -> int:
     runs = [sc for f in files if f.is_file() for sc in compare_runs(_recording(args, load(f))).values()]
     check_output_size(runs, results, "reproduce", jobs)  # every compare run, before the first starts
 
+    for f in files:  # before the first run: a comparison `tapmp compare` completed is not replaced silently
+        if f.is_file():
+            check_reproduce_may_replace(results / f.stem / "compare", args.overwrite)
+
     def compare(scenario, out):
         scenario = _recording(args, scenario)
-        return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress,
-                              f"tapmp compare {out.parent.name}", jobs)
+        return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress, command, jobs,
+                              written_by="reproduce")
 
-    text = reproduce(Path(args.scenarios), results, page, compare, command,
-                     paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args),
-                     say=say)
+    with heartbeat() as tell:
+        text = reproduce(Path(args.scenarios), results, page, compare, command,
+                         paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args),
+                         say=tell)
     print(f"wrote {page}")
     if args.write_docs:
         docs = Path("docs") / "paper-reproduction.md"
@@ -742,8 +797,11 @@ def parser() -> argparse.ArgumentParser:
     recording_args(rp)
     rp.add_argument("--scenarios", default=str(SCENARIOS_DIR), help="folder with paper_simulation.toml, "
                     "paper_experiment.toml (default: the scenarios shipped with the package)")
-    rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare, "
-                    f"overwritten; {RELATIVE}")
+    rp.add_argument("--results", default="results", help="folder for the runs: RESULTS/<scenario>/compare "
+                    "(the folders `tapmp compare` writes by default: a comparison reproduce wrote is replaced, one "
+                    f"`tapmp compare` completed only with --overwrite); {RELATIVE}")
+    rp.add_argument("--overwrite", action="store_true", help="replace a completed comparison of `tapmp compare` "
+                    "in RESULTS/<scenario>/compare")
     fmu_args(rp)
     rp.add_argument("--paper-gains-stop-time", type=float, default=0.2, metavar="S",
                     help="horizon [s] of each run of the paper's gains at 1 us, 10 us and 0.1 ms (default 0.2)")

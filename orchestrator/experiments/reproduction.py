@@ -351,7 +351,9 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, comman
             calibrated[key] = (sc, *compare(sc, folders[key])[:3])
     say("the paper's gains at steps of " + ", ".join(f"{h:g}" for h in PAPER_GAIN_STEPS)
         + f" s, {paper_gains_stop:g} s per run, on {workers} process(es)")
-    gain_rows = run_paper_gains(steps=PAPER_GAIN_STEPS, stop_time=paper_gains_stop, workers=workers)
+    gain_rows = run_paper_gains(steps=PAPER_GAIN_STEPS, stop_time=paper_gains_stop, workers=workers,
+                                progress=lambda done, total, row: say(f"the paper's gains: {done} of {total} runs "
+                                                                      "done"))
     pg_cmd = (f"python -m orchestrator.experiments.paper_gains --stop-time {paper_gains_stop:g} --steps "
               + " ".join(f"{h:g}" for h in PAPER_GAIN_STEPS) + f" --workers {workers}")
 

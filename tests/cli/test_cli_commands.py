@@ -98,10 +98,27 @@ def test_reproduce_writes_the_page_with_the_numbers_of_its_runs(built, tmp_path)
         assert n == 1
         (scenarios / f"{name}.toml").write_text(text)
     page, results = tmp_path / "repro.md", tmp_path / "results"
-    res = tapmp("reproduce", "--scenarios", scenarios, "--results", results, "--out", page, "--ssp", built["ssp"],
-                "--paper-gains-stop-time", "0.001", "--no-progress", tmp_path=tmp_path)
+    # a comparison `tapmp compare` completed where reproduce writes: refused before anything runs
+    mine = results / "paper_simulation" / "compare"
+    res = tapmp("compare", scenarios / "paper_simulation.toml", "--ssp", built["ssp"], "--out", mine, "--no-progress",
+                tmp_path=tmp_path)
+    assert res.returncode == 0, res.stderr
+    before = {p: p.read_bytes() for p in mine.rglob("*") if p.is_file() and p.name != ".tapmp.lock"}
+    args = ["reproduce", "--scenarios", scenarios, "--results", results, "--out", page, "--ssp", built["ssp"],
+            "--paper-gains-stop-time", "0.001", "--no-progress"]
+    res = tapmp(*args, tmp_path=tmp_path)
+    assert res.returncode == 2 and res.stderr == (
+        f"error: output folder {mine} holds a completed comparison that tapmp reproduce did not write (by tapmp "
+        "compare): pass --overwrite to replace it, or --results another folder\n")
+    assert {p: p.read_bytes() for p in mine.rglob("*") if p.is_file() and p.name != ".tapmp.lock"} == before
+    assert not page.exists() and not (results / "paper_experiment").exists()
+    res = tapmp(*args, "--overwrite", tmp_path=tmp_path)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().splitlines()[-1] == f"wrote {page}"
+    assert json.loads((mine / "comparison.json").read_text())["written_by"] == "reproduce"
+    assert "Produced by `tapmp reproduce --scenarios " in (mine / "comparison.md").read_text()
+    total = int(re.search(r"the paper's gains: 1 of (\d+) runs done", res.stderr).group(1))
+    assert f"the paper's gains: {total} of {total} runs done" in res.stderr
     text = page.read_text()
     for name in ("paper_simulation", "paper_experiment"):
         assert f"`scenarios/{name}.toml`" in text and "0.02 s at a 0.0001 s step" in text
