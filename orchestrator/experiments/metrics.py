@@ -3,7 +3,8 @@
 Tracking error of motor i: e_i = q_di - q_i with the plant's true position q_i
 (the encoder reading is what the controller sees; accuracy is judged on the true
 motion). Synchronization errors follow Eq. 18. Axis errors are X_d - X, Z_d - Z
-in um and B_d - B in urad. MAE = mean |e|; STD = population standard deviation.
+in um and B_d - B in urad. MAE = mean |e|; STD = population standard deviation; the tracking
+error's signed mean per motor (tracking_mean_um) is its steady offset.
 Saturation of motor i: the share of samples whose force command |F_i| (the controller's
 output) is at the force limit (the plant's force_limit; the controller's if the plant's is 0).
 Effort: the RMS of each motor's force command above EFFORT_HZ (after a 4th-order Butterworth
@@ -208,6 +209,7 @@ class ErrorStatistics:
         std = {g: (np.sqrt(self.m2[g] / self.n) * um).tolist() for g in _GROUPS}
         out = {
             "tracking_mae_um": mae["tracking"], "tracking_std_um": std["tracking"],
+            "tracking_mean_um": (self.mean["tracking"] * um).tolist(),  # signed: the steady offset
             "sync_mae_um": mae["sync"], "sync_std_um": std["sync"],
             "axis_mae": mae["axis"], "axis_std": std["axis"],
             "units": {"tracking": "um", "sync": "um", "axis": ["um", "um", "urad"]},
