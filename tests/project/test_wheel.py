@@ -94,6 +94,11 @@ def test_the_wheel_builds_runs_and_exports_from_an_empty_folder(tmp_path):
     assert (result / "results.csv").is_file() and (result / "metrics.json").is_file()
     assert len((result / "results.csv").read_text().splitlines()) == 502  # header + 501 samples of 0.1 ms
 
+    study = run("study", "gain_swep")  # a shipped study by name: misspelled, then as shipped
+    assert study.returncode == 2 and "shipped are gain_sweep, robustness, tune; did you mean gain_sweep?" in study.stderr
+    study = run("study", "gain_sweep", "--ssp", "none.ssp")  # found: it reaches the check of its SSP
+    assert study.returncode == 2 and study.stderr.startswith("error: SSP file none.ssp does not exist"), study.stderr
+
     python = run("run", "paper_simulation", "--set", "stop_time=0.01", "--fmus", "python", "--out", "py",
                  "--no-progress", extra_env={"TAPMP_FMUS_DIR": "b"})  # the pythonfmu family, by the variable
     assert python.returncode == 0, python.stderr
