@@ -453,16 +453,20 @@ def summary_rows(results: dict) -> list[tuple]:
 
 
 def summary_table(results: dict) -> str:
-    """The short table `tapmp compare` prints: one row per run (see summary_rows) with the steady
-    (mean) tracking error on each mode beside the MAE (mode_means)."""
+    """The short table `tapmp compare` prints: one row per run (see summary_rows), its force effort
+    and the steady (mean) tracking error on each mode (mode_means)."""
     rows = summary_rows(results)
     w = max(len("run"), *(len(r[0]) for r in rows))
+    hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), 0.0)
+    head = f"F RMS > {hz:g} Hz [N]"
     lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'vs APD-DC: tracking':>19}  "
-             f"{'sync':>8}  {'mean: common':>12}  {'diff. Z':>8}  {'diff. B':>8} [um]"]
+             f"{'sync':>8}  {head:>19}  {'mean: common':>12}  {'diff. Z':>8}  {'diff. B':>8} [um]"]
     for name, t, y, rt, ry in rows:
+        f = results[name].get("force_hf_rms_n")
+        effort = f"{sum(f) / len(f):.4g}" if f else "n/a"  # the mean over the motors
         means = mode_means(results[name]) if "tracking_mean_um" in results[name] else [float("nan")] * 3
-        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%  {means[0]:>+12.4f}  "
-                     f"{means[1]:>+8.4f}  {means[2]:>+8.4f}")
+        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%  {effort:>19}  "
+                     f"{means[0]:>+12.4f}  {means[1]:>+8.4f}  {means[2]:>+8.4f}")
     return "\n".join(lines)
 
 
@@ -501,9 +505,8 @@ def cmd_compare(args) -> int:
         select_runs(out, list(compare_runs(scenario)), show)
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
                                       command, jobs, show)
-    print(f"{scenario.name}: MAE, the mean over the three motors; reduction against APD-DC (Eq. 41), positive = "
-          "smaller error; mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B "
-          "(1,-2,1)")
+    print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
+    print("mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B (1,-2,1)")
     print(summary_table(results))
     for line in move_lines(results, ("X", "Z", "B")):  # the motors' too in each run's metrics.json
         print(line)

@@ -34,15 +34,18 @@ def test_compare_into_a_log_prints_a_summary_of_the_metrics_and_no_long_or_progr
                                           f"-> {out}")
     assert "paper_simulation: figures" in res.stderr.splitlines()
     lines = res.stdout.splitlines()
-    assert len(lines) == 3 + len(BASELINES)
+    assert len(lines) == 4 + len(BASELINES)
     assert lines[-1] == f"results, figures and the full tables (comparison.md) in {out}"
+    assert lines[1].startswith("mean: the steady tracking error per mode")
+    del lines[1]
     assert lines[1].split() == ["run", "tracking", "MAE", "[um]", "sync", "MAE", "[um]", "vs", "APD-DC:", "tracking",
-                                "sync", "F", "RMS", ">", "100", "Hz", "[N]"]
+                                "sync", "F", "RMS", ">", "100", "Hz", "[N]", "mean:", "common", "diff.", "Z", "diff.",
+                                "B", "[um]"]
     metrics = {b.name: json.loads((out / b.name / "metrics.json").read_text()) for b in BASELINES}
     base_t, base_y = _mean(metrics["apd-dc"]["tracking_mae_um"]), _mean(metrics["apd-dc"]["sync_mae_um"])
     rows = {r.split()[0]: r.split()[1:] for r in lines[2:-1]}
     assert list(rows) == [b.name for b in BASELINES]
-    for name, (t, y, rt, ry, f) in rows.items():
+    for name, (t, y, rt, ry, f, *_) in rows.items():
         assert float(f) == pytest.approx(_mean(metrics[name]["force_hf_rms_n"]), rel=1e-3)  # effort, mean of motors
         mt, my = _mean(metrics[name]["tracking_mae_um"]), _mean(metrics[name]["sync_mae_um"])
         assert float(t) == pytest.approx(mt, abs=5e-5) and float(y) == pytest.approx(my, abs=5e-5)

@@ -143,7 +143,7 @@ def test_run_warns_on_one_stderr_line_before_running_an_unstable_scenario(built,
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0
     warnings = [line for line in proc.stderr.splitlines() if line.startswith("warning:")]
-    assert len(warnings) == 1 and "unstable" in warnings[0] and "spectral radius 39.2" in warnings[0]
+    assert len(warnings) == 1 and "unstable" in warnings[0] and "spectral radius 39.197457" in warnings[0]
     stable = subprocess.run(cmd[:5] + cmd[7:-2] + [str(tmp_path / "stable"), "--no-progress"], capture_output=True, text=True, timeout=120)
     assert stable.returncode == 0 and "warning" not in stable.stderr
     assert math.isfinite(check(load(PAPER)).time_constant)
