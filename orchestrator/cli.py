@@ -232,10 +232,10 @@ def check_runs(runs: dict) -> dict:
 
 
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None):
+                   show: list | None = None, figures: bool = True):
     """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
-    out/comparison.md and the figures (of the runs ``show``, default see plots.select_runs);
-    returns (runs, results, checks, comparison.md text)."""
+    out/comparison.md and, if ``figures``, the figures (of the runs ``show``, default see
+    plots.select_runs); returns (runs, results, checks, comparison.md text)."""
     from .experiments.plots import plot
     from .experiments.pool import run_many
     from .experiments.report import write_comparison
@@ -247,10 +247,13 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
         say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
             f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
         bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
-        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, True, bars,
+        # without figures the runs' rows stay in the workers (no copy back to this process)
+        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, figures, bars,
                            scenario.name)
         results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
+        if not figures:
+            return runs, results, checks, text
         say(f"{scenario.name}: figures")
         kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
         plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs, show)
@@ -315,14 +318,16 @@ def cmd_compare(args) -> int:
     command = args.command_line
     jobs = _jobs(args)
     show = _names(args.runs)
+    if show and args.no_figures:
+        raise UsageError("--runs chooses the runs the figures show: it cannot go with --no-figures")
     if show:  # before any run starts
         from .experiments.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show)
+                                      command, jobs, show, not args.no_figures)
     print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
     print(summary_table(results))
-    print(f"results, figures and the full tables (comparison.md) in {out}")
+    print(f"results{'' if args.no_figures else ', figures'} and the full tables (comparison.md) in {out}")
     return 0
 
 
@@ -594,6 +599,8 @@ def parser() -> argparse.ArgumentParser:
                    "sc-dc,apd-dc,pid-dc-mode-matched, or all; default: sc-dc, apd-dc and the better of "
                    "apd-dc-mode-matched and apd-dc-ms-matched by mean tracking MAE); every run still runs and is "
                    "in comparison.md")
+    c.add_argument("--no-figures", action="store_true", help="write no figures (the runs and comparison.md only; "
+                   "draw them later with `tapmp plot FOLDER`)")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write the paper-reproduction page (results/paper-reproduction.md)",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "
