@@ -5,12 +5,14 @@ fastest of --repeat. Run from the repository root after `bash build_fmus.sh`:
     .venv/bin/python benchmarks/bench_compare.py [--scenario scenarios/paper_simulation.toml] [--repeat 3]
                                                  [--jobs N] [--stop-time S] [--ssp FILE]
 
-Prints the wall time of each command and the ratio compare / run (target <= 3). --stages
+Prints the wall time of each command (`tapmp run`, `tapmp compare`, `tapmp compare --no-figures`)
+and the ratios compare / run (target <= 3) and compare --no-figures / run. --stages
 instead times the stages of one comparison in this process (imports, stability checks, the
 runs, the figures).
 """
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -81,21 +83,25 @@ def main(argv=None) -> int:
         from orchestrator.experiments.pool import parse_jobs
         stages(args.scenario, parse_jobs(args.jobs), args.stop_time, args.ssp)
         return 0
-    best = {"tapmp run": float("inf"), "tapmp compare": float("inf")}
+    best = {"tapmp run": float("inf"), "tapmp compare": float("inf"), "tapmp compare --no-figures": float("inf")}
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         for r in range(args.repeat):
             for name, cmd in (("tapmp run", ["run", args.scenario, "--out", f"{tmp}/run", *extra]),
                               ("tapmp compare", ["compare", args.scenario, "--out", f"{tmp}/compare", *extra,
-                                                 *jobs])):
+                                                 *jobs]),
+                              ("tapmp compare --no-figures", ["compare", args.scenario, "--out", f"{tmp}/compare",
+                                                              *extra, *jobs, "--no-figures"])):
                 wall = timed(cmd)
                 best[name] = min(best[name], wall)
-                print(f"run {r + 1}/{args.repeat} {name:14s} {wall:7.2f} s", file=sys.stderr)
+                print(f"run {r + 1}/{args.repeat} {name:26s} {wall:7.2f} s", file=sys.stderr)
     print(f"{Path(args.scenario).name}{' stop_time=%g' % args.stop_time if args.stop_time else ''}, "
           f"fastest of {args.repeat}")
-    print(f"{'command':14s}  {'wall [s]':>8s}")
+    print(f"{'command':26s}  {'wall [s]':>8s}  {'load':>5s}")
+    load = os.getloadavg()[0]
     for name, wall in best.items():
-        print(f"{name:14s}  {wall:8.2f}")
+        print(f"{name:26s}  {wall:8.2f}  {load:5.2f}")
     print(f"compare / run: {best['tapmp compare'] / best['tapmp run']:.2f}")
+    print(f"compare --no-figures / run: {best['tapmp compare --no-figures'] / best['tapmp run']:.2f}")
     return 0
 
 
