@@ -221,3 +221,16 @@ def test_compare_with_no_figures_writes_the_runs_and_comparison_md_and_plot_draw
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: --runs chooses the runs the figures show: it cannot go with --no-figures"]
     assert not (tmp_path / "other").exists()
+
+
+def test_figures_drawn_while_the_runs_go_on_are_the_pictures_plot_draws_from_the_files(built, tmp_path):
+    """compare draws its figures from the rows the runs hand back, starting while the other runs
+    still run (the runs they show start first); `tapmp plot` on the finished folder reads the
+    rows from the result files: the same five PNG files, byte for byte."""
+    out = tmp_path / "cmp"
+    assert main(["compare", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.05",
+                 "--no-progress"]) == 0
+    drawn = {p.name: p.read_bytes() for p in out.glob("*.png")}
+    assert len(drawn) == 5
+    assert main(["plot", str(out)]) == 0
+    assert {p.name: p.read_bytes() for p in out.glob("*.png")} == drawn
