@@ -8,7 +8,8 @@ fastest of --repeat. Run from the repository root after `bash build_fmus.sh`:
 Prints the wall time of each command (`tapmp run`, `tapmp compare`, `tapmp compare --no-figures`)
 and the ratios compare / run (target <= 3) and compare --no-figures / run. --stages
 instead times the stages of one comparison in this process (imports, stability checks, the
-runs, the figures).
+runs, the figures): "runs" without the figures this process drew while the runs went on,
+"figures" all of them, "figures during the runs" the part drawn meanwhile.
 """
 
 import argparse
@@ -41,29 +42,42 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     from orchestrator.experiments import plots, pool
     from orchestrator.experiments.scenario import load
     times = {"imports": time.perf_counter() - start}
+    during = [False]  # inside run_many: figures drawn there are taken out of the runs' time
 
-    def timed(module, name, stage):
-        original = getattr(module, name)
+    def timed(owner, name, stage):
+        original = getattr(owner, name)
 
         def wrapper(*a, **k):
             t = time.perf_counter()
+            inside = during[0]
+            if stage == "runs":
+                during[0] = True
             try:
                 return original(*a, **k)
             finally:
-                times[stage] = times.get(stage, 0.0) + time.perf_counter() - t
-        setattr(module, name, wrapper)
+                wall = time.perf_counter() - t
+                if stage == "runs":
+                    during[0] = False
+                times[stage] = times.get(stage, 0.0) + wall
+                if stage == "figures" and inside:
+                    times["runs"] = times.get("runs", 0.0) - wall
+                    times["figures during the runs"] = times.get("figures during the runs", 0.0) + wall
+        setattr(owner, name, wrapper)
     timed(cli, "check_runs", "stability checks")
     timed(pool, "run_many", "runs")
-    timed(plots, "plot", "figures")
+    for method in ("__init__", "draw_next", "draw_rest"):  # the figures, during the runs and after them
+        timed(plots.FigureSet, method, "figures")
     sc = load(scenario, [f"stop_time={stop_time}"] if stop_time else [])
     ssp = cli.resolve_ssp(ssp, sc.fmus)
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         t = time.perf_counter()
         cli.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
         times["whole comparison"] = time.perf_counter() - t
-    print(f"{'stage':18s}  {'wall [s]':>8s}")
-    for stage, wall in times.items():
-        print(f"{stage:18s}  {wall:8.2f}")
+    times.setdefault("figures during the runs", 0.0)
+    order = ("imports", "stability checks", "runs", "figures", "figures during the runs", "whole comparison")
+    print(f"{'stage':24s}  {'wall [s]':>8s}")
+    for stage in order:
+        print(f"{stage:24s}  {times.get(stage, 0.0):8.2f}")
 
 
 def main(argv=None) -> int:
