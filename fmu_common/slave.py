@@ -19,11 +19,13 @@ the runtime logs and answers with an error status too.
 """
 
 import json
+import math
 from array import array
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 
+from tapmp import native
 from tapmp.errors import ModelInputError
 from tapmp.interface import DEFAULT_EXPERIMENT
 
@@ -36,6 +38,29 @@ def _real(vr):
 
 def _integer(vr):
     return property(lambda self: self.ints[vr], lambda self, x: self.ints.__setitem__(vr, x))
+
+
+def is_number(v) -> bool:
+    """A JSON number (an int or a float, not a bool)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def as_float(v) -> float:
+    """A JSON number as a float; an integer too large for one becomes an infinity."""
+    try:
+        return float(v)
+    except OverflowError:
+        return math.inf if v > 0 else -math.inf
+
+
+def require_state(check: str, *args) -> None:
+    """Run one of the C model's checks of an FMU state's hidden values (tapmp_plant_state_check,
+    tapmp_controller_state_check) on ``args``; ModelInputError naming the first offender with
+    the value the check saw, as the native FMUs report it."""
+    ffi, lib = native.load()
+    name, value, allowed = ffi.new("const char **"), ffi.new("double *"), ffi.new("const char **")
+    if getattr(lib, check)(*args, name, value, allowed):
+        raise ModelInputError(ffi.string(name[0]).decode(), value[0], ffi.string(allowed[0]).decode())
 
 
 def _text(err: ModelInputError, t: float) -> str:
@@ -126,7 +151,8 @@ class TapmpSlave(Fmi2Slave):
         """Inverse of :meth:`hidden_state`; called after the variables are restored."""
 
     def check_hidden_state(self, hidden) -> None:
-        """Raise ValueError if ``hidden`` (from :meth:`hidden_state`) is not valid."""
+        """Raise ModelInputError if ``hidden`` (from :meth:`hidden_state`, of an FMU state whose
+        values and time are this object's now) is not valid; change nothing."""
 
     def log(self, msg: str, status=OK, category: str = "logAll", debug: bool = False):
         """Queue a log record for the FMI logger (errors and warnings always reach it)."""
@@ -172,6 +198,20 @@ class TapmpSlave(Fmi2Slave):
     def fmi2_hidden(self) -> str:
         # json keeps floats exact (the shortest repr round-trips) and, unlike pickle, is safe to load.
         return json.dumps(self.hidden_state())
+
+    def fmi2_check_state(self, text: str):
+        """The hidden state of an FMU state (its JSON text), checked against the state's values
+        and time (in ``reals``, ``ints`` and ``time``) without touching the model: None, or the
+        message naming the bad value."""
+        try:
+            hidden = json.loads(text)
+        except (ValueError, RecursionError):
+            return f"hidden state = {text!r} is invalid: allowed is the JSON text of the model's hidden state"
+        try:
+            self.check_hidden_state(hidden)
+        except ModelInputError as err:
+            return str(err)
+        return None
 
     def fmi2_restore(self, text: str) -> None:
         hidden = json.loads(text)

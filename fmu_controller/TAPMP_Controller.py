@@ -1,10 +1,10 @@
 """FMI adapter of the SC-DC / APD-DC / PID-DC controller: maps FMU variables to
 tapmp.control.ControllerModel."""
 
-import math
-
-from fmu_common.slave import WARNING, TapmpSlave
+from fmu_common.slave import WARNING, TapmpSlave, as_float, is_number, require_state
+from tapmp import native
 from tapmp.control import ControllerModel, Gains, ModalGains
+from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER_VARS
 from tapmp.params import GAIN_NAMES, ModelParams
 
@@ -41,12 +41,24 @@ class TAPMP_Controller(TapmpSlave):
         super().check_parameters()
 
     def check_hidden_state(self, hidden):
-        ok = hidden is None or (isinstance(hidden, list) and len(hidden) == 3 and isinstance(hidden[2], list)
-                                and len(hidden[2]) == 3)
-        values = [] if not ok or hidden is None else (list(hidden[0]) + list(hidden[1] or [])
-                                                      + [v for v in hidden[2][:2] if v is not None])
-        if not (ok and all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)):
-            raise ValueError(f"FMU state: controller state {hidden!r} is invalid: allowed are finite numbers")
+        def numbers(v):
+            return isinstance(v, list) and len(v) == 3 and all(is_number(x) for x in v)
+        if not (isinstance(hidden, list) and len(hidden) == 3 and numbers(hidden[0])
+                and (hidden[1] is None or numbers(hidden[1])) and isinstance(hidden[2], list)
+                and len(hidden[2]) == 3 and is_number(hidden[2][0])
+                and (hidden[2][1] is None or is_number(hidden[2][1])) and isinstance(hidden[2][2], bool)):
+            raise ModelInputError("controller state", hidden, "[integral (3 numbers), previous q (3 numbers or "
+                                  "null), [t0, k_last (a number or null), warned (true or false)]]")
+        integral, q_prev, (t0, k_last, warned) = hidden
+        m = self._build()  # the settings as the C structs the check reads
+        ffi, _ = native.load()
+        st = ffi.new("tapmp_controller_state *", {"integral": [as_float(v) for v in integral],
+                                                   "q_prev": [as_float(v) for v in q_prev or (0, 0, 0)],
+                                                   "has_q_prev": q_prev is not None})
+        clock = ffi.new("tapmp_clock *", {"t0": as_float(t0), "T_s": self.T_s, "has_sample": k_last is not None,
+                                          "k_last": 0.0 if k_last is None else as_float(k_last),
+                                          "warned": warned})
+        require_state("tapmp_controller_state_check", m._cp, m._cg, self.law, self.force_limit, st, clock, self.time)
 
     def initial_outputs(self):
         r = self.reals

@@ -71,13 +71,18 @@ static void warn(tapmp_instance *inst, void (*text_of)(const tapmp_clock *, doub
     if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
 }
 
-/* tapmp.control.ControllerModel.communication_point */
+/* tapmp.control.ControllerModel.communication_point; with eventModeUsed the outputs hold in every
+ * step: the controller samples in Event Mode (model_event_update). */
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
 {
     tapmp_clock *clock = &inst->m.clock;
     double k, steps, missed;
     (void)h;  /* the host's step never enters the law: the time between samples does */
     read_settings(inst, &inst->m);  /* new tunable values take effect here; the loop state carries over */
+    if (inst->event_mode_used) {
+        memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);
+        return 1;
+    }
     if (!tapmp_clock_at(clock, t, &k, &steps, &missed)) {
         memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
         if (!isnan(missed)) warn(inst, tapmp_clock_missed_text, t, missed);
@@ -85,6 +90,36 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
     }
     if (sample(inst, t, steps * clock->T_s, 1, out, msg, size)) {
         if (tapmp_clock_sampled(clock, k, steps)) warn(inst, tapmp_clock_skipped_text, t, steps);
+        return 1;
+    }
+    size_t n = strlen(msg);
+    snprintf(msg + n, size - n, " (at t = %.6g s)", t);
+    return 0;
+}
+
+/* tapmp.control.ControllerModel.next_event_time: the next sample instant not sampled yet, t0 + k T_s. */
+int model_next_event(const tapmp_instance *inst, double *time)
+{
+    const tapmp_clock *clock = &inst->m.clock;
+    *time = clock->t0 + (clock->has_sample ? clock->k_last + 1.0 : 0.0) * clock->T_s;
+    return 1;
+}
+
+/* tapmp.control.ControllerModel.event: in Event Mode at a sample instant not sampled yet the
+ * controller samples its inputs and publishes the new command at once; at any other time of an
+ * event the outputs hold. doStep never passes a sample instant (it returns early there), so no
+ * instant is skipped and the clock's warnings cannot arise. */
+int model_event_update(tapmp_instance *inst, double out[], char *msg, size_t size)
+{
+    tapmp_clock *clock = &inst->m.clock;
+    double t = inst->time, k, steps, missed;
+    read_settings(inst, &inst->m);
+    if (!tapmp_clock_at(clock, t, &k, &steps, &missed)) {
+        memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
+        return 1;
+    }
+    if (sample(inst, t, steps * clock->T_s, 1, out, msg, size)) {
+        tapmp_clock_sampled(clock, k, steps);
         return 1;
     }
     size_t n = strlen(msg);
@@ -118,4 +153,25 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
     inst->m.clock.k_last = hidden[8];
     inst->m.clock.has_sample = hidden[9] != 0.0;
     inst->m.clock.warned = hidden[10] != 0.0;
+}
+
+/* The loop state and clock of an FMU state (model_get_hidden's layout) for its settings and time. */
+int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size)
+{
+    ModelData m = state->m;
+    tapmp_controller_state st;
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    read_settings(state, &m);
+    for (int i = 0; i < 3; i++) {
+        st.integral[i] = hidden[i];
+        st.q_prev[i] = hidden[3 + i];
+    }
+    st.has_q_prev = hidden[6] != 0.0;
+    m.clock.t0 = hidden[7];
+    m.clock.k_last = hidden[8];
+    m.clock.has_sample = hidden[9] != 0.0;
+    int bad = tapmp_controller_state_check(&m.s.p, &m.s.g, m.s.k.law, m.s.k.force_limit, &st, &m.clock, state->time,
+                                           &name, &x, &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
 }

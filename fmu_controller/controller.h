@@ -13,4 +13,6 @@ typedef struct {
 #define MODEL_N_HIDDEN 11
 #define MODEL_N_OUT 12              /* F1..F3, u1..u3, e1..e3, es1..es3 */
 #define MODEL_OUT_FIRST VR_F1
+/* FMI 3.0 with eventModeUsed: every sample instant t0 + k T_s is a time event (controller.c) */
+#define MODEL_HAS_EVENTS
 #endif

@@ -1,8 +1,7 @@
 """FMI adapter of the TAPMP plant: maps FMU variables to tapmp.plant.PlantModel."""
 
-import math
-
-from fmu_common.slave import TapmpSlave
+from fmu_common.slave import TapmpSlave, as_float, is_number, require_state
+from tapmp.errors import ModelInputError
 from tapmp.interface import PLANT_VARS
 from tapmp.params import ModelParams
 from tapmp.plant import PlantConfig, PlantModel
@@ -37,10 +36,10 @@ class TAPMP_Plant(TapmpSlave):
         self.publish_block(_OUTPUTS, self.model.outputs())
 
     def check_hidden_state(self, hidden):
-        if hidden is not None and not (len(hidden) == 7 and all(
-                isinstance(v, (int, float)) and math.isfinite(v) for v in hidden)):
-            raise ValueError(f"FMU state: plant state {hidden!r} is invalid: allowed are 7 finite numbers "
-                             "(X, Z, B, dX, dZ, dB and the sample count)")
+        if not (isinstance(hidden, list) and len(hidden) == 7 and all(is_number(v) for v in hidden)):
+            raise ModelInputError("plant state", hidden, "7 numbers (X, Z, B, dX, dZ, dB and the sample count)")
+        values = [as_float(v) for v in hidden]
+        require_state("tapmp_plant_state_check", values[:6], values[6], list(self.reals[_STATE_OUTPUTS]))
 
     def hidden_state(self):
         return None if self.model is None else [*self.model.state, self.model.sample]
@@ -58,3 +57,4 @@ class TAPMP_Plant(TapmpSlave):
 _FORCES = TAPMP_Plant.block("F1", 3)
 # q1..q3 (measured), q1_true..q3_true, dq1..dq3, X, Z, B, dX, dZ, dB, in table order
 _OUTPUTS = TAPMP_Plant.block("q1", 15)
+_STATE_OUTPUTS = TAPMP_Plant.block("X", 6)  # X, Z, B, dX, dZ, dB: the state itself

@@ -73,3 +73,12 @@ void model_set_hidden(tapmp_instance *inst, const double hidden[])
     inst->m.plant.sample = hidden[6];
     publish(inst);
 }
+
+/* The plant state and sample count of an FMU state, with the outputs X..dB it holds. */
+int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size)
+{
+    const char *name = NULL, *allowed = NULL;
+    double x = 0.0;
+    int bad = tapmp_plant_state_check(hidden, hidden[6], state->reals + VR_X, &name, &x, &allowed);
+    return tapmp_range_text(bad, name, x, allowed, msg, size);
+}

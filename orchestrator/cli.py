@@ -1,6 +1,7 @@
 """Command-line tool ``tapmp`` (also ``python -m orchestrator``)."""
 
 import argparse
+import math
 import os
 import shlex
 import signal
@@ -14,7 +15,7 @@ from tapmp.errors import ModelInputError
 from tapmp.native import NativeModelError
 
 from .engine import build as build_mod
-from tapmp.toolchain import PLATFORMS
+from tapmp.toolchain import PLATFORMS, CacheTrustError
 from .engine.build_native import NativeBuildError
 from .engine.master import CoSimulationError
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
@@ -25,8 +26,8 @@ from .engine.tempdirs import remove_stale_folders
 from .errors import UsageError
 from .experiments.estimate import check_output_size
 from .experiments.export import ExportError
-from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, output_lock, prepare_output,
-                                  write_comparison_status)
+from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, check_output, output_lock,
+                                  prepare_output, write_comparison_status)
 from .experiments.progress import Progress
 from .experiments.reading import ResultFolderError
 from .experiments.results import one_line, run_scenario
@@ -39,7 +40,7 @@ from .studies.study import StudyError
 # disk, a scheduler address). Every other exception is a programming error and shows its traceback.
 USER_ERRORS = (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
                ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, OSError)
+               ResultsWriteError, build_mod.BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
 
 
 def _family(value: str) -> str:
@@ -98,14 +99,15 @@ def _load(args):
 
 
 def record_every(value) -> int:
-    """--record-every checked: an integer >= 1."""
+    """--record-every checked: an integer from 1 to MAX_INT (the scenario key's bound)."""
+    from .experiments.scenario import MAX_INT
     try:
         n = int(value)
     except ValueError:
         n = 0
-    if n < 1:
-        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer >= 1 "
-                                         "(keep every N-th step)")
+    if not 1 <= n <= MAX_INT:
+        raise UsageError(f"--record-every = {value!r} is invalid: allowed is an integer from 1 to {MAX_INT} "
+                         "(keep every N-th step)")
     return n
 
 
@@ -120,10 +122,13 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
     """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
     for the duration; comparison.json records "running", then "completed", or "failed" /
     "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
-    an unfinished one is replaced, its runs with it."""
+    an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
+    unless empty (see folders.check_output)."""
     laws = {name: sc.law for name, sc in runs.items()}
+    # before the lock file is made: a refused folder stays as it was
+    check_output(out, overwrite, "comparison", laws, unmarked_only=True)
     with output_lock(out):
-        prepare_output(out, overwrite, "comparison")
+        prepare_output(out, overwrite, "comparison", laws)
         write_comparison_status(out, scenario.name, laws, "running")
         try:
             yield out
@@ -184,15 +189,32 @@ def cmd_check(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    from .experiments.analysis import analyze, pole_table, table
-    scenario = load(args.scenario, args.set)
+    from .experiments.analysis import analyze, pole_table, robustness_table, table
+    from .experiments.stability import verdict_for
+    scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .experiments.baselines import compare_runs
+    for key, v in (("--delay", args.delay), ("--actuator-bandwidth", args.actuator_bandwidth)):
+        if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
+            raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
+                "a delay >= 0 s" if key == "--delay" else "a bandwidth > 0 Hz (finite)"))
     result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
                      responses=args.responses)
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
           "input force, one motor or mode at a time")
     print(table(result))
+    print("robustness on the same loop: disk margins (symmetric), all three motors' forces scaled at once, "
+          "a delay in one loop, a first-order actuator on every motor")
+    print(robustness_table(result))
+    if args.delay or args.actuator_bandwidth is not None:
+        from .experiments.analysis import inserted_radius
+        what = " and ".join(x for x in (f"a delay of {args.delay:g} s on every motor's force" if args.delay else "",
+                                        f"a first-order actuator of {args.actuator_bandwidth:g} Hz on every motor"
+                                        if args.actuator_bandwidth is not None else "") if x)
+        print(f"spectral radius of the sampled loop with {what} (each inserted alone; stable if < 1 - 1e-6):")
+        for name, sc in compare_runs(scenario).items():
+            r = inserted_radius(sc, args.delay or 0.0, args.actuator_bandwidth)
+            print(f"  {name}: " + ", ".join(f"{k} {v:.6f} ({verdict_for(v)})" for k, v in r.items() if v is not None))
     print(pole_table(result))
     print(f"analysis.json and figures in {out}")
     return 0
@@ -325,17 +347,26 @@ def summary_table(results: dict) -> str:
     """The short table `tapmp compare` prints: one row per run (see summary_rows)."""
     rows = summary_rows(results)
     w = max(len("run"), *(len(r[0]) for r in rows))
+    hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), 0.0)
+    head = f"F RMS > {hz:g} Hz [N]"
     lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'vs APD-DC: tracking':>19}  "
-             f"{'sync':>8}"]
+             f"{'sync':>8}  {head:>19}"]
     for name, t, y, rt, ry in rows:
-        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%")
+        f = results[name].get("force_hf_rms_n")
+        effort = f"{sum(f) / len(f):.4g}" if f else "n/a"  # the mean over the motors
+        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%  {effort:>19}")
     return "\n".join(lines)
 
 
+MAX_WORKERS = 4096  # processes one command may start; bounded before the number reaches the OS or Dask
+
+
 def _check_workers(workers: int) -> None:
-    """--workers: UsageError unless at least one process."""
+    """--workers: UsageError unless 1 to MAX_WORKERS processes."""
     if workers < 1:
         raise UsageError(f"--workers = {workers} is invalid: allowed is an integer >= 1")
+    if workers > MAX_WORKERS:
+        raise UsageError(f"--workers = {workers} is invalid: allowed is an integer from 1 to {MAX_WORKERS}")
 
 
 def _jobs(args) -> int:
@@ -470,7 +501,8 @@ def cmd_study(args) -> int:
               + (f", {c['rejected']} rejected (not stable, not run)" if c["rejected"] else ""))
     if study.tune:
         for law, r in s["tuning"].items():
-            print(f"{law}: objective {r['start']:.4f} um (start gains) -> {r['tuned']:.4f} um (tuned, "
+            start = f"{r['start']:.4f} um" if r["start"] is not None else "not run (start gains rejected)"
+            print(f"{law}: objective {start} (start gains) -> {r['tuned']:.4f} um (tuned, "
                   f"{r['evaluations']} evaluations); preset {r['preset']}")
         print(f"presets, comparison and objective plot in {s['write_to']}")
         print(f"{study.name}: {s['cases']} evaluations ({s['wall_time_s']:.1f} s): {counts} -> "
@@ -622,6 +654,11 @@ def parser() -> argparse.ArgumentParser:
     an.add_argument("--f-max", type=float, default=None, metavar="HZ",
                     help="highest frequency (default: the Nyquist frequency 1/(2 step))")
     an.add_argument("--points", type=int, default=400, help="frequencies, log-spaced (default 400)")
+    an.add_argument("--delay", type=float, default=None, metavar="SECONDS",
+                    help="also report each run's spectral radius with this delay on every motor's force")
+    an.add_argument("--actuator-bandwidth", type=float, default=None, metavar="HZ",
+                    help="also report each run's spectral radius with a first-order actuator (current loop) of "
+                    "this bandwidth on every motor")
     an.add_argument("--responses", action="store_true", help="also write frequency_response.csv: magnitude and "
                     "phase of L, S, T and e/d per run and break point at every frequency")
     an.set_defaults(func=cmd_analyze)

@@ -255,6 +255,27 @@ class ControllerModel:
         skipped = lib.tapmp_clock_sampled(clock, self._k[0], steps)
         return out, self._warning(lib.tapmp_clock_skipped_text, t, steps) if skipped else None
 
+    def next_event_time(self) -> float:
+        """The next sample instant not sampled yet, t0 + k T_s [s]: the controller's next time event
+        in FMI 3.0's Event Mode (nextEventTime), the start time t0 before the first sample."""
+        clock = self._clock
+        return clock.t0 + ((clock.k_last + 1.0) if clock.has_sample else 0.0) * clock.T_s
+
+    def event(self, t: float, ref, q, dq_in):
+        """The discrete update at an event at time t [s] (FMI 3.0 Event Mode,
+        fmi3UpdateDiscreteStates): at a sample instant not sampled yet, sample the inputs and return
+        the new (F, u, e, e_s) of :meth:`sample`, which belong to the instant t and are the outputs from
+        t on; at any other time return None (the outputs hold). The host stops at every sample instant
+        (:meth:`next_event_time`), so the interval since the previous sample is always one T_s on an
+        unbroken run and no warning arises; the steps in between change nothing."""
+        lib, clock = self._lib, self._clock
+        if not lib.tapmp_clock_at(clock, t, self._k, self._steps, self._missed):
+            return None
+        steps = self._steps[0]
+        out = self.sample(t, steps * self.T_s, ref, q, dq_in)
+        lib.tapmp_clock_sampled(clock, self._k[0], steps)
+        return out
+
     def _warning(self, text_function, t: float, x: float) -> str:
         """The text the C model writes for a warning of the clock (tapmp_clock_*_text)."""
         text_function(self._clock, t, x, self._text, len(self._text))

@@ -15,7 +15,7 @@ from typing import NamedTuple
 from .params import (DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
                      SERVO_STEP, START_TIME, STOP_TIME)
 from .plant import PlantConfig
-from .trajectory import TrajectoryParams
+from .trajectory import TrajectoryParams, circle_reference
 
 PLANT = "TAPMP_Plant"
 CONTROLLER = "TAPMP_Controller"
@@ -94,6 +94,12 @@ def _pose(suffix: str, causality: str, what: str) -> list[Var]:
 
 
 _CFG = PlantConfig()
+# The plant's default initial state (X0, Z0, B0 [m, m, rad], dX0, dZ0, dB0 [m/s, m/s, rad/s]):
+# the default reference's pose and velocity at the DefaultExperiment's start, so that the three
+# FMUs wired with their defaults run the paper's simulation (scenarios/paper_simulation.toml,
+# start_on_trajectory) with no start transient. The readable circle formula gives the same
+# doubles as the C model's tapmp_reference (dZ0 is -0.0), without loading the C library here.
+INITIAL_STATE: tuple[float, ...] = circle_reference(START_TIME, TrajectoryParams())[:6]
 _PLANT_CFG_DOC = {
     "encoder_resolution": ("m", "encoder (grating ruler) resolution of the measured q; 0 = no quantization"),
     "c_v1": ("N.s/m", "viscous friction coefficient of mover 1"),
@@ -127,8 +133,10 @@ PLANT_VARS: tuple[Var, ...] = tuple(
     + [Var(f"dq{i}", "output", "m/s", f"velocity of motor {i}") for i in (1, 2, 3)]
     + [v for v in _pose("", "output", "")[:6]]
     + _model_params("plant", "fixed")
-    + [Var(f"{a}0", "parameter", u, f"initial {d}", variability="fixed") for a, u, d in _AXES]
-    + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d}", variability="fixed") for a, u, d in _AXES]
+    + [Var(f"{a}0", "parameter", u, f"initial {d} (default: the reference's at the start time)",
+           x, variability="fixed") for (a, u, d), x in zip(_AXES, INITIAL_STATE[:3])]
+    + [Var(f"d{a}0", "parameter", _RATE[u], f"initial rate of {d} (default: the reference's at the start time)",
+           x, variability="fixed") for (a, u, d), x in zip(_AXES, INITIAL_STATE[3:])]
     + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _PLANT_CFG_DOC.items()]
     + [Var("substeps", "parameter", "", "RK4 integration steps per communication step (>= 1)",
            _CFG.substeps, type="Integer", variability="fixed"),
@@ -219,7 +227,9 @@ TRAJECTORY_VARS: tuple[Var, ...] = tuple(
 # checks them with the C model's generated checks (settings_check_source), which the Python
 # model, scenarios, studies and `tapmp check` run too: at fmi2SetReal for a tunable parameter in
 # Step Mode, else when the model is set up.
-_MASS = (1e-6, 1e6)
+# Masses from 1e-12: the paper-gain reading (orchestrator/experiments/paper_gains.py) gives the
+# controller its nominal masses times K_T, e.g. I_y K_T = 3.2e-7 in command units.
+_MASS = (1e-12, 1e6)
 RANGES: dict[str, tuple[float, float]] = {
     "m_p": _MASS, "m_1": _MASS, "m_2": _MASS, "m_3": _MASS, "I_y": _MASS, "L_1": (1e-6, 1e3),
     "g": (1e-6, 1e6),

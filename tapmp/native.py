@@ -11,7 +11,9 @@ The library is, in this order:
   pythonfmu FMUs' resources at build time): an FMU never compiles at run time;
 * compiled on first use by the project's toolchain (tapmp.toolchain: zig cc, or $CC) into
   the cache folder ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
-  under a file lock so that concurrent processes (a study's workers) build it once.
+  under a file lock so that concurrent processes (a study's workers) build it once. The cache
+  folder and the library must belong to this user and be writable by no one else
+  (tapmp.toolchain.build_cached), else CacheTrustError and nothing is loaded.
 Both names carry a hash of the C sources, so an edited model is never run from a stale library.
 
 The range checks of the settings are generated C too (``tapmp_settings.h``, from the settings
@@ -127,7 +129,15 @@ def load():
         ffi = FFI()
         ffi.cdef(cdef_text(HEADER.read_text()))
         ffi.cdef(cdef_text(LOOP_HEADER.read_text()))
-        _LOADED = ffi, ffi.dlopen(str(library_path()))
+        path = library_path()
+        try:
+            lib = ffi.dlopen(str(path))
+            for name in dir(lib):  # every declared function, now: a stale or foreign file fails here
+                getattr(lib, name)
+        except (OSError, AttributeError) as err:
+            raise NativeModelError(f"cannot load the compiled C model {path}: {' '.join(str(err).split())} "
+                                   "(delete the file so that it is compiled again)") from None
+        _LOADED = ffi, lib
     return _LOADED
 
 

@@ -130,8 +130,6 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
     return output
 
 
-# -- universal (fat) Mach-O ----------------------------------------------------------------
-
 def cache_dir() -> Path:
     """Folder of libraries compiled on first use: $TAPMP_CACHE, $XDG_CACHE_HOME/tapmp or ~/.cache/tapmp."""
     if os.environ.get("TAPMP_CACHE"):
@@ -139,18 +137,99 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tapmp"
 
 
-def build_cached(path: Path, compile_into) -> Path:
-    """``path`` (a library in the cache), compiled by ``compile_into(tmp_path)`` unless present.
+class CacheTrustError(RuntimeError):
+    """The cache folder, a folder above it or a library in it could be changed by another user;
+    the message names the path and what is wrong in one line."""
 
-    A file lock beside it makes concurrent builds (a study's workers) wait for the first one, and
-    the library appears under its name only once complete (written to a temporary file, then
-    renamed). OSError if the folder cannot be written; compile_into's errors pass through."""
-    if path.is_file():
+
+CACHE_FIX = "set TAPMP_CACHE to a folder of your own that only you can write (chmod 700)"
+
+
+def _owner(uid: int) -> str:
+    """``uid`` with its user name where the system knows one."""
+    import pwd
+    try:
+        return f"uid {uid} ({pwd.getpwuid(uid).pw_name})"
+    except KeyError:
+        return f"uid {uid}"
+
+
+def _distrust(path: Path, st: os.stat_result, *, ancestor: bool) -> str | None:
+    """What makes ``path`` (stat ``st``) unsafe to load code through, or None: another user owns
+    it (for a folder above the cache, root may own it too), or its group or others may write it
+    (a folder above the cache may be world-writable with the sticky bit, as /tmp is: there no one
+    can rename or remove another user's entries)."""
+    import stat
+    me = os.geteuid()
+    if st.st_uid != me and not (ancestor and st.st_uid == 0):
+        return f"{path} belongs to {_owner(st.st_uid)}, not to this user ({_owner(me)})"
+    if ancestor and st.st_mode & stat.S_ISVTX:
+        return None
+    if st.st_mode & 0o022:
+        who = "its group and others" if st.st_mode & 0o022 == 0o022 else \
+            "its group" if st.st_mode & 0o020 else "others"
+        return f"{path} is writable by {who} (mode {stat.S_IMODE(st.st_mode):04o})"
+    return None
+
+
+def private_folder(folder: Path) -> Path:
+    """``folder`` (the cache) resolved, created with mode 0700 if missing, after checking that
+    no other user can change it or what it holds: it and every folder above it belong to this
+    user (or, above it, to root) and are writable by no one else (above it, a sticky folder such
+    as /tmp may be world-writable). CacheTrustError names the first offending path; OSError if it
+    cannot be created."""
+    folder = Path(folder).expanduser().absolute()
+    if not hasattr(os, "geteuid"):  # Windows: no POSIX owners and modes to check
+        folder.mkdir(parents=True, exist_ok=True)
+        return folder
+    if not folder.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        folder.chmod(0o700)  # whatever the umask: the folder code is loaded from is private
+    folder = folder.resolve()
+    if not folder.is_dir():
+        raise CacheTrustError(f"the compiled-code cache {folder} is not a folder: {CACHE_FIX}")
+    for p in (folder, *folder.parents):
+        problem = _distrust(p, p.stat(), ancestor=p != folder)
+        if problem:
+            where = "the compiled-code cache" if p == folder else f"a folder above the compiled-code cache {folder}"
+            raise CacheTrustError(f"{where}: {problem}, so another user could plant a library there "
+                                  f"that tapmp would run: {CACHE_FIX}")
+    return folder
+
+
+def check_private_file(path: Path) -> Path:
+    """``path``, a library in the private cache folder, if it is a regular file (not a symbolic
+    link) of this user that no one else may write; else CacheTrustError naming it."""
+    import stat
+    if not hasattr(os, "geteuid"):
         return path
+    st = os.lstat(path)
+    if not stat.S_ISREG(st.st_mode):
+        raise CacheTrustError(f"the compiled-code cache: {path} is not a regular file (a symbolic link or other), "
+                              f"so it could lead to a library another user planted: delete it, or {CACHE_FIX}")
+    problem = _distrust(path, st, ancestor=False)
+    if problem:
+        raise CacheTrustError(f"the compiled-code cache: {problem}, so it may be a library another user planted; "
+                              f"tapmp does not load it: delete it, or {CACHE_FIX}")
+    return path
+
+
+def build_cached(path: Path, compile_into) -> Path:
+    """``path`` (a library in the cache), compiled by ``compile_into(tmp_path)`` unless present;
+    returns the path to load (in the resolved cache folder).
+
+    Before anything is loaded or built, the cache folder is checked as ssh checks its keys
+    (:func:`private_folder`, :func:`check_private_file`): a library another user could have
+    written is never returned (CacheTrustError). A file lock beside it makes concurrent builds
+    (a study's workers) wait for the first one, and the library appears under its name only once
+    complete (written to a temporary file, then renamed). OSError if the folder cannot be
+    written; compile_into's errors pass through."""
+    path = private_folder(Path(path).parent) / Path(path).name
+    if os.path.lexists(path):
+        return check_private_file(path)
     from filelock import FileLock
-    path.parent.mkdir(parents=True, exist_ok=True)
     with FileLock(str(path.parent / f".{path.stem}.lock")):
-        if not path.is_file():
+        if not os.path.lexists(path):
             fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
             os.close(fd)
             try:
@@ -159,8 +238,10 @@ def build_cached(path: Path, compile_into) -> Path:
                 os.replace(tmp, path)
             finally:
                 Path(tmp).unlink(missing_ok=True)
-    return path
+    return check_private_file(path)
 
+
+# -- universal (fat) Mach-O ----------------------------------------------------------------
 
 FAT_MAGIC = 0xCAFEBABE
 CPU_TYPE = {0x01000007: "x86_64", 0x0100000C: "arm64"}

@@ -9,6 +9,7 @@ fails the test instead.
 """
 
 import os
+import shutil
 import tempfile
 from ctypes import byref
 from pathlib import Path
@@ -28,6 +29,9 @@ REQUIRE_SHARED = ("CI", "TAPMP_REQUIRE_SHARED")  # environment variables that ma
 
 
 def pytest_configure(config):
+    # the system's temporary folder and what it held before any test (tests/project/test_temp_folder.py)
+    config.system_temp = tempfile.gettempdir()
+    config.system_temp_before = set(os.listdir(config.system_temp))
     config.addinivalue_line("markers", "needs_shared(path, ...): the test needs ../shared/<path> (relative to the "
                                        "repository root); skipped without it, failed without it in CI")
 
@@ -55,12 +59,14 @@ def shared(relative: str) -> Path:
 FOLDER_MARKERS = {"interop": ("interop", "slow")}
 # Markers every test using a fixture carries: native_built compiles every family for every
 # platform (about a minute), faulty_ssps builds three plant FMUs of their own.
+LAST_TEST = "test_temp_folder.py::test_the_suite_leaves_at_most_100_mb_in_the_temporary_folders"
 FIXTURE_MARKERS = {"native_built": ("slow",), "faulty_ssps": ("slow",)}
 
 
 def pytest_collection_modifyitems(config, items):
     """Adds :data:`FOLDER_MARKERS` and :data:`FIXTURE_MARKERS` to the tests they name, and
-    ``interop`` and ``slow`` to every test that needs a tool of ../shared/tools."""
+    ``interop`` and ``slow`` to every test that needs a tool of ../shared/tools, and runs the
+    temporary-folder test (:data:`LAST_TEST`) after every other."""
     here = Path(__file__).resolve().parent
     for item in items:
         names = set(getattr(item, "fixturenames", ()))
@@ -77,6 +83,9 @@ def pytest_collection_modifyitems(config, items):
             continue  # a test outside tests/ (a scratch repository's)
         for name in FOLDER_MARKERS.get(folder, ()):
             item.add_marker(name)
+    # what the suite leaves in the temporary folders is measured after every other test
+    last = [item for item in items if item.nodeid.endswith(LAST_TEST)]
+    items[:] = [item for item in items if not item.nodeid.endswith(LAST_TEST)] + last
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -97,15 +106,28 @@ def session_temp_folder(tmp_path_factory):
         yield folder
 
 
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Records whether each phase of a test passed (``item.phase_failed``), for own_temp_folder."""
+    report = yield
+    if report.failed:
+        item.phase_failed = True
+    return report
+
+
 @pytest.fixture(autouse=True)
-def own_temp_folder(tmp_path_factory, monkeypatch):
+def own_temp_folder(request, tmp_path_factory, monkeypatch):
     """Every test's temporary files in its own folder (beside its tmp_path, under pytest's base
     folder): Python's tempfile (fmpy's extractions, Dask's scratch space), and TMPDIR for C
-    libraries (Ecos's ecos_ssp_*) and child processes; nothing is left in the system's /tmp."""
+    libraries (Ecos's ecos_ssp_*) and child processes; nothing is left in the system's /tmp.
+    Removed when the test passed, kept for a failed one (as pytest keeps a failed test's tmp_path:
+    tmp_path_retention_policy = "failed" in pyproject.toml)."""
     folder = tmp_path_factory.mktemp("tmp")
     monkeypatch.setenv("TMPDIR", str(folder))
     monkeypatch.setattr(tempfile, "tempdir", str(folder))
-    return folder
+    yield folder
+    if not getattr(request.node, "phase_failed", False):
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

@@ -9,7 +9,7 @@
 #    third-party FMI tools in ../shared/tools: fmusim, OMSimulator), clang and libclang-rt-14-dev
 #    (libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer for the native FMUs' fuzz
 #    targets and sanitizer builds; TAPMP_FUZZ_SECONDS sets the seconds per fuzz target,
-#    default 60), and python3-dev if this Python has no C headers (Python.h, for the pythonfmu
+#    default 60), chromium (renders the documentation inside the native FMUs headless), and python3-dev if this Python has no C headers (Python.h, for the pythonfmu
 #    FMUs' binary). The FMUs' binaries need no system compiler: zig cc from PyPI's ziglang
 #    package builds them for every platform. As root directly, else through sudo;
 #    `apt-get update` only if installing fails (empty or stale package lists).
@@ -17,7 +17,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
-PACKAGES=(libtbb12 wine64 qemu-user libc6-arm64-cross libminizip1 libxml2 clang libclang-rt-14-dev)
+PACKAGES=(libtbb12 wine64 qemu-user libc6-arm64-cross libminizip1 libxml2 clang libclang-rt-14-dev chromium)
 
 missing=()
 for package in "${PACKAGES[@]}"; do

@@ -1,8 +1,10 @@
 /* FMI 3.0 co-simulation interface of a native TAPMP FMU: maps the fmi3 functions onto the
  * version-neutral instance (instance.c). Variables are Float64 and Int32; the independent
- * variable `time` has the value reference N_VARS. Model Exchange, Scheduled Execution,
- * clocks, event mode and derivatives are not provided: those calls return fmi3Error with a
- * message (their capability flags are false in the modelDescription). */
+ * variable `time` has the value reference N_VARS. A model with time events (MODEL_HAS_EVENTS: the
+ * controller) has Event Mode (hasEventMode, mightReturnEarlyFromDoStep); the others refuse
+ * eventModeUsed. Model Exchange, Scheduled Execution, clocks and derivatives are not provided:
+ * those calls return fmi3Error with a message (their capability flags are false in the
+ * modelDescription). */
 #include <stdlib.h>
 #include <string.h>
 
@@ -64,19 +66,25 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    (void)resourcePath, (void)visible, (void)earlyReturnAllowed, (void)requiredIntermediateVariables;
+    (void)resourcePath, (void)visible, (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables, (void)intermediateUpdate;
+#ifndef MODEL_HAS_EVENTS
     if (eventModeUsed) {
         log_no_instance(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: eventModeUsed = true "
                         "is invalid: allowed is false (hasEventMode is false for " MODEL_IDENTIFIER_STRING ")");
         return NULL;
     }
+#endif
     fmi3_env *env = calloc(1, sizeof *env);
     if (!env) return NULL;
     env->env = instanceEnvironment;
     env->log = logMessage;
     tapmp_instance *inst = tapmp_new(instanceName, "fmi3", logger, env, loggingOn, instantiationToken);
     if (!inst) free(env);
+    else {
+        inst->event_mode_used = eventModeUsed != fmi3False;
+        inst->early_return_allowed = earlyReturnAllowed != fmi3False;
+    }
     return inst;
 }
 
@@ -254,13 +262,39 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
 {
     (void)noSetFMUStatePriorToCurrentPoint;
     INSTANCE(c);
-    int status = tapmp_do_step(inst, t, h);
-    if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
+    int event = 0, early = 0;
+    double last = inst->time;
+    int status = tapmp_do_step_events(inst, t, h, &event, &early, &last);
+    if (eventHandlingNeeded) *eventHandlingNeeded = event ? fmi3True : fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
-    if (earlyReturn) *earlyReturn = fmi3False;
-    if (lastSuccessfulTime) *lastSuccessfulTime = inst->time;
+    if (earlyReturn) *earlyReturn = early ? fmi3True : fmi3False;
+    if (lastSuccessfulTime) *lastSuccessfulTime = last;
     return (fmi3Status)status;
 }
+
+#ifdef MODEL_HAS_EVENTS
+fmi3Status fmi3EnterEventMode(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_enter_event_mode(inst); }
+fmi3Status fmi3EnterStepMode(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_enter_step_mode(inst); }
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate,
+                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime)
+{
+    INSTANCE(c);
+    int changed = 0, defined = 0;
+    double next = 0.0;
+    int status = tapmp_update_discrete_states(inst, &changed, &defined, &next);
+    /* one update settles the event: the model's discrete states depend on nothing it changes */
+    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
+    if (terminateSimulation) *terminateSimulation = fmi3False;
+    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
+    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
+    if (nextEventTimeDefined) *nextEventTimeDefined = defined ? fmi3True : fmi3False;
+    if (nextEventTime) *nextEventTime = next;
+    return (fmi3Status)status;
+}
+#endif
 
 /* Everything below belongs to interfaces this FMU does not provide. PARAMS is the
  * parenthesized parameter list, the rest marks the parameters other than c as unused. */
@@ -271,8 +305,14 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
 #define NO_ME "Model Exchange is not provided"
 #define NO_CLOCKS "this FMU has no clocks"
 #define NO_DERIVATIVES "providesDirectionalDerivatives and providesAdjointDerivatives are false"
+#ifndef MODEL_HAS_EVENTS
 NOT_PROVIDED0(EnterEventMode, "hasEventMode is false")
 NOT_PROVIDED0(EnterStepMode, "hasEventMode is false")
+NOT_PROVIDED(UpdateDiscreteStates, "hasEventMode is false",
+             (fmi3Instance c, fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *d, fmi3Boolean *e, fmi3Boolean *f,
+              fmi3Float64 *g),
+             (void)a, (void)b, (void)d, (void)e, (void)f, (void)g)
+#endif
 NOT_PROVIDED0(EnterConfigurationMode, "this FMU has no structural parameters")
 NOT_PROVIDED0(ExitConfigurationMode, "this FMU has no structural parameters")
 NOT_PROVIDED(GetDirectionalDerivative, NO_DERIVATIVES,
@@ -307,10 +347,6 @@ NOT_PROVIDED(SetShiftFraction, NO_CLOCKS,
              (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[], const fmi3UInt64 r[]),
              (void)vr, (void)n, (void)c_, (void)r)
 NOT_PROVIDED0(EvaluateDiscreteStates, NO_ME)
-NOT_PROVIDED(UpdateDiscreteStates, "hasEventMode is false",
-             (fmi3Instance c, fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *d, fmi3Boolean *e, fmi3Boolean *f,
-              fmi3Float64 *g),
-             (void)a, (void)b, (void)d, (void)e, (void)f, (void)g)
 NOT_PROVIDED0(EnterContinuousTimeMode, NO_ME)
 NOT_PROVIDED(CompletedIntegratorStep, NO_ME, (fmi3Instance c, fmi3Boolean a, fmi3Boolean *b, fmi3Boolean *d),
              (void)a, (void)b, (void)d)

@@ -5,22 +5,36 @@
  *   doStep is refused, so no stale or non-finite value travels on;
  * - a call the co-simulation state machine does not allow in the current mode is an error;
  * - doStep(t, h) needs a finite t that continues the previous step (t equals the end of
- *   the previous step, or the start time, within TIME_TOLERANCE max(1 s, |t|)) and a
- *   finite h > 0; outputs are computed, checked to be finite and only then published. */
+ *   the previous step, or the start time, within the absolute time_tolerance()) and a
+ *   finite h > 0 whose end t + h lies after the previous end: time only moves forward;
+ *   outputs are computed, checked to be finite and only then published;
+ * - an FMU state is checked whole (its mode, settings, outputs and the model's hidden
+ *   values, model_check_hidden) before any of it is applied. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#ifdef _WIN32
+#define WIN32_LEAN_AND_MEAN
+#include <windows.h>  /* SRWLOCK */
+#else
+#include <pthread.h>
+#endif
+
 #include "instance.h"
 
 #define INSTANCE_MAGIC 0x7A3D9C51u
-#define TIME_TOLERANCE 1e-9
+/* How far [s] a doStep's communication point may lie from the instance's time: 1e-4 of the servo
+ * period T_s = 1e-4 s. That is the controller's own tolerance for its sample instants
+ * (TAPMP_SAMPLE_TOLERANCE T_s), so a point accepted here is the same instant to every model, and
+ * it is absolute: it does not grow with the time (1e-9 |t| let 1 ms pass at t = 1e6 s). */
+#define TIME_TOLERANCE 1e-8
 
 TAPMP_DEFINITION const tapmp_var VARS[N_VARS] = MODEL_VARS_INIT;
 
-static const char *MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
+static const char *MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated", "Event Mode"};
 
 char *tapmp_repr(double x, char *buf)
 {
@@ -66,23 +80,58 @@ char *tapmp_repr(double x, char *buf)
 
 /* Live instances: a call on, or a free of, an instance that is not live (freed already,
  * or a stray pointer) is refused without touching it. Kept compact, so the check on every
- * call scans only the live instances of this FMU in the process (usually one). */
+ * call scans only the live instances of this FMU in the process (usually one). FMI lets a
+ * host run different instances on different threads: the registry, the one state they share,
+ * is read and changed only under registry_lock. */
 #define MAX_LIVE 4096
 static tapmp_instance *live[MAX_LIVE];
 static int n_live;
+#ifdef _WIN32
+static SRWLOCK registry_lock = SRWLOCK_INIT;
+#define LOCK() AcquireSRWLockExclusive(&registry_lock)
+#define UNLOCK() ReleaseSRWLockExclusive(&registry_lock)
+#else
+static pthread_mutex_t registry_lock = PTHREAD_MUTEX_INITIALIZER;
+#define LOCK() pthread_mutex_lock(&registry_lock)
+#define UNLOCK() pthread_mutex_unlock(&registry_lock)
+#endif
 
 static int registry_add(tapmp_instance *inst)
 {
-    if (n_live == MAX_LIVE) return 0;
-    live[n_live++] = inst;
-    return 1;
+    LOCK();
+    int added = n_live < MAX_LIVE;
+    if (added) live[n_live++] = inst;
+    UNLOCK();
+    return added;
+}
+
+static void registry_remove(const tapmp_instance *inst)
+{
+    LOCK();
+    for (int i = 0; i < n_live; i++)
+        if (live[i] == inst) {
+            live[i] = live[--n_live];
+            break;
+        }
+    UNLOCK();
 }
 
 int tapmp_alive(const tapmp_instance *inst)
 {
-    for (int i = n_live - 1; i >= 0; i--)
-        if (live[i] == inst) return 1;
-    return 0;
+    int found = 0;
+    LOCK();
+    for (int i = n_live - 1; i >= 0 && !found; i--) found = live[i] == inst;
+    UNLOCK();
+    return found;
+}
+
+/* TIME_TOLERANCE, or at times so large that it is below 4 units in the last place of the time,
+ * those: two exact ways of computing the same communication point (t0 + k h, or the previous
+ * t + h) differ after rounding by up to about two of them. */
+static double time_tolerance(double time)
+{
+    double a = fabs(time);
+    return fmax(TIME_TOLERANCE, 4.0 * (nextafter(a, INFINITY) - a));
 }
 
 tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, void *env,
@@ -123,11 +172,7 @@ tapmp_instance *tapmp_new(const char *name, const char *fmi, tapmp_logger log, v
 void tapmp_free(tapmp_instance *inst)
 {
     if (!inst) return;
-    for (int i = 0; i < n_live; i++)
-        if (live[i] == inst) {
-            live[i] = live[--n_live];
-            break;
-        }
+    registry_remove(inst);
     for (size_t i = 0; i < inst->n_states; i++) free(inst->states[i]);  /* states the master did not free */
     free(inst->states);
     inst->magic = 0;
@@ -188,8 +233,10 @@ int tapmp_range_text(int kind, const char *name, double value, const char *allow
 {
     char v[40];
     if (!kind) return 1;
-    if (kind == 2) snprintf(v, sizeof v, "%d", (int)value);
-    return tapmp_invalid_text(msg, size, name, kind == 2 ? v : tapmp_repr(value, v), allowed, 0, 0);
+    /* an integer setting's value may lie outside int (that is why it is refused): printed, not converted */
+    if (kind == 2) snprintf(v, sizeof v, "%.0f", value);
+    return tapmp_invalid_text(msg, size, name ? name : "a setting", kind == 2 ? v : tapmp_repr(value, v),
+                              allowed ? allowed : "a value in its range", 0, 0);
 }
 
 /* Range of a parameter, declared as min/max in the modelDescription (tapmp/interface.py). */
@@ -268,7 +315,8 @@ int tapmp_exit_initialization(tapmp_instance *inst)
 {
     if (inst->mode != MODE_INITIALIZATION)
         return tapmp_mode_error(inst, "ExitInitializationMode", "Initialization Mode");
-    inst->mode = MODE_STEP;
+    /* FMI 3.0: with eventModeUsed the instance leaves initialization into Event Mode */
+    inst->mode = inst->event_mode_used ? MODE_EVENT : MODE_STEP;
     inst->retune = inst->dirty = 0;
     if (inst->failed) return ST_ERROR;
     int status = setup(inst);
@@ -287,6 +335,8 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     char v[40], w[40], allowed[160], msg[TAPMP_MESSAGE_MAX];
     if (inst->mode != MODE_STEP) {
         const char *hint = inst->mode == MODE_TERMINATED ? " (the instance is terminated; reset it first)" :
+                           inst->mode == MODE_EVENT ? " (finish the event first: fmi3UpdateDiscreteStates, "
+                           "fmi3EnterStepMode)" :
                            " (leave initialization first: EnterInitializationMode, ExitInitializationMode)";
         return tapmp_fail(inst, "%sDoStep is not allowed in %s: allowed in Step Mode%s", inst->fmi,
                           MODE_NAMES[inst->mode], hint);
@@ -301,10 +351,17 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     if (!isfinite(t + h))
         return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a step whose end t + h is "
                           "finite (at t = %.6g s)", tapmp_repr(h, v), t);
-    if (fabs(t - inst->time) > TIME_TOLERANCE * fmax(1.0, fabs(inst->time))) {
+    double tol = time_tolerance(inst->time);
+    if (fabs(t - inst->time) > tol) {
         snprintf(allowed, sizeof allowed, "the end of the previous step, %s s (within %g s)",
-                 tapmp_repr(inst->time, w), TIME_TOLERANCE * fmax(1.0, fabs(inst->time)));
+                 tapmp_repr(inst->time, w), tol);
         return tapmp_invalid(inst, "currentCommunicationPoint", tapmp_repr(t, v), allowed, 0);
+    }
+    if (!(t + h > inst->time)) {  /* t within the tolerance before the time, h too small to make up for it */
+        char e[40];
+        return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a step whose end t + h = %s s "
+                          "lies after the end of the previous step, %s s (time only moves forward; at t = %.6g s)",
+                          tapmp_repr(h, v), tapmp_repr(t + h, e), tapmp_repr(inst->time, w), t);
     }
     double out[MODEL_N_OUT];
     ModelData before = inst->m;
@@ -336,10 +393,100 @@ int tapmp_do_step(tapmp_instance *inst, double t, double h)
     return ST_OK;
 }
 
+/* --- events (FMI 3.0 Event Mode) ----------------------------------------------------- */
+
+int tapmp_enter_event_mode(tapmp_instance *inst)
+{
+    if (!inst->event_mode_used)
+        return tapmp_fail(inst, "%sEnterEventMode is not allowed: the instance was created with eventModeUsed = "
+                          "false (allowed: instantiate with eventModeUsed = true)", inst->fmi);
+    if (inst->mode == MODE_EVENT) return ST_OK;  /* the host may announce an event it is in already */
+    if (inst->mode != MODE_STEP) return tapmp_mode_error(inst, "EnterEventMode", "Step Mode");
+    if (inst->failed) return tapmp_fail(inst, "%sEnterEventMode refused after an earlier error: %s", inst->fmi,
+                                        inst->error);
+    inst->mode = MODE_EVENT;
+    return ST_OK;
+}
+
+int tapmp_update_discrete_states(tapmp_instance *inst, int *values_changed, int *next_defined, double *next_time)
+{
+    char v[40], msg[TAPMP_MESSAGE_MAX];
+    double out[MODEL_N_OUT];
+    if (inst->mode != MODE_EVENT) return tapmp_mode_error(inst, "UpdateDiscreteStates", "Event Mode");
+    if (inst->failed) return tapmp_fail(inst, "%sUpdateDiscreteStates at t = %.6g s refused after an earlier error: "
+                                        "%s", inst->fmi, inst->time, inst->error);
+    ModelData before = inst->m;
+    if (inst->retune) {  /* new tunable values take effect at this event */
+        inst->retune = 0;
+        if (!model_validate(inst, msg, sizeof msg) || !check_ranges(inst, msg, sizeof msg))
+            return tapmp_fail(inst, "%s (at t = %.6g s)", msg, inst->time);
+    }
+    if (!model_event_update(inst, out, msg, sizeof msg)) {
+        inst->m = before;
+        return tapmp_fail(inst, "%s", msg);
+    }
+    int changed = 0;
+    for (int i = 0; i < MODEL_N_OUT; i++) {
+        if (!isfinite(out[i])) {
+            inst->m = before;
+            tapmp_invalid_text(msg, sizeof msg, VARS[MODEL_OUT_FIRST + i].name, tapmp_repr(out[i], v), OVERFLOW, 1,
+                               inst->time);
+            return tapmp_fail(inst, "%s", msg);
+        }
+        changed |= memcmp(&out[i], &inst->reals[MODEL_OUT_FIRST + i], sizeof out[i]) != 0;
+    }
+    memcpy(inst->reals + MODEL_OUT_FIRST, out, sizeof out);
+    *values_changed = changed;
+    *next_defined = model_next_event(inst, next_time);
+    if (!*next_defined) *next_time = 0.0;
+    return ST_OK;
+}
+
+int tapmp_enter_step_mode(tapmp_instance *inst)
+{
+    if (inst->mode != MODE_EVENT) return tapmp_mode_error(inst, "EnterStepMode", "Event Mode");
+    inst->mode = MODE_STEP;
+    return ST_OK;
+}
+
+int tapmp_do_step_events(tapmp_instance *inst, double t, double h, int *event_needed, int *early_return,
+                         double *last_time)
+{
+    double te;
+    *event_needed = *early_return = 0;
+    if (!inst->event_mode_used || inst->mode != MODE_STEP || inst->failed || !isfinite(t) ||
+        !(isfinite(h) && h > 0.0) || !model_next_event(inst, &te)) {
+        int status = tapmp_do_step(inst, t, h);  /* no event ahead, or its checks refuse the call */
+        *last_time = inst->time;
+        return status;
+    }
+    char v[40], w[40];
+    double tol = time_tolerance(te);
+    if (inst->time >= te - tol)  /* the event at te is due and was not handled */
+        return tapmp_fail(inst, "%sDoStep at t = %s s is not allowed: the event at t = %s s is pending (doStep "
+                          "returned eventHandlingNeeded = true): allowed is %sEnterEventMode, "
+                          "%sUpdateDiscreteStates, %sEnterStepMode first", inst->fmi, tapmp_repr(t, v),
+                          tapmp_repr(te, w), inst->fmi, inst->fmi, inst->fmi);
+    int passes = t + h > te + tol;
+    if (passes && !inst->early_return_allowed) {
+        char e[40];
+        return tapmp_fail(inst, "communicationStepSize = %s is invalid: allowed is a step that ends at or before the "
+                          "next event, t = %s s (nextEventTime; earlyReturnAllowed is false, so doStep cannot stop "
+                          "there; at t = %s s)", tapmp_repr(h, v), tapmp_repr(te, w), tapmp_repr(t, e));
+    }
+    int status = tapmp_do_step(inst, t, passes ? te - t : h);
+    if (status <= ST_WARNING && passes) inst->time = te;  /* exactly the event's time, not t + (te - t) */
+    *last_time = inst->time;
+    if (status > ST_WARNING) return status;
+    *early_return = passes;
+    *event_needed = passes || fabs(t + h - te) <= tol;  /* stopped at the event, or the step ends on it */
+    return status;
+}
+
 int tapmp_terminate(tapmp_instance *inst)
 {
-    if (inst->mode != MODE_STEP && !inst->failed)
-        return tapmp_mode_error(inst, "Terminate", "Step Mode");
+    if (!MODE_RUNNING(inst->mode) && !inst->failed)
+        return tapmp_mode_error(inst, "Terminate", inst->event_mode_used ? "Step Mode or Event Mode" : "Step Mode");
     inst->mode = MODE_TERMINATED;
     return ST_OK;
 }
@@ -456,7 +603,7 @@ static int settable(tapmp_instance *inst, unsigned vr, double x, const char *cal
     if (var->type == 'R') tapmp_repr(x, text);
     else snprintf(text, sizeof text, "%d", (int)x);
     if (var->causality == 'o') return tapmp_invalid(inst, var->name, text, "no value: it is an output", 0);
-    if (var->variability == 'f' && inst->mode == MODE_STEP)
+    if (var->variability == 'f' && MODE_RUNNING(inst->mode))
         return tapmp_invalid(inst, var->name, text, "no change after initialization: it is a fixed parameter", 0);
     return ST_OK;
 }
@@ -466,7 +613,7 @@ static int settable(tapmp_instance *inst, unsigned vr, double x, const char *cal
 static int check_tunable(tapmp_instance *inst, unsigned vr, double old_real, int old_int)
 {
     char msg[TAPMP_MESSAGE_MAX];
-    if (inst->mode != MODE_STEP || VARS[vr].variability != 't') return ST_OK;
+    if (!MODE_RUNNING(inst->mode) || VARS[vr].variability != 't') return ST_OK;
     if (model_validate(inst, msg, sizeof msg) && check_ranges(inst, msg, sizeof msg)) {
         inst->retune = 1;
         return ST_OK;
@@ -614,12 +761,22 @@ int tapmp_get_state(tapmp_instance *inst, tapmp_state **state)
     return ST_OK;
 }
 
-/* Check a state fully before any of it is applied; 0 + msg if it is not valid. */
-static int validate_state(const tapmp_instance *c, char *msg, size_t size)
+/* The parts of a state that need no model: its mode, whether a model is built (as that mode
+ * requires), its time and its Real values finite; 0 + msg if one is not valid. */
+static int validate_values(const tapmp_instance *c, char *msg, size_t size)
 {
     char v[40];
-    if (c->mode < MODE_INSTANTIATED || c->mode > MODE_TERMINATED) {
-        snprintf(msg, size, "FMU state: mode = %d is invalid: allowed are 0 to 3", (int)c->mode);
+    if (c->mode < MODE_INSTANTIATED || c->mode > MODE_LAST) {
+        snprintf(msg, size, "FMU state: mode = %d is invalid: allowed are 0 to %d", (int)c->mode, (int)MODE_LAST);
+        return 0;
+    }
+    /* EnterInitializationMode builds the model or fails: every later mode has one unless an error
+     * stopped the instance; Instantiated (after Reset too) has none */
+    int needs_model = c->mode != MODE_INSTANTIATED && !c->failed;
+    if (needs_model != c->has_model && (c->mode == MODE_INSTANTIATED || needs_model)) {
+        snprintf(msg, size, "FMU state: has_model = %d is invalid in %s: allowed is %d (%s)", c->has_model,
+                 MODE_NAMES[c->mode], needs_model, needs_model ? "a model is built on entering Initialization "
+                 "Mode" : "no model is built before Initialization Mode");
         return 0;
     }
     if (!isfinite(c->time)) return tapmp_invalid_text(msg, size, "FMU state: time", tapmp_repr(c->time, v),
@@ -628,18 +785,34 @@ static int validate_state(const tapmp_instance *c, char *msg, size_t size)
         if (VARS[vr].type == 'R' && !isfinite(c->reals[vr]))
             return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(c->reals[vr], v),
                                       "a finite number (in the FMU state)", 0, 0.0);
-    double hidden[MODEL_N_HIDDEN > 0 ? MODEL_N_HIDDEN : 1];
-    if (c->has_model) {
-        model_get_hidden(c, hidden);
-        for (int i = 0; i < MODEL_N_HIDDEN; i++)
-            if (!isfinite(hidden[i])) {
-                snprintf(msg, size, "FMU state: hidden state value %d = %s is invalid: allowed is a finite "
-                         "number", i, tapmp_repr(hidden[i], v));
-                return 0;
-            }
-        if (!model_validate(c, msg, size) || !check_ranges(c, msg, size)) return 0;
-    }
     return 1;
+}
+
+/* The model's part of a state with a model: its settings, then its hidden values (finite, then
+ * model_check_hidden); 0 + msg if one is not valid. */
+static int validate_model(const tapmp_instance *c, const double hidden[], char *msg, size_t size)
+{
+    char v[40];
+    if (!model_validate(c, msg, size) || !check_ranges(c, msg, size)) return 0;
+    for (int i = 0; i < MODEL_N_HIDDEN; i++)
+        if (!isfinite(hidden[i])) {
+            snprintf(msg, size, "FMU state: hidden state value %d = %s is invalid: allowed is a finite "
+                     "number", i, tapmp_repr(hidden[i], v));
+            return 0;
+        }
+    static const char prefix[] = "FMU state: ";  /* the model's message follows it in msg (size > the prefix) */
+    memcpy(msg, prefix, sizeof prefix - 1);
+    return model_check_hidden(c, hidden, msg + sizeof prefix - 1, size - (sizeof prefix - 1));
+}
+
+/* Check a state fully before any of it is applied; 0 + msg if it is not valid. */
+static int validate_state(const tapmp_instance *c, char *msg, size_t size)
+{
+    double hidden[MODEL_N_HIDDEN > 0 ? MODEL_N_HIDDEN : 1];
+    if (!validate_values(c, msg, size)) return 0;
+    if (!c->has_model) return 1;
+    model_get_hidden(c, hidden);
+    return validate_model(c, hidden, msg, size);
 }
 
 /* Apply a validated copy: everything from `mode` on, keeping identity and callbacks. */
@@ -740,10 +913,10 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
     tapmp_instance *c = &st->copy;
     if (ok) {
         *c = *inst;
-        c->mode = s->mode >= MODE_INSTANTIATED && s->mode <= MODE_TERMINATED ? (tapmp_mode)s->mode : MODE_INSTANTIATED;
+        c->mode = s->mode >= MODE_INSTANTIATED && s->mode <= MODE_LAST ? (tapmp_mode)s->mode : MODE_INSTANTIATED;
         c->failed = s->failed != 0;
         c->retune = s->retune != 0;
-        c->has_model = 0;  /* validated without the model first: the model is built from valid parameters only */
+        c->has_model = s->has_model != 0;  /* as claimed: validate_values checks it against the mode */
         c->time = s->time;
         memcpy(c->reals, s->reals, sizeof c->reals);
         memcpy(c->ints, s->ints, sizeof c->ints);
@@ -751,15 +924,16 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
         memcpy(c->error, s->error, sizeof c->error);
         memset(&c->m, 0, sizeof c->m);
         if (s->mode != (int)c->mode) {
-            snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to 3", s->mode);
+            snprintf(msg, sizeof msg, "FMU state: mode = %d is invalid: allowed are 0 to %d", s->mode, (int)MODE_LAST);
             ok = 0;
-        } else if ((ok = validate_state(c, msg, sizeof msg)) && s->has_model &&
-                   (ok = model_validate(c, msg, sizeof msg) && check_ranges(c, msg, sizeof msg))) {
-            c->has_model = 1;  /* rebuilt from the parameters; validate_state checks the hidden state */
+        } else if ((ok = validate_values(c, msg, sizeof msg)) && c->has_model &&
+                   (ok = validate_model(c, s->hidden, msg, sizeof msg))) {
+            /* the model data from the checked settings and hidden values; the serialized outputs stand */
+#ifndef MODEL_OWN_RESOURCES
             model_setup(c);
-            model_set_hidden(c, s->hidden);
-            memcpy(c->reals, s->reals, sizeof c->reals);  /* the serialized outputs stand */
-            ok = validate_state(c, msg, sizeof msg);
+#endif
+            model_set_hidden(c, s->hidden);  /* a model with its own resources keeps them as data */
+            memcpy(c->reals, s->reals, sizeof c->reals);
         }
     }
     free(s);

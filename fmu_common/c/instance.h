@@ -26,7 +26,12 @@ typedef struct {
  * MODEL_IDENTIFIER_STRING and INSTANTIATION_TOKEN. */
 #include "model_vars.h"
 
-typedef enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_TERMINATED } tapmp_mode;
+/* MODE_EVENT: FMI 3.0's Event Mode (a co-simulation instance with eventModeUsed); it comes last so
+ * that the modes of FMU states saved before it existed keep their numbers. */
+typedef enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_TERMINATED, MODE_EVENT } tapmp_mode;
+#define MODE_LAST MODE_EVENT
+/* Step Mode or Event Mode: the model is running (fixed parameters are fixed, tunable ones retune). */
+#define MODE_RUNNING(mode) ((mode) == MODE_STEP || (mode) == MODE_EVENT)
 
 /* Status codes shared by FMI 2.0 and 3.0 (OK, Warning, Discard, Error, Fatal). */
 enum { ST_OK = 0, ST_WARNING = 1, ST_DISCARD = 2, ST_ERROR = 3, ST_FATAL = 4 };
@@ -47,6 +52,8 @@ typedef struct tapmp_instance {
     struct tapmp_state **states;  /* the FMU states this instance handed out and has not freed */
     void *backend;          /* the model's resources outside the instance (the Python object), or NULL */
     size_t n_states, max_states;
+    int event_mode_used;       /* FMI 3.0 co-simulation: the host handles the model's events in Event Mode */
+    int early_return_allowed;  /* FMI 3.0 co-simulation: doStep may return early at an event */
     /* everything below is the FMU state */
     tapmp_mode mode;
     double time;            /* current communication point [s] */
@@ -95,6 +102,19 @@ TAPMP_LINKAGE int tapmp_exit_initialization(tapmp_instance *inst);
 TAPMP_LINKAGE int tapmp_do_step(tapmp_instance *inst, double t, double h);
 TAPMP_LINKAGE int tapmp_terminate(tapmp_instance *inst);
 TAPMP_LINKAGE int tapmp_reset(tapmp_instance *inst);
+/* Events (FMI 3.0 Event Mode; model-neutral: the model supplies model_next_event and
+ * model_event_update). Enter Event Mode from Step Mode (co-simulation with eventModeUsed); the
+ * discrete update at the current time, publishing the outputs and saying when the next time event
+ * is (*next_defined, *next_time [s]); back to Step Mode. */
+TAPMP_LINKAGE int tapmp_enter_event_mode(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_update_discrete_states(tapmp_instance *inst, int *values_changed, int *next_defined,
+                                               double *next_time);
+TAPMP_LINKAGE int tapmp_enter_step_mode(tapmp_instance *inst);
+/* doStep(t, h) of an instance with eventModeUsed: a step that would pass the model's next time
+ * event ends there (*early_return = 1 if earlyReturnAllowed, an error otherwise), and one that reaches
+ * it asks for event handling; *last_time [s] is the time reached. Without eventModeUsed: tapmp_do_step. */
+TAPMP_LINKAGE int tapmp_do_step_events(tapmp_instance *inst, double t, double h, int *event_needed,
+                                       int *early_return, double *last_time);
 /* Get and set: `nv` is the number of values in v (FMI 3.0's nValues; FMI 2.0 passes n).
  * Every variable is a scalar, so nv must equal n; vr and v may be NULL only for n = 0. */
 TAPMP_LINKAGE int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[], size_t nv);
@@ -129,9 +149,27 @@ TAPMP_LINKAGE int model_initial_outputs(tapmp_instance *inst, char *msg, size_t 
  * order of the output block) without publishing; 1, or 0 + msg on error, or -status for a
  * status the model answers with itself (nothing published or logged: a Python model may). */
 TAPMP_LINKAGE int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size);
-/* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. */
+/* Hidden state (not a variable) as MODEL_N_HIDDEN doubles, and back. model_set_hidden also
+ * builds a deserialized state's model data; it must not touch any live instance's model. */
 TAPMP_LINKAGE void model_get_hidden(const tapmp_instance *inst, double hidden[]);
 TAPMP_LINKAGE void model_set_hidden(tapmp_instance *inst, const double hidden[]);
+/* Check the hidden values of an FMU state (hidden, in model_get_hidden's layout; finite) against
+ * the state's settings (already checked), outputs and time in `state`, without changing anything:
+ * inside the model's domain and the bounds the settings allow. 1, or 0 + msg naming the value. */
+TAPMP_LINKAGE int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size);
+
+/* A model with time events (MODEL_HAS_EVENTS defined in its header: the controller's sample
+ * instants) supplies these; for the others there are none. model_next_event: 1 and the time [s] of
+ * the next event after the ones handled, or 0 if none is scheduled. model_event_update: the model's
+ * discrete update at inst->time in Event Mode, the outputs into out (as model_step); 1, or 0 + msg. */
+#ifdef MODEL_HAS_EVENTS
+TAPMP_LINKAGE int model_next_event(const tapmp_instance *inst, double *time);
+TAPMP_LINKAGE int model_event_update(tapmp_instance *inst, double out[], char *msg, size_t size);
+#else
+#define model_next_event(inst, time) ((void)(inst), (void)(time), 0)
+#define model_event_update(inst, out, msg, size) \
+    ((void)(msg), (void)(size), memcpy((out), (inst)->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof(double)), 1)
+#endif
 
 /* A model whose instances hold resources outside the instance (the pythonfmu family: a
  * Python object) defines MODEL_OWN_RESOURCES in its header and these; for the others they

@@ -13,9 +13,11 @@
  * A Python exception (a bug, never bad input) is an error status with the exception logged;
  * log records the object queued are passed on after each call. Nothing here terminates or
  * finalizes the interpreter. */
+#include <math.h>
 #include <pthread.h>
 
 #include "python_env.h"
+#include "uri.h"
 
 typedef struct {
     PyObject *slave, *records;  /* the adapter's object and its queue of log records (a list) */
@@ -92,34 +94,11 @@ static int ensure_python(char *why, size_t size)
     return ok;
 }
 
-/* file:///a%20b/ -> /a b/ (RFC 8089 local file URIs, as FMI 2.0 prescribes). */
-static int uri_to_path(const char *uri, char *path, size_t size)
-{
-    if (strncmp(uri, "file://", 7) == 0) {
-        uri += 7;
-        if (strncmp(uri, "localhost/", 10) == 0) uri += 9;
-    } else if (strncmp(uri, "file:", 5) == 0) {
-        uri += 5;
-    }
-    size_t k = 0;
-    for (; *uri && k + 1 < size; uri++) {
-        unsigned int byte;
-        if (uri[0] == '%' && sscanf(uri + 1, "%2x", &byte) == 1) {
-            path[k++] = (char)byte;
-            uri += 2;
-        } else {
-            path[k++] = *uri;
-        }
-    }
-    path[k] = '\0';
-    return k > 0;
-}
-
 static int resources_dir(const char *location, char *path, size_t size, char *why, size_t why_size)
 {
     if (location && uri_to_path(location, path, size)) return 1;
     snprintf(why, why_size, "fmuResourceLocation = '%s' is invalid: allowed is a file:// URI of the FMU's "
-             "resources folder", location ? location : "(null)");
+             "resources folder (each %% followed by two hex digits, not %%00)", location ? location : "(null)");
     return 0;
 }
 
@@ -169,13 +148,14 @@ static PyObject *call(py_backend *B, const char *method, PyObject *arg)
     return r;
 }
 
-/* The hidden state's JSON from the mirror in inst->m (a new str) or NULL. */
-static PyObject *hidden_text(const tapmp_instance *inst)
+/* The hidden state's JSON from its character codes (inst->m.hidden: whole numbers 1 to 255,
+ * then zeros, as model_capture writes them and model_check_hidden checks them): a new str, or NULL. */
+static PyObject *hidden_text(const double hidden[])
 {
     char text[MODEL_N_HIDDEN + 1];
     int n = 0;
-    while (n < MODEL_N_HIDDEN && inst->m.hidden[n] > 0.0) {
-        text[n] = (char)(unsigned char)inst->m.hidden[n];
+    while (n < MODEL_N_HIDDEN && hidden[n] >= 1.0 && hidden[n] <= 255.0) {
+        text[n] = (char)(unsigned char)hidden[n];
         n++;
     }
     return PyUnicode_DecodeUTF8(text, n, "strict");
@@ -190,7 +170,7 @@ static int sync_model(tapmp_instance *inst, py_backend *B)
     if (inst->m.stamp == B->live) return 1;
     PyObject *text = NULL;
     if (inst->m.hidden[0] > 0.0) {
-        if (!(text = hidden_text(inst))) {
+        if (!(text = hidden_text(inst->m.hidden))) {
             log_exception(inst, "restore_hidden_state");
             return 0;
         }
@@ -221,8 +201,10 @@ static int sync_model(tapmp_instance *inst, py_backend *B)
     return 1;
 }
 
-/* Takes the GIL and gives the object the instance's values and time; NULL on failure (logged). */
-static py_backend *begin(const tapmp_instance *c, PyGILState_STATE *gil)
+/* Takes the GIL and gives the object the instance's values and time, and with `sync` the
+ * instance's model state (sync_model); NULL on failure (logged). A call that only checks values
+ * (of an FMU state, say) does not sync: it leaves the live model as it is. */
+static py_backend *begin(const tapmp_instance *c, PyGILState_STATE *gil, int sync)
 {
     tapmp_instance *inst = (tapmp_instance *)c;  /* logging may record the error */
     py_backend *B = inst->backend;
@@ -233,7 +215,7 @@ static py_backend *begin(const tapmp_instance *c, PyGILState_STATE *gil)
     int ok = t && PyObject_SetAttrString(B->slave, "time", t) == 0;
     Py_XDECREF(t);
     if (!ok) log_exception(inst, "time");
-    if (ok && inst->has_model) ok = sync_model(inst, B);
+    if (ok && sync && inst->has_model) ok = sync_model(inst, B);
     if (!ok) {
         PyGILState_Release(*gil);
         return NULL;
@@ -352,7 +334,7 @@ void model_free(tapmp_instance *inst)
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
     PyGILState_STATE gil;
-    py_backend *B = begin(inst, &gil);
+    py_backend *B = begin(inst, &gil, 0);  /* the settings alone: check_parameters builds aside */
     if (!B) return snprintf(msg, size, "%s", inst->error), 0;
     int ok = checked((tapmp_instance *)inst, call(B, "fmi2_check", NULL), "check_parameters", msg, size);
     end(inst, B, gil);
@@ -363,7 +345,7 @@ void model_setup(tapmp_instance *inst)
 {
     char msg[TAPMP_MESSAGE_MAX];
     PyGILState_STATE gil;
-    py_backend *B = begin(inst, &gil);
+    py_backend *B = begin(inst, &gil, 1);
     if (!B) return;
     if (checked(inst, call(B, "fmi2_setup", NULL), "setup_model", msg, sizeof msg))
         outputs_from(B, inst->reals + MODEL_OUT_FIRST);
@@ -376,7 +358,7 @@ void model_setup(tapmp_instance *inst)
 int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size)
 {
     PyGILState_STATE gil;
-    py_backend *B = begin(inst, &gil);
+    py_backend *B = begin(inst, &gil, 1);
     if (!B) return snprintf(msg, size, "%s", inst->error), 0;
     int ok = checked(inst, call(B, "fmi2_initial_outputs", NULL), "initial_outputs", msg, size);
     if (ok) outputs_from(B, inst->reals + MODEL_OUT_FIRST);
@@ -388,7 +370,7 @@ int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size)
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
 {
     PyGILState_STATE gil;
-    py_backend *B = begin(inst, &gil);
+    py_backend *B = begin(inst, &gil, 1);
     if (!B) return snprintf(msg, size, "%s", inst->error), 0;
     PyObject *args[3] = {B->slave, PyFloat_FromDouble(t), PyFloat_FromDouble(h)};
     PyObject *name = PyUnicode_FromString(inst->retune ? "fmi2_retune_step" : "fmi2_do_step");
@@ -436,25 +418,56 @@ void model_get_hidden(const tapmp_instance *inst, double hidden[])
     memcpy(hidden, inst->m.hidden, sizeof inst->m.hidden);
 }
 
-/* The model from a deserialized state: a hidden state the Python model refuses becomes
- * NaN, so the check of the state that follows refuses the whole state. */
+/* The model data of a deserialized state (model_check_hidden has checked hidden): the hidden
+ * state is kept as data under a stamp of its own, so nothing here enters Python or touches the
+ * live model; a SetFMUstate with the state makes it the instance's, and its next call restores
+ * the Python model from it (sync_model). */
 void model_set_hidden(tapmp_instance *inst, const double hidden[])
 {
     memcpy(inst->m.hidden, hidden, sizeof inst->m.hidden);
     inst->m.stamp = new_stamp();
-    PyGILState_STATE gil;
-    py_backend *B = begin(inst, &gil);  /* restores the Python model from the hidden state */
-    if (!B) {
-        inst->m.hidden[0] = NAN;
-        return;
+}
+
+/* The hidden state's JSON (character codes 1 to 255, then zeros) checked by the adapter's
+ * check_hidden_state against the state's settings, outputs and time, without touching the
+ * live model (the values are pushed, the model is not synced). */
+int model_check_hidden(const tapmp_instance *state, const double hidden[], char *msg, size_t size)
+{
+    char v[40];
+    int n = 0;
+    while (n < MODEL_N_HIDDEN && hidden[n] != 0.0) {
+        if (!(hidden[n] >= 1.0 && hidden[n] <= 255.0 && hidden[n] == floor(hidden[n])))
+            return snprintf(msg, size, "hidden state character %d = %s is invalid: allowed is a character code "
+                            "1 to 255 (the JSON text of the model's hidden state)", n, tapmp_repr(hidden[n], v)), 0;
+        n++;
     }
-    end(inst, B, gil);
+    if (n == 0) return snprintf(msg, size, "hidden state = '' is invalid: allowed is the JSON text of the "
+                                "model's hidden state"), 0;
+    for (int i = n; i < MODEL_N_HIDDEN; i++)
+        if (hidden[i] != 0.0)
+            return snprintf(msg, size, "hidden state character %d = %s is invalid: allowed is 0 after the end of "
+                            "the text", i, tapmp_repr(hidden[i], v)), 0;
+    PyGILState_STATE gil;
+    py_backend *B = begin(state, &gil, 0);
+    if (!B) return snprintf(msg, size, "%s", state->error), 0;
+    PyObject *text = hidden_text(hidden);
+    int ok;
+    if (!text) {
+        PyErr_Clear();
+        snprintf(msg, size, "hidden state: the text is invalid: allowed is UTF-8 JSON");
+        ok = 0;
+    } else {
+        ok = checked((tapmp_instance *)state, call(B, "fmi2_check_state", text), "check_hidden_state", msg, size);
+        Py_DECREF(text);
+    }
+    end(state, B, gil);
+    return ok;
 }
 
 int model_input_status(tapmp_instance *inst, unsigned vr, double value)
 {
     PyGILState_STATE gil;
-    py_backend *B = begin(inst, &gil);
+    py_backend *B = begin(inst, &gil, 1);
     if (!B) return -1;
     PyObject *r = PyObject_CallMethod(B->slave, "fmi2_reject_input", "Id", vr, value);
     long answer = r && PyLong_Check(r) ? PyLong_AsLong(r) : -1;

@@ -230,6 +230,21 @@ def model_description_fmi2(model: str) -> bytes:
     return to_bytes(root)
 
 
+# The models with time events (their C header defines MODEL_HAS_EVENTS): the controller, whose
+# sample instants t0 + k T_s are time events in FMI 3.0's Event Mode. The plant is continuous and
+# the trajectory a function of time: neither has an instant at which something jumps.
+EVENT_MODELS = frozenset({"TAPMP_Controller"})
+
+
+def event_mode_attributes(model: str) -> dict:
+    """The FMI 3.0 co-simulation attributes of Event Mode for ``model``: hasEventMode and
+    mightReturnEarlyFromDoStep (doStep stops at the next sample instant when the host allows early
+    return); canReturnEarlyAfterIntermediateUpdate stays false (no intermediate update)."""
+    events = "true" if model in EVENT_MODELS else "false"
+    return {"mightReturnEarlyFromDoStep": events, "canReturnEarlyAfterIntermediateUpdate": "false",
+            "hasEventMode": events}
+
+
 def model_description_fmi3(model: str) -> bytes:
     """modelDescription.xml (FMI 3.0 co-simulation) of the native ``model``."""
     table = VARIABLES[model]
@@ -242,8 +257,8 @@ def model_description_fmi3(model: str) -> bytes:
         "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
         "providesDirectionalDerivatives": "false", "providesAdjointDerivatives": "false",
         "canHandleVariableCommunicationStepSize": "true", "maxOutputDerivativeOrder": "0",
-        "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false",
-        "hasEventMode": "false", "providesEvaluateDiscreteStates": "false"})
+        "providesIntermediateUpdate": "false", **event_mode_attributes(model),
+        "providesEvaluateDiscreteStates": "false"})
     root.append(unit_definitions(v.unit for v in table if v.unit))
     _categories_and_experiment(root, "fmi3Error")
     variables = ET.SubElement(root, "ModelVariables")
@@ -365,12 +380,34 @@ def _binaries(tmp: Path, src: Path, model: str, family: str, platforms) -> dict[
     return members
 
 
+def _host_fmu(tmp: Path, src: Path, model: str, family: str, md: bytes, binaries: dict) -> Path:
+    """An FMU in ``tmp`` with the modelDescription and this machine's binary (compiled here if
+    ``binaries`` lack it), for running the reference experiment at build time."""
+    folder = PLATFORM_DIRS[family][toolchain.HOST]
+    name = f"binaries/{folder}/{model}{SUFFIX[toolchain.os_of(toolchain.HOST)]}"
+    if name not in binaries:
+        (tmp / "host").mkdir()
+        lib = compile_sources(src, model, family, tmp / "host" / Path(name).name, toolchain.HOST)
+        binaries = {name: lib.read_bytes()}
+    path = tmp / f"{model}.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        _zip_write(z, "modelDescription.xml", md)
+        _zip_write(z, name, binaries[name])
+    return path
+
+
 def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = True,
-                     model_source: Path | None = None, platforms=None) -> Path:
+                     model_source: Path | None = None, platforms=None, extras: bool = True,
+                     stimulus: dict | None = None) -> Path:
     """Build one native FMU (``family`` "fmi2" or "fmi3") into out_dir; atomic (a build that
     fails leaves no FMU of that name half written). ``platforms`` (names of
     toolchain.PLATFORMS) default to all, or the host's (x86_64-linux) alone if not ``windows``;
-    ``model_source`` replaces the model's C file (benchmarks/floor_model.c)."""
+    ``model_source`` replaces the model's C file (benchmarks/floor_model.c). With ``extras``
+    the FMU carries its reference experiment, documentation, license and (FMI 3.0) terminals
+    and icon (fmu_extras.extra_members; ``stimulus``: fmu_extras.closed_loop_stimulus(), computed
+    if None)."""
+    from . import fmu_extras
+
     out_dir = Path(out_dir)
     fmu = out_dir / f"{model}.fmu"
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
@@ -378,8 +415,14 @@ def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = Tru
         src = staged_sources(files, model, family)
         if platforms is None:
             platforms = ALL_PLATFORMS if windows else (toolchain.HOST,)
-        binaries = _binaries(Path(tmp), src, model, family, check_platforms(platforms))
+        platforms = check_platforms(platforms)
+        binaries = _binaries(Path(tmp), src, model, family, platforms)
         md = model_description_fmi2(model) if family == "fmi2" else model_description_fmi3(model)
+        extra = {}
+        if extras:
+            host = _host_fmu(Path(tmp), src, model, family, md, binaries)
+            folders = tuple(dict.fromkeys(PLATFORM_DIRS[family][p] for p in platforms))  # darwin64 once
+            extra = fmu_extras.extra_members(model, family, host, folders, stimulus)
         partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
         try:
             with zipfile.ZipFile(partial, "w") as z:
@@ -387,6 +430,8 @@ def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = Tru
                 for name, data in sorted(files.items()):
                     _zip_write(z, f"sources/{name}", data)
                 for name, data in binaries.items():
+                    _zip_write(z, name, data)
+                for name, data in sorted(extra.items()):
                     _zip_write(z, name, data)
             partial.replace(fmu)
         finally:
@@ -406,11 +451,14 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     if platforms is None:
         platforms = ALL_PLATFORMS if windows is not False else (toolchain.HOST,)
     platforms = check_platforms(platforms)
+    from .fmu_extras import closed_loop_stimulus
+    stimulus = closed_loop_stimulus()  # the reference experiments' inputs, the same for every family
     out = {}
     for family in families:
         folder = Path(out_dir) / family
         folder.mkdir(parents=True, exist_ok=True)
-        paths = {model: build_native_fmu(model, family, folder, platforms=platforms) for model in FMU_NAMES}
+        paths = {model: build_native_fmu(model, family, folder, platforms=platforms, stimulus=stimulus)
+                 for model in FMU_NAMES}
         for model in FMU_NAMES:
             log(f"built {paths[model]}")
         paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths)

@@ -71,9 +71,14 @@ def family_ssp(fmus: str, folder: str | Path | None = None) -> Path:
 
 
 def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None) -> Path:
-    """``--ssp`` if given, else the built SSP of family ``fmus`` in ``folder`` (--fmus-dir,
-    default :func:`fmus_dir`); FamilyNotBuilt if it is missing."""
+    """``--ssp`` if given (UsageError if it is a folder), else the built SSP of family ``fmus`` in
+    ``folder`` (--fmus-dir, default :func:`fmus_dir`); FamilyNotBuilt if it is missing."""
     if ssp:
+        if Path(ssp).is_dir():
+            inside = [p for p in (Path(ssp) / "TAPMP.ssp", Path(ssp) / FAMILIES[fmus]) if p.is_file()]
+            hint = f", e.g. {inside[0]}" if inside else "; a folder of built FMUs goes to --fmus-dir"
+            raise UsageError(f"--ssp = {ssp!r} is a folder: allowed is an SSP file (a zip archive holding "
+                             f"SystemStructure.ssd and the FMUs){hint}")
         return Path(ssp)
     path = family_ssp(fmus, folder)
     if not path.is_file():

@@ -35,6 +35,17 @@ test_ecos.py, test_fmpy_ssp.py):
   the transfers in Initialization Mode) or ``zero``: FMPy's ``simulate_ssp``, which
   initializes every FMU on its own and starts every connection at 0, so no output is
   read before the first step and the first step's inputs are all 0.
+
+Event mode (``event_mode``, FMI 3.0): every FMU with ``hasEventMode`` (the TAPMP controller) is
+instantiated with eventModeUsed and earlyReturnAllowed. The master keeps each one's nextEventTime
+and never steps any FMU past it: a macro step is cut at every event inside it, every FMU steps to
+the event, and there the event FMUs, in the step order, enter Event Mode, take their inputs from the
+outputs at that time, update (fmi3UpdateDiscreteStates) and publish their outputs, which the others
+take from then on. An event at the end of a macro step is handled at the start of the next one, so
+the row at a communication point holds the outputs before it (the command of the previous sample).
+So the controller samples at every instant t0 + k T_s whatever the macro step. The FMI 3.0 FMUs
+without Event Mode and the FMI 2.0 ones step as before. An early return at a time the FMU did not
+announce is refused: the others have stepped past it already.
 """
 
 import math
@@ -55,7 +66,7 @@ from fmpy.ssp.ssd import read_ssd
 from tapmp.interface import CONNECTION_STARTS, ORDERINGS
 
 from . import stepper as stepper_core
-from .archive import MEMBER_RULE, inside_archive
+from .archive import ExtractBudget, ExtractLimitError, MEMBER_RULE, inside_archive
 from .clocks import Clock
 from .errors import CoSimulationError, DivergenceError
 from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
@@ -111,7 +122,8 @@ class CoSimulation:
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
                  check: OutputCheck | None = None, clock: str = "exact",
-                 connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None):
+                 connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None,
+                 event_mode: bool = False):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -123,6 +135,12 @@ class CoSimulation:
         if stepper not in STEPPERS:
             raise CoSimulationError(f"stepper = {stepper!r} is invalid (TAPMP_STEPPER or the stepper argument): "
                                     f"allowed are {', '.join(STEPPERS)}")
+        if event_mode not in (True, False):
+            raise CoSimulationError(f"event_mode = {event_mode!r} is invalid: allowed is true or false")
+        self.event_mode = bool(event_mode)
+        if self.event_mode and stepper == "compiled":
+            raise CoSimulationError("stepper = 'compiled' is unavailable with event_mode = true: allowed are "
+                                    "'python' or 'auto' (event mode runs in the Python loop)")
         self.stepper = stepper
         self._core = None        # the CompiledStepper once opened, if used
         self.filled = 0          # rows the last advance() stored, also when it raised
@@ -174,8 +192,15 @@ class CoSimulation:
         return False
 
     def _open(self):
+        if self.ssp_path.is_dir():
+            raise CoSimulationError(f"SSP file {self.ssp_path} is a folder: allowed is an SSP file (a zip archive "
+                                    "holding SystemStructure.ssd and the FMUs)")
         if not self.ssp_path.is_file():
             raise CoSimulationError(f"SSP file {self.ssp_path} does not exist: run `tapmp build` first")
+        try:
+            self._budget = ExtractBudget()  # of the SSP's members and the FMUs' together
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err)) from None
         ssd, members = self._read_ssp()
         elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
         self.tmp = make_folder()
@@ -189,7 +214,10 @@ class CoSimulation:
         addLoggerProxy(byref(self.callbacks))
         for name, (source, _) in elements.items():
             try:
-                unit = Unit(name, fmus[name], self.tmp / "fmu" / name, self.log)
+                unit = Unit(name, fmus[name], self.tmp / "fmu" / name, self.log, self._budget,
+                            f"SSP file {self.ssp_path}: the FMU {source} of element {name}")
+            except ExtractLimitError as err:
+                raise CoSimulationError(str(err), name) from None
             except Exception as err:
                 raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {source} of "
                                         f"element {name} (truncated or not an FMU): {err}", name) from err
@@ -200,9 +228,14 @@ class CoSimulation:
             unit.finish_connections()
         self._plan(ssd.system.connections)
         parameters = self._resolve_parameters()
+        if self.event_mode and not any(u.has_event_mode for u in self.units.values()):
+            raise CoSimulationError(f"event_mode = true is invalid for SSP file {self.ssp_path}: no FMU in it has "
+                                    "Event Mode: allowed is an SSP with an FMI 3.0 FMU with hasEventMode=\"true\" "
+                                    "(the native FMI 3.0 controller, build/native/fmi3/TAPMP.ssp)")
         for name in self.init_order:
             unit = self.units[name]
-            self._call(unit, lambda u=unit: u.instantiate(self.callbacks, self._logger), "instantiate")
+            self._call(unit, lambda u=unit: u.instantiate(self.callbacks, self._logger, self.event_mode),
+                       "instantiate")
             unit.instantiated = True
             for pname, value in parameters.get(name, {}).items():
                 self._call(unit, lambda u=unit, p=pname, v=value: u.set_parameter(p, v),
@@ -218,6 +251,9 @@ class CoSimulation:
             if propagate:
                 self._call(unit, unit.apply_inputs, "setReal")
             self._call(unit, unit.slave.exitInitializationMode, "exitInitializationMode")
+            if unit.event_mode:  # it left initialization into Event Mode: the event at the start time
+                self._call(unit, unit.update_discrete_states, "updateDiscreteStates", self.t0)
+                self._call(unit, unit.slave.enterStepMode, "enterStepMode", self.t0)
             if propagate:  # else the outputs (and so the connections) stay 0 until the first step
                 self._call(unit, unit.read_outputs, "getReal")
         prefix = self._column_prefixes()
@@ -233,7 +269,10 @@ class CoSimulation:
                 self._bounds.append((unit.out, i, column, float(limit), unit.name))
                 envelope_units.append((unit, i, float(limit)))
         self._check_outputs(self.t0)
-        if self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
+        self._event_units = [u for u in self._step_units if u.event_mode]
+        if self.event_mode:
+            pass  # the Python loop: the compiled core has no Event Mode
+        elif self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
             try:
                 self._core = stepper_core.CompiledStepper(
                     self._row_units, self._step_units, self.ordering == "jacobi", self.clock, envelope_units,
@@ -288,9 +327,16 @@ class CoSimulation:
         """The SSD of the SSP file and its archive members {normalized name: member name};
         refuses an archive with a member named by an absolute path or one with ``..``."""
         try:
+            with zipfile.ZipFile(self.ssp_path) as z:  # the SSD is parsed in memory: its size counts too
+                size = z.getinfo("SystemStructure.ssd").file_size if "SystemStructure.ssd" in z.namelist() else 0
+            if size > self._budget.limit:
+                raise ExtractLimitError(str(self._budget.refuse(f"SSP file {self.ssp_path}", "SystemStructure.ssd",
+                                                                size)))
             ssd = read_ssd(str(self.ssp_path))
             with zipfile.ZipFile(self.ssp_path) as z:
                 names = [i.filename for i in z.infolist() if not i.is_dir()]
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err)) from None
         except Exception as err:
             raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
                                     "holding SystemStructure.ssd and the FMUs)") from err
@@ -346,11 +392,12 @@ class CoSimulation:
                                                 f"points outside the archive: {MEMBER_RULE}", name)
                     if not target.exists():
                         target.parent.mkdir(parents=True, exist_ok=True)
-                        with z.open(members[inside]) as src, open(target, "wb") as dst:
-                            shutil.copyfileobj(src, dst)
+                        self._budget.copy(z, z.getinfo(members[inside]), target, f"SSP file {self.ssp_path}")
                     paths[name] = target
         except CoSimulationError:
             raise
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err)) from None
         except OSError as err:
             raise CoSimulationError(f"cannot extract SSP file {self.ssp_path} into {self.tmp}: {err}") from err
         except Exception as err:
@@ -456,6 +503,14 @@ class CoSimulation:
         scanned when it grew.
         """
         t, h = self.clock.at(self.k), self.clock.step(self.k)
+        if self.event_mode:
+            return self._step_events(t, h)
+        self._substep(t, h)
+        self.k += 1
+        self._check_outputs(self.clock.at(self.k))
+
+    def _substep(self, t: float, h: float) -> None:
+        """Exchange the values and step every FMU from t by h [s] in the planned ordering."""
         n_log = len(self.log)
         if self.ordering == "gauss-seidel":
             for unit in self._step_units:
@@ -483,8 +538,47 @@ class CoSimulation:
                 status = max(worst[i], unit.read_outputs())
                 if status > 1 or len(self.log) != n_log:
                     self._step_failed(unit, t, n_log, status)
+
+    def _step_events(self, t: float, h: float) -> None:
+        """One macro step in event mode (module docstring): the events due at t first, then sub-steps
+        that end at each event inside the step, each followed by its event, up to t_{k+1}."""
+        end = self.clock.at(self.k + 1)
+        tol = max(1e-12, 8.0 * (math.nextafter(abs(end), math.inf) - abs(end)))  # ulps between two clocks
+        self._handle_events(t)
+        now = t
+        while True:
+            next_event = min((u.next_event for u in self._event_units), default=math.inf)
+            inside = next_event < end - tol
+            target = next_event if inside else end
+            # from t_k the step is h as without events, so a run whose events fall on its grid is the same
+            self._substep(now, h if now == t and not inside else target - now)
+            for unit in self._event_units:
+                early = unit.returned_early()
+                if early is not None and early < target - tol:
+                    raise CoSimulationError(
+                        f"{unit.name}: doStep returned early at t = {early:.9g} s, before t = {target:.9g} s, a "
+                        "time it did not announce as nextEventTime: the other FMUs have stepped past it (allowed "
+                        "is an FMU whose events are the time events it announces)", unit.name, early, list(self.log))
+            now = target
+            if not inside:
+                break
+            self._check_outputs(now)
+            self._handle_events(now)
         self.k += 1
         self._check_outputs(self.clock.at(self.k))
+
+    def _handle_events(self, t: float) -> None:
+        """The event FMUs whose last doStep asked for event handling, in the step order: enter Event
+        Mode, inputs from the outputs at t [s], update, outputs, back to Step Mode."""
+        for unit in self._event_units:
+            if not unit.event_needed():
+                continue
+            unit._flags[0].value = False  # handled
+            self._call(unit, unit.slave.enterEventMode, "enterEventMode", t)
+            self._call(unit, unit.apply_inputs, "setFloat64", t)
+            self._call(unit, unit.update_discrete_states, "updateDiscreteStates", t)
+            self._call(unit, unit.read_outputs, "getFloat64", t)
+            self._call(unit, unit.slave.enterStepMode, "enterStepMode", t)
 
     def advance(self, rows) -> int:
         """Step ``len(rows)`` times, storing :meth:`row` after each step into ``rows`` (a
@@ -493,6 +587,10 @@ class CoSimulation:
         failure raises what :meth:`step` raises, after setting :attr:`filled` to the rows
         stored before it."""
         self.filled = 0
+        try:  # before any step, the same in both loops: the compiled core's int64 clock must not wrap
+            self.clock.require_steps(self.k + len(rows))
+        except ValueError as err:
+            raise CoSimulationError(str(err)) from None
         if self._core is None:  # the reference loop
             for i in range(len(rows)):
                 self.step()

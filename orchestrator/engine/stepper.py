@@ -12,7 +12,9 @@ The C file is compiled on first use (or by ``tapmp build``) into a cache folder 
 the package: ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
 named after a hash of the source and the compiler command, under a file lock so that
 concurrent processes build it once. If it cannot be built, the master says so in one line
-on stderr and steps in Python. ``TAPMP_STEPPER=python`` selects the Python loop.
+on stderr and steps in Python. A cache folder or library another user could have written is
+refused before anything is loaded (tapmp.toolchain.CacheTrustError, not a fallback: the run
+stops with one line naming the path). ``TAPMP_STEPPER=python`` selects the Python loop.
 """
 
 import ctypes
@@ -79,7 +81,13 @@ def load():
     """The loaded core (ctypes.CDLL), built on first use; StepperBuildError if impossible."""
     global _LIB
     if _LIB is None:
-        lib = ctypes.CDLL(str(build()))
+        path = build()
+        try:
+            lib = ctypes.CDLL(str(path))
+            lib.tapmp_advance
+        except (OSError, AttributeError) as err:
+            raise StepperBuildError(f"cannot load {path}: {' '.join(str(err).split())} (delete the file so that it "
+                                    "is compiled again)") from None
         lib.tapmp_advance.restype = c_int32
         lib.tapmp_advance.argtypes = [POINTER(_Plan), POINTER(_State), c_int64, c_void_p, c_int32]
         _LIB = lib
@@ -87,7 +95,9 @@ def load():
 
 
 def available(quiet: bool = False) -> bool:
-    """Whether the compiled core can be used; if not, say why once on stderr (unless quiet)."""
+    """Whether the compiled core can be used; if not, say why once on stderr (unless quiet).
+    CacheTrustError (a cache another user could write) is raised, never taken as a reason to
+    step in Python: the same cache holds the C model every run loads."""
     global _NOTE_GIVEN
     try:
         load()

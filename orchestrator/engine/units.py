@@ -4,13 +4,15 @@ directly through ctypes with arrays built once (fmpy's getReal/setReal wrappers 
 arrays and lists on every call). The compiled stepping core reads the same arrays.
 """
 
+import math
 from ctypes import byref, c_bool, c_double, c_uint
 from pathlib import Path
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
+from .archive import ExtractBudget, extract_archive
 from .errors import CoSimulationError
 
 _DESCRIPTIONS = {}  # sha-1 of an FMU archive -> its parsed modelDescription (read-only)
@@ -37,13 +39,15 @@ class Unit:
     (fmpy's getReal/setReal wrappers build new arrays and lists on every call).
     """
 
-    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list):
+    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list, budget=None, where: str = ""):
         self.name = name
+        # extracted first, counted against ``budget`` (archive.ExtractBudget): a member's size is
+        # checked before modelDescription.xml is read into memory
+        extract_archive(fmu_path, unzip_dir, budget or ExtractBudget(), where or f"FMU {fmu_path}")
         self.md = _model_description(fmu_path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.log = log
-        extract(str(fmu_path), unzipdir=str(unzip_dir))
         slave_type = FMU3Slave if self.fmi3 else FMU2Slave
         self.slave = slave_type(guid=self.md.guid, unzipDirectory=str(unzip_dir),
                                 modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
@@ -63,6 +67,11 @@ class Unit:
         self.in_vrs = self.inp = None
         self.n_in = 0
         self.instantiated = False
+        # FMI 3.0 Event Mode (hasEventMode): the master may instantiate with eventModeUsed
+        self.has_event_mode = self.fmi3 and bool(getattr(self.md.coSimulation, "hasEventMode", False))
+        self.event_mode = False       # instantiated with eventModeUsed (and earlyReturnAllowed)
+        self.next_event = math.inf    # its next time event [s] (nextEventTime), inf if none
+        self.n_events = 0             # events handled (fmi3UpdateDiscreteStates rounds that settled)
         dll = self.slave.dll
         if self.fmi3:
             self._get_real, self._set_real, self._do_step3 = dll.fmi3GetFloat64, dll.fmi3SetFloat64, dll.fmi3DoStep
@@ -72,12 +81,16 @@ class Unit:
         else:
             self._get_real, self._set_real, self._do_step = dll.fmi2GetReal, dll.fmi2SetReal, dll.fmi2DoStep
 
-    def instantiate(self, callbacks, log_message) -> None:
+    def instantiate(self, callbacks, log_message, event_mode: bool = False) -> None:
         """fmi2Instantiate with the master's ``callbacks``, or fmi3InstantiateCoSimulation with
-        ``log_message(instance, status, category, message)`` (FMI 3 logs carry no instance name)."""
+        ``log_message(instance, status, category, message)`` (FMI 3 logs carry no instance name);
+        ``event_mode``: eventModeUsed and earlyReturnAllowed (an FMU with hasEventMode only)."""
         if self.fmi3:
             name = self.name.encode()
-            self.slave.instantiate(loggingOn=True, logMessage=lambda env, status, category, message:
+            self.event_mode = event_mode and self.has_event_mode
+            self.slave.instantiate(loggingOn=True, eventModeUsed=self.event_mode,
+                                   earlyReturnAllowed=self.event_mode,
+                                   logMessage=lambda env, status, category, message:
                                    log_message(None, name, status, category, message))
         else:
             self.slave.instantiate(callbacks=callbacks, loggingOn=True)
@@ -123,6 +136,26 @@ class Unit:
         if self.fmi3:
             return self._do_step3(self.slave.component, t, h, True, *self._step_out)
         return self._do_step(self.slave.component, t, h, 1)
+
+    def event_needed(self) -> bool:
+        """The last fmi3DoStep said eventHandlingNeeded."""
+        return self.event_mode and self._flags[0].value
+
+    def returned_early(self) -> float | None:
+        """The time [s] the last fmi3DoStep stopped at if it returned early (earlyReturn), else None."""
+        return self._last_time.value if self.event_mode and self._flags[2].value else None
+
+    def update_discrete_states(self) -> None:
+        """In Event Mode: fmi3UpdateDiscreteStates until the FMU needs no further update (at most
+        100 rounds), keeping its nextEventTime in :attr:`next_event` (inf if it defines none)."""
+        for _ in range(100):
+            again, _terminate, _, _, defined, next_time = self.slave.updateDiscreteStates()
+            self.next_event = next_time if defined else math.inf
+            if not again:
+                self.n_events += 1
+                return
+        raise CoSimulationError(f"{self.name}: fmi3UpdateDiscreteStates still needs another update after 100 "
+                                "rounds: allowed is an FMU whose discrete states settle", self.name)
 
     def set_parameter(self, name: str, value) -> None:
         var = self.vars.get(name)

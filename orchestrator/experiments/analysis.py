@@ -53,6 +53,7 @@ Frequencies are in Hz, up to the Nyquist frequency 1 / (2 h) of the scenario's s
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -119,6 +120,7 @@ class SplitLoop:
             qm = np.array(m.plant.joint_positions())
             Ce[:, j] = -(qp - qm) / 2.0
         T = invariant_basis(m)
+        self.T, self.x0 = T, x0
         self.A, self.B, self.C, self.D = T.T @ A @ T, T.T @ B, C @ T, D
         self.Ce = Ce @ T
         self.names = m.names
@@ -150,13 +152,20 @@ class SplitLoop:
         return control.ss(self.closed_loop(), self.B @ v / F_SCALE, v.T @ self.Ce, np.zeros((1, 1)), self.h)
 
 
+def batch_response(A, B, C, D, h: float, freqs) -> np.ndarray:
+    """G(z) = C (z I - A)^-1 B + D at z = exp(j 2 pi f h) for every f of freqs [Hz] at once
+    (one LU solve per frequency, stacked): an array of shape (len(freqs), outputs, inputs)."""
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (A, B, C, D))
+    z = np.exp(1j * 2.0 * np.pi * np.asarray(freqs, dtype=float) * h)
+    stack = z[:, None, None] * np.eye(A.shape[0])[None] - A[None]
+    X = np.linalg.solve(stack, np.broadcast_to(B.astype(complex), (len(z), *B.shape)))
+    return C[None] @ X + D[None]
+
+
 def _response(sys, freqs: np.ndarray, h: float) -> np.ndarray:
-    """Complex frequency response of a discrete-time SISO system at freqs [Hz]."""
-    z = np.exp(1j * 2.0 * np.pi * freqs * h)
-    A, B, C, D = (np.asarray(M) for M in (sys.A, sys.B, sys.C, sys.D))
-    n = A.shape[0]
-    # solve (z I - A) x = B per frequency: exact evaluation on the unit circle
-    return np.array([(C @ linalg.solve(zk * np.eye(n) - A, B))[0, 0] + D[0, 0] for zk in z])
+    """Complex frequency response of a discrete-time SISO system at freqs [Hz] (exact evaluation
+    on the unit circle)."""
+    return batch_response(sys.A, sys.B, sys.C, sys.D, h, freqs)[:, 0, 0]
 
 
 SEARCH_POINTS = 4000  # frequencies on which crossings are bracketed before brentq refines them
@@ -188,7 +197,7 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
 
     grid = np.geomspace(f_low, nyq, SEARCH_POINTS)
     grid[-1] = nyq
-    vals = np.array([Lf(f) for f in grid])
+    vals = batch_response(A, B, C, D, h, grid)[:, 0, 0]
     pcs = []  # phase crossovers: Im L = 0 with Re L < 0
     for k in np.nonzero(np.diff(np.sign(vals.imag)))[0]:
         f = brentq(lambda x: Lf(x).imag, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-15)
@@ -197,7 +206,9 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
     if vals[-1].real < 0.0 and abs(vals[-1].imag) <= 1e-12 * abs(vals[-1]):
         pcs.append(nyq)  # at Nyquist the response of a real system is real
     if min(abs(linalg.eigvals(A) - 1.0), default=1.0) > 1e-9:  # no integrator: L(z = 1) is finite and real
-        dc = complex((C @ linalg.solve(eye - A, B))[0, 0] + D[0, 0])
+        with warnings.catch_warnings():  # a slow pole near z = 1 makes I - A ill-conditioned, L(1) large: still right
+            warnings.simplefilter("ignore", linalg.LinAlgWarning)
+            dc = complex((C @ linalg.solve(eye - A, B))[0, 0] + D[0, 0])
         if dc.real < 0.0:
             pcs.append(0.0)  # L < 0 at f = 0 (a negative stiffness the loop holds): a crossover at DC
     gcs = [brentq(lambda x: abs(Lf(x)) - 1.0, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-15)
@@ -227,6 +238,9 @@ def poles(split: SplitLoop) -> list:
     return sorted(out, key=lambda p: (p["zeta"], p["f_n_hz"]))
 
 
+MAX_POINTS = 100_000  # frequencies: each one solves the loop at every break point (bounded work)
+
+
 def frequency_grid(h: float, f_min: float = F_MIN, f_max: float | None = None, points: int = POINTS) -> np.ndarray:
     """Log-spaced frequencies [Hz] from f_min to f_max (default: the Nyquist frequency 1/(2h));
     ScenarioError names a bound outside (0, Nyquist] or fewer than 2 points."""
@@ -238,8 +252,8 @@ def frequency_grid(h: float, f_min: float = F_MIN, f_max: float | None = None, p
                                 f"(up to the Nyquist frequency 1/(2 step), step = {h:g} s)")
     if not f_min < f_max:
         raise ScenarioError(f"--f-min = {f_min!r} is invalid: allowed is a frequency below --f-max = {f_max!r} Hz")
-    if not (isinstance(points, int) and points >= 2):
-        raise ScenarioError(f"--points = {points!r} is invalid: allowed is an integer >= 2")
+    if not (isinstance(points, int) and 2 <= points <= MAX_POINTS):
+        raise ScenarioError(f"--points = {points!r} is invalid: allowed is an integer from 2 to {MAX_POINTS}")
     return np.geomspace(f_min, min(f_max, nyq), points)
 
 
@@ -288,7 +302,13 @@ def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
         rho = float(max(abs(linalg.eigvals(split.closed_loop()))))
         verdict = verdict_for(rho)
         loops = analyze_loop(split, freqs)
-        if verdict != "stable":
+        every = None
+        if verdict == "stable":
+            rob = robustness(split, freqs)
+            for b, x in rob["loops"].items():
+                loops[b].update(x)
+            every = rob["all_loops"]
+        else:
             # margins, peaks and bandwidth describe a stable loop's distance to instability; the
             # responses of an unstable loop are no steady state that any run would show
             for x in loops.values():
@@ -296,7 +316,7 @@ def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
                                             "bandwidth_hz", "compliance_peak_m_per_n", "compliance_peak_hz",
                                             "compliance_low_m_per_n")})
         out[name] = {"law": sc.law, "spectral_radius": rho, "verdict": verdict, "poles": poles(split),
-                     "loops": loops}
+                     "loops": loops, "all_loops": every}
     return out
 
 
@@ -338,6 +358,38 @@ def table(result: dict, breaks=BREAK_POINTS) -> str:
                          f"| {_fmt(x['compliance_peak_m_per_n'] * 1e6, '.4g')} "
                          f"| {_fmt(x['compliance_low_m_per_n'] * 1e6, '.4g')} |")
     return "\n".join(lines)
+
+
+def robustness_table(result: dict, breaks=BREAK_POINTS) -> str:
+    """Markdown table: per run, the disk margins of each break point (alpha, as gain [dB] and phase
+    [deg]) and of all three motors at once, the all-loops gain margin with the K_T error it covers,
+    the smallest delay margin [ms] and the lowest actuator bandwidth [Hz]."""
+    lines = ["| run | disk margin per loop: " + ", ".join(breaks) + " | all loops: disk margin (gain dB, phase deg) "
+             "| all-loops gain margin (K_T error) | delay margin [ms] (loop) | lowest actuator bandwidth [Hz] |",
+             "|---" * 6 + "|"]
+    for run, r in result["runs"].items():
+        if r["verdict"] != "stable":
+            lines.append(f"| {run} | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}) "
+                         "| - | - | - | - |")
+            continue
+        lines.append("| " + " | ".join(robustness_cells(run, r, breaks)) + " |")
+    return "\n".join(lines)
+
+
+def robustness_cells(run: str, r: dict, breaks=BREAK_POINTS) -> list[str]:
+    """The cells of robustness_table for one stable run of analyze_runs."""
+    a = r["all_loops"]
+    kt = a["kt_error_pct"]
+    low = f"{a['gm_lower']:.3g}x ({kt[0]:+.0f} %)" if a["gm_lower"] is not None else f"below {GAIN_SPAN[0]:g}x"
+    up = f"{a['gm_upper']:.3g}x ({kt[1]:+.0f} %)" if a["gm_upper"] is not None else f"above {GAIN_SPAN[1]:g}x"
+    delays = {b: r["loops"][b]["delay_margin_s"] for b in breaks}
+    worst = min(delays, key=delays.get)
+    bw = a["actuator_bandwidth_hz"]
+    return [run, ", ".join(f"{r['loops'][b]['disk_margin']:.3f}" for b in breaks),
+            f"{a['disk_margin']:.3f} ({_fmt(a['disk_gm_db'], '.2f')}, {a['disk_pm_deg']:.1f})",
+            f"{low} to {up}",
+            f"{_fmt(delays[worst] * 1e3, '.4g')} ({worst})",
+            f"{bw:.4g}" if bw > ACTUATOR_SPAN[0] else f"below {ACTUATOR_SPAN[0]:g}"]
 
 
 def pole_table(result: dict, count: int = 3) -> str:
@@ -411,3 +463,269 @@ def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: floa
                                              for b, x in r["loops"].items()}} for run, r in result["runs"].items()}
         (out / "analysis.json").write_text(json.dumps(_plain(data), indent=1) + "\n")
     return result
+
+
+# Robustness beyond one loop's Ms: disk margins, the all-loops gain margin, delay margins and the
+# slowest actuator the loop tolerates. Every measure is taken on the split loop above (the loop of
+# `tapmp check`); a measure that inserts something into the loop (a delay, an actuator lag, a gain
+# on all three forces) reads the spectral radius of the loop with it inserted.
+
+GAIN_SPAN = (0.01, 100.0)  # all-loops gain factors searched: a K_T from 1 % to 100 x the model's
+DELAY_SAMPLES = 200        # delays searched: up to this many steps h
+ACTUATOR_SPAN = (0.1, 1e3)  # actuator bandwidths searched [Hz]: from 0.1 Hz to 1000 x the Nyquist frequency
+
+
+def disk_gain_phase(alpha: float) -> dict:
+    """The symmetric (skew 0) disk margin alpha as the gain and phase variations it covers (Seiler,
+    Packard and Gahinet, An introduction to disk margins, IEEE Control Systems 40(5), 2020, Eq. 9-10):
+    any gain in [(2 - alpha)/(2 + alpha), (2 + alpha)/(2 - alpha)] or phase within +-2 atan(alpha/2),
+    applied to every perturbed loop at once, keeps the loop stable. Gains as factors and dB, phase in deg."""
+    up = (2.0 + alpha) / (2.0 - alpha) if alpha < 2.0 else math.inf
+    return {"disk_margin": alpha, "disk_gm": up, "disk_gm_db": 20.0 * math.log10(up) if up < math.inf else math.inf,
+            "disk_gm_lower": 1.0 / up, "disk_pm_deg": math.degrees(2.0 * math.atan(alpha / 2.0))}
+
+
+def frequency_matrix(A, B, C, D, h: float, f: float) -> np.ndarray:
+    """G(z) = C (z I - A)^-1 B + D at z = exp(j 2 pi f h) (f [Hz], h [s])."""
+    z = np.exp(1j * 2.0 * math.pi * f * h)
+    return C @ linalg.solve(z * np.eye(A.shape[0]) - A, B) + D
+
+
+def _mu_diagonal(M: np.ndarray, d0=None):
+    """(mu, log-scaling) of M for a diagonal complex perturbation, one scalar per channel: the
+    D-scaled upper bound min_D sigma_max(D M D^-1), which equals mu for up to three channels
+    (Packard and Doyle, The complex structured singular value, Automatica 29(1), 1993, Sec. 9)."""
+    from scipy.optimize import minimize
+    n = M.shape[0]
+    if n == 1:
+        return float(abs(M[0, 0])), None
+
+    def sigma(d):
+        e = np.exp(np.concatenate([d, [0.0]]))
+        return float(np.linalg.norm((e[:, None] * M) / e[None, :], 2))
+
+    x0 = np.zeros(n - 1) if d0 is None else d0
+    r = minimize(sigma, x0, method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-13, "maxiter": 4000})
+    best = min(sigma(x0), float(r.fun))
+    return best, (r.x if r.fun <= sigma(x0) else x0)
+
+
+def disk_margin(A, B, C, D, h: float, freqs: np.ndarray) -> dict:
+    """Symmetric disk margin of the discrete loop G = C (zI - A)^-1 B + D closed by w = y
+    (L = -G, negative feedback) with one independent complex perturbation per channel:
+    alpha = 1 / max_f mu(S - I/2), S = (I + L)^-1 (Seiler et al. 2020, skew 0; for one channel
+    1 / max |S - 1/2|). The peak is bracketed on ``freqs`` [Hz] (the Nyquist frequency added) and
+    refined between its neighbours. Returns disk_gain_phase(alpha) plus "disk_f_hz", the
+    frequency of the peak."""
+    from scipy.optimize import minimize_scalar
+    nyq = 0.5 / h
+    grid = np.unique(np.append(np.asarray(freqs, dtype=float), nyq))
+    n = B.shape[1]
+    eye = np.eye(n)
+
+    def M(f):
+        G = frequency_matrix(A, B, C, D, h, f)
+        return linalg.inv(eye - G) - 0.5 * eye
+
+    Ms = np.linalg.inv(eye[None] - batch_response(A, B, C, D, h, grid)) - 0.5 * eye[None]
+    sig = np.linalg.norm(Ms, 2, axis=(1, 2))
+    lower = np.array([np.max(np.abs(np.diag(m))) for m in Ms])  # mu >= each channel's own |M_ii|
+    best, k_best, d_best = -1.0, 0, None
+    for k in np.argsort(-sig):  # an upper bound below the best mu so far cannot hold the peak
+        if sig[k] <= best:
+            break
+        if lower[k] > sig[k] * (1.0 - 1e-12):
+            mu, d = float(sig[k]), d_best
+        else:
+            mu, d = _mu_diagonal(Ms[k], d_best)
+        if mu > best:
+            best, k_best, d_best = mu, k, d
+    lo, hi = grid[max(k_best - 1, 0)], grid[min(k_best + 1, len(grid) - 1)]
+    if hi > lo:
+        r = minimize_scalar(lambda lf: -_mu_diagonal(M(math.exp(lf)), d_best)[0],
+                            bounds=(math.log(lo), math.log(hi)), method="bounded", options={"xatol": 1e-9})
+        if -r.fun > best:
+            best, f_peak = float(-r.fun), math.exp(r.x)
+        else:
+            f_peak = grid[k_best]
+    else:
+        f_peak = grid[k_best]
+    return {**disk_gain_phase(1.0 / best), "disk_f_hz": float(f_peak)}
+
+
+def _radius(M: np.ndarray) -> float:
+    return float(max(abs(linalg.eigvals(M))))
+
+
+def _first_crossing(rho, values, rtol: float = 1e-7):
+    """The first value of the monotone sequence ``values`` at which rho(value) >= 1 after the loop
+    was stable (rho < 1) at the one before, refined by bisection to rtol; None if rho stays < 1."""
+    prev = values[0]
+    for v in values[1:]:
+        if rho(v) >= 1.0:
+            a, b = prev, v  # stable at a, not at b
+            while abs(b - a) > rtol * abs(b):
+                mid = 0.5 * (a + b)
+                a, b = (mid, b) if rho(mid) < 1.0 else (a, mid)
+            return 0.5 * (a + b)
+        prev = v
+    return None
+
+
+def all_loops_gain_margin(split: SplitLoop) -> dict:
+    """The gain margin with all three plant-input forces scaled by one factor k, the closed loop
+    A + k B C (what a motor constant K_T k times the model's does to the feedback, since F = u / K_T
+    scales the feedback, not the feedforward): gm_upper, the smallest k > 1 and gm_lower, the largest
+    k < 1 at which the spectral radius reaches 1, searched in GAIN_SPAN (None: none there); with
+    kt_error_pct the K_T errors (k - 1) 100 % between which the loop stays stable."""
+    A, BC = split.A, split.B @ split.C
+
+    def rho(k):
+        return _radius(A + k * BC)
+
+    if rho(1.0) >= 1.0:
+        return {"gm_upper": None, "gm_lower": None, "kt_error_pct": None}
+    ups = [1.0] + list(np.geomspace(1.02, GAIN_SPAN[1], 240))
+    downs = [1.0] + list(np.geomspace(1.0 / 1.02, GAIN_SPAN[0], 240))
+    up, low = _first_crossing(rho, ups), _first_crossing(rho, downs)
+    return {"gm_upper": up, "gm_upper_db": None if up is None else 20.0 * math.log10(up),
+            "gm_lower": low, "gm_lower_db": None if low is None else 20.0 * math.log10(low),
+            "kt_error_pct": [None if low is None else 100.0 * (low - 1.0), None if up is None else 100.0 * (up - 1.0)]}
+
+
+def plant_rates(split: SplitLoop):
+    """(Ac, Bc): the continuous-time plant d x_p/dt = Ac x_p + Bc w linearized at the loop's start
+    (central differences of tapmp.plant.PlantModel.derivatives), embedded in the split loop's
+    coordinates: Ac acts on the plant rows of a full loop state, both scaled as SplitLoop's A and B."""
+    m = split.map
+    s0, w0 = split.x0[:6], split.w0
+    sc = m.scale[:6]
+    Ac, Bc = np.empty((6, 6)), np.empty((6, 3))
+    for j in range(6):
+        d = np.zeros(6)
+        d[j] = sc[j]
+        Ac[:, j] = (np.array(m.plant.derivatives(s0 + d, *w0)) - np.array(m.plant.derivatives(s0 - d, *w0))) / 2.0 / sc
+    for j in range(3):
+        d = np.zeros(3)
+        d[j] = F_SCALE
+        Bc[:, j] = (np.array(m.plant.derivatives(s0, *(w0 + d))) - np.array(m.plant.derivatives(s0, *(w0 - d)))) / 2.0 / sc
+    return Ac, Bc
+
+
+def _input_response(split: SplitLoop, Ac, Bc, duration: float, after: float, decay: float = 0.0) -> np.ndarray:
+    """The plant's state at the end of a step (split loop coordinates, n x 3) from a unit force per
+    channel applied for ``duration`` [s] with weight exp(-decay t), then ``after`` [s] unforced."""
+    n6 = Ac.shape[0]
+    big = np.zeros((n6 + 3, n6 + 3))
+    big[:n6, :n6], big[:n6, n6:] = Ac, Bc
+    big[n6:, n6:] = -decay * np.eye(3)
+    x = linalg.expm(big * duration)[:n6, n6:]
+    if after > 0.0:
+        x = linalg.expm(Ac * after) @ x
+    full = np.zeros((split.T.shape[0], 3))
+    full[:n6] = x
+    return split.T.T @ full
+
+
+def delayed_loop(split: SplitLoop, v, delay: float, rates=None) -> np.ndarray:
+    """The one-step matrix of the split loop with the force in direction v delayed by ``delay`` [s]
+    = (m + phi) h: during a step the plant gets the command of m + 1 samples before for the first
+    phi h, then that of m samples before (the other directions as they run). v: a unit vector, or
+    a 3 x k matrix of orthonormal directions delayed alike (the identity: every motor). State: the
+    loop's, then V^T y of the last m + 1 samples."""
+    Ac, Bc = plant_rates(split) if rates is None else rates
+    h = split.h
+    m = int(math.floor(delay / h + 1e-12))
+    phi = delay / h - m
+    V = np.asarray(v, dtype=float).reshape(3, -1)
+    k = V.shape[1]
+    A, B, C = split.A, split.B, split.C
+    N = A.shape[0]
+    c = V.T @ C
+    Bv = B @ V
+    Gv = _input_response(split, Ac, Bc, phi * h, (1.0 - phi) * h) @ V if phi > 0.0 else np.zeros((N, k))
+    M = np.zeros((N + (m + 1) * k, N + (m + 1) * k))
+    M[:N, :N] = A + B @ (np.eye(3) - V @ V.T) @ C
+
+    def reg(j):  # the columns of register j (V^T y of j + 1 samples before)
+        return slice(N + j * k, N + (j + 1) * k)
+
+    if m == 0:
+        M[:N, :N] += (Bv - Gv) @ c
+    else:
+        M[:N, reg(m - 1)] += Bv - Gv
+    M[:N, reg(m)] += Gv
+    M[reg(0), :N] = c
+    for j in range(1, m + 1):
+        M[reg(j), reg(j - 1)] = np.eye(k)
+    return M
+
+
+def delay_margin(split: SplitLoop, v, rates=None) -> float | None:
+    """The smallest delay [s] of the force in direction v at which the loop (delayed_loop) reaches a
+    spectral radius of 1, searched in steps of h/4 up to DELAY_SAMPLES steps and refined by
+    bisection; None if the loop is not stable without delay, inf if none within the search."""
+    rates = plant_rates(split) if rates is None else rates
+    if _radius(split.closed_loop()) >= 1.0:
+        return None
+    found = _first_crossing(lambda d: _radius(delayed_loop(split, v, d, rates)),
+                            list(np.arange(0, 4 * DELAY_SAMPLES + 1) * split.h / 4.0), rtol=1e-6)
+    return math.inf if found is None else found
+
+
+def actuator_loop(split: SplitLoop, bandwidth_hz: float, rates=None) -> np.ndarray:
+    """The one-step matrix of the split loop with a first-order actuator 1 / (s / (2 pi f_a) + 1) on
+    each motor between the controller's force and the plant (f_a = bandwidth_hz [Hz]), integrated
+    exactly over the step. State: the loop's, then the three actuator forces."""
+    Ac, Bc = plant_rates(split) if rates is None else rates
+    A, B, C = split.A, split.B, split.C
+    N = A.shape[0]
+    decay = 2.0 * math.pi * bandwidth_hz
+    e = math.exp(-decay * split.h)
+    Ge = _input_response(split, Ac, Bc, split.h, 0.0, decay)
+    M = np.zeros((N + 3, N + 3))
+    M[:N, :N] = A + (B - Ge) @ C
+    M[:N, N:] = Ge
+    M[N:, :N] = (1.0 - e) * C
+    M[N:, N:] = e * np.eye(3)
+    return M
+
+
+def actuator_bandwidth(split: SplitLoop, rates=None) -> float | None:
+    """The lowest actuator bandwidth [Hz] (actuator_loop, every motor) above which the loop stays
+    stable: searched downward from ACTUATOR_SPAN's top (x the Nyquist frequency) in steps of 25 %
+    and refined by bisection; ACTUATOR_SPAN[0] if stable down to it, None if the loop is not
+    stable without the actuator."""
+    rates = plant_rates(split) if rates is None else rates
+    if _radius(split.closed_loop()) >= 1.0:
+        return None
+    top = ACTUATOR_SPAN[1] * 0.5 / split.h
+    f = _first_crossing(lambda b: _radius(actuator_loop(split, b, rates)),
+                        list(np.geomspace(top, ACTUATOR_SPAN[0], int(math.log(top / ACTUATOR_SPAN[0]) / math.log(1.25)))),
+                        rtol=1e-6)
+    return ACTUATOR_SPAN[0] if f is None else f
+
+
+def inserted_radius(scenario, delay: float = 0.0, actuator_hz: float | None = None) -> dict:
+    """The spectral radius of the scenario's sampled loop with ``delay`` [s] on every motor's force
+    (delayed_loop) and, separately, with a first-order actuator of ``actuator_hz`` [Hz] on every
+    motor (actuator_loop): {"delay": rho or None, "actuator": rho or None} (None: not asked)."""
+    split = SplitLoop(scenario)
+    rates = plant_rates(split)
+    return {"delay": _radius(delayed_loop(split, np.eye(3), delay, rates)) if delay > 0.0 else None,
+            "actuator": _radius(actuator_loop(split, actuator_hz, rates)) if actuator_hz is not None else None}
+
+
+def robustness(split: SplitLoop, freqs: np.ndarray) -> dict:
+    """The robustness measures of a stable split loop: per break point the disk margin (disk_margin of
+    the loop opened in that direction) and the delay margin [s]; for all three motors at once the disk
+    margin, the gain margin (all_loops_gain_margin) and the lowest actuator bandwidth [Hz]."""
+    rates = plant_rates(split)
+    loops = {}
+    for name, v in break_directions().items():
+        G = split.loop(v)
+        A, B, C, D = (np.asarray(M, dtype=float) for M in (G.A, G.B, G.C, G.D))
+        loops[name] = {**disk_margin(A, B, C, D, split.h, freqs), "delay_margin_s": delay_margin(split, v, rates)}
+    every = {**disk_margin(split.A, split.B, split.C, split.D, split.h, freqs), **all_loops_gain_margin(split),
+             "actuator_bandwidth_hz": actuator_bandwidth(split, rates)}
+    return {"loops": loops, "all_loops": every}

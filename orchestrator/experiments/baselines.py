@@ -17,6 +17,9 @@ The baselines here take the structure apart, one change per run:
     apd-dc-ms-matched      PID-DC  SC-DC's D per mode, no integral, P per mode tuned to SC-DC's
                                    peak sensitivity Ms (orchestrator.experiments.robustness)
     pid-dc-mode-matched    PID-DC  SC-DC's P, D and I per mode (equals SC-DC for uniform gains)
+    pid-dc-full            PID-DC  SC-DC's P, D and differential I per mode, plus the same integral
+                                   gain on the common mode (ki_c = ki_d, not tuned): the ordinary
+                                   PID that integrates every mode
     sc-dc-b0               SC-DC   b = 0 (no integral of c, differential P down by 3 Lambda_v b)
     sc-dc-lp0              SC-DC   Lambda_p = 0 (differential P down by 3 Lambda_p)
 
@@ -61,6 +64,9 @@ BASELINES = (
              "bought with a smaller stability margin"),
     Baseline("pid-dc-mode-matched", "PID-DC mode-matched (SC-DC's P, D and I per mode)",
              "SC-DC as a modal PID; for uniform gains the same law (a check of the identity)"),
+    Baseline("pid-dc-full", "PID-DC full integral (SC-DC's P and D per mode, ki_c = ki_d)",
+             "SC-DC's modal PID with an integral on the common mode too (ki_c = ki_d, not tuned): what the "
+             "integral SC-DC leaves out of the common mode gives"),
     Baseline("sc-dc-b0", "SC-DC ablation, b = 0",
              "SC-DC without the coupling b: no integral of c, differential P lower by 3 Lambda_v b"),
     Baseline("sc-dc-lp0", "SC-DC ablation, Lambda_p = 0",
@@ -89,6 +95,12 @@ def scdc_modal(g: Gains) -> tuple[ModalGains, str]:
     return mg.validated(), (f"projected (gains differ between motors: per-mode P, D, I of V^T K V, the "
                             f"differential gain the mean of the two differential modes; left out: coupling "
                             f"up to {cp:.4g} u/m in P and {ci:.4g} u/(m s) in I)")
+
+
+def full_integral(mg: ModalGains) -> ModalGains:
+    """SC-DC's modal gains ``mg`` with the common mode integrated as the differential modes are:
+    ki_c = ki_d [N/(m s)] (the same integral gain on every mode; not tuned)."""
+    return mg._replace(ki_c=mg.ki_d)
 
 
 def differential_stiffness(g: Gains) -> list[float]:
@@ -123,6 +135,7 @@ def compare_runs(scenario) -> dict:
         "apd-dc-mode-matched": pid(no_integral),
         "apd-dc-ms-matched": pid(robustness_matched(scenario).gains),
         "pid-dc-mode-matched": pid(mg),
+        "pid-dc-full": pid(full_integral(mg)),
         "sc-dc-b0": scenario.with_changes(law="sc-dc", gain_overrides=dict(ov, b=[0.0, 0.0, 0.0])),
         "sc-dc-lp0": scenario.with_changes(law="sc-dc", gain_overrides=dict(ov, Lambda_p=[0.0, 0.0, 0.0])),
     }

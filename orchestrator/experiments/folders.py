@@ -11,8 +11,14 @@ the folder until its last file is written; a second writer is refused (OutputInU
 also with overwrite. The lock is re-entrant within one thread (a command may lock a folder
 and then run into it) and released by the kernel if the process dies, even by SIGKILL. A
 folder whose run completed is never reused without overwrite; one whose run failed, was
-interrupted or never finished is (its old files are removed first); a folder of the other
+interrupted or never finished is (its old result files are removed first); a folder of the other
 kind (run / comparison) is refused even with overwrite.
+
+Never delete what tapmp did not write: a folder is tapmp's only if tapmp marked it (run.json or
+comparison.json of its kind, written first); reusing or overwriting it removes only the files of
+fixed names tapmp writes there (tapmp_names), so a user's notes stay. A folder tapmp did not mark
+is written into only if it is empty, or with overwrite if no file there has a name tapmp writes;
+otherwise it is refused before anything, even the lock file, is made there.
 """
 
 import json
@@ -139,9 +145,9 @@ def output_lock(folder):
 
 
 def folder_kind(folder) -> str | None:
-    """What a result folder holds: "comparison" (comparison.json, or a comparison written before
-    comparison.json existed: no run files of its own and run folders below), "run" (any of
-    RUN_FILES) or None (nothing of tapmp's)."""
+    """What a result folder holds, for reading it: "comparison" (comparison.json, or a comparison
+    written before comparison.json existed: no run files of its own and run folders below), "run"
+    (any of RUN_FILES) or None (nothing of tapmp's)."""
     folder = Path(folder)
     if (folder / COMPARISON_JSON).is_file():
         return "comparison"
@@ -152,48 +158,143 @@ def folder_kind(folder) -> str | None:
     return None
 
 
-def folder_completed(folder) -> bool:
-    """Whether a result folder holds a completed run or comparison: status "completed"
-    in run.json / comparison.json; a run's metrics.json (written only on completion) or an
-    unreadable run.json count as completed too (never reuse what might be good results);
-    a comparison without comparison.json is completed if one of its runs is."""
-    folder = Path(folder)
-    kind = folder_kind(folder)
+# The figures `tapmp plot` and `tapmp compare` write (plots.py): run_<stem> in a run folder, <stem>
+# in a comparison folder, signals (--signals) in either; PNG, and SVG with --svg.
+FIGURE_STEMS = ("fig4_trajectory", "fig5_tracking_errors", "fig6_sync_errors", "fig7_axis_errors",
+                "fig8_force_commands")
+_FIGURE_EXTS = ("png", "svg")
+MARKERS = {"run": "run.json", "comparison": COMPARISON_JSON}  # the file whose content makes a folder tapmp's
+WHAT = {"run": "a single run", "comparison": "a comparison"}
+
+
+def tapmp_names(kind: str) -> frozenset:
+    """The fixed names of the files tapmp writes into a result folder of ``kind`` ("run" or
+    "comparison"); besides them tapmp writes only its lock file, temporary files named
+    ``.<name>.*.tmp`` while it writes (renamed or removed at once) and, in a comparison, one run
+    folder per compared run."""
     if kind == "run":
-        info = read_json(folder / "run.json")
-        if (folder / "metrics.json").exists() or ((folder / "run.json").exists() and info is None):
-            return True
-        return isinstance(info, dict) and info.get("status") == "completed"
+        figs = [f"run_{stem}.{ext}" for stem in FIGURE_STEMS for ext in _FIGURE_EXTS]
+        return frozenset((*RUN_FILES, *figs, *(f"signals.{ext}" for ext in _FIGURE_EXTS)))
+    figs = [f"{stem}.{ext}" for stem in (*FIGURE_STEMS, "signals") for ext in _FIGURE_EXTS]
+    return frozenset((COMPARISON_JSON, "comparison.md", *figs))
+
+
+def marked_kind(folder) -> str | None:
+    """"run" or "comparison" if tapmp marked ``folder`` as its own (a run.json or comparison.json
+    it wrote: a JSON object of that "kind"; or a comparison from before comparison.json existed:
+    no run.json of its own and run folders tapmp marked below), else None. Only a marked folder
+    is tapmp's to reuse or overwrite."""
+    folder = Path(folder)
+    for kind, marker in MARKERS.items():
+        info = read_json(folder / marker)
+        if isinstance(info, dict) and info.get("kind") == kind:
+            return kind
+    if not (folder / MARKERS["run"]).exists() and not (folder / COMPARISON_JSON).exists() and folder.is_dir() \
+            and any(marked_kind(p) == "run" for p in folder.iterdir() if p.is_dir() and not p.is_symlink()):
+        return "comparison"
+    return None
+
+
+def folder_completed(folder) -> bool:
+    """Whether a result folder tapmp marked holds a completed run or comparison: status
+    "completed" in run.json / comparison.json; a run's metrics.json (written only on completion)
+    counts as completed too (never reuse what might be good results); a comparison without
+    comparison.json is completed if one of its runs is."""
+    folder = Path(folder)
+    kind = marked_kind(folder)
+    if kind == "run":
+        return (folder / "metrics.json").exists() or read_json(folder / "run.json").get("status") == "completed"
     if kind == "comparison":
         info = read_json(folder / COMPARISON_JSON)
-        if info is not None:
+        if isinstance(info, dict):
             return info.get("status") == "completed"
-        return any(folder_completed(p) for p in folder.iterdir() if p.is_dir())
+        return any(folder_completed(p) for p in folder.iterdir() if p.is_dir() and marked_kind(p) == "run")
     return False
 
 
-def prepare_output(out: Path, overwrite: bool, kind: str = "run") -> Path:
-    """Create the output folder for a result of ``kind`` ("run" or "comparison"). Refused
-    (OutputExistsError, one line naming --out, and --overwrite where it would help): a
-    folder holding the other kind, and one holding a completed result unless overwrite.
-    A folder of the same kind whose result failed, was interrupted or never finished is
-    reused: its run files (and figures of a run) are removed. Call it holding the
-    folder's output_lock."""
+def _listing(names: list, limit: int = 5) -> str:
+    names = sorted(names)
+    more = f" and {len(names) - limit} more" if len(names) > limit else ""
+    return ", ".join(names[:limit]) + more
+
+
+def _entries(folder: Path) -> list:
+    """The entries of ``folder`` other than tapmp's lock file ([] if it does not exist)."""
+    try:
+        return [e for e in folder.iterdir() if e.name != LOCK_FILE]
+    except FileNotFoundError:
+        return []
+    except NotADirectoryError:
+        return []
+
+
+def _unmarked_clobbered(folder: Path, kind: str, runs=(), prefix: str = "") -> list:
+    """The entries of the unmarked ``folder`` that a result of ``kind`` would replace: tapmp's
+    fixed names, and in a comparison's run folders (``runs``) those of a run, as paths relative to
+    the top folder (``prefix``)."""
+    names = tapmp_names(kind)
+    out = []
+    for e in _entries(folder):
+        if e.name in names:
+            out.append(prefix + e.name)
+        elif kind == "comparison" and e.name in runs and e.is_dir() and not e.is_symlink():
+            if marked_kind(e) is None:
+                out += _unmarked_clobbered(e, "run", prefix=f"{prefix}{e.name}/")
+        elif kind == "comparison" and e.name in runs:
+            out.append(prefix + e.name)  # a file or link where a run folder goes
+    return out
+
+
+def check_output(out: Path, overwrite: bool, kind: str = "run", runs=(), unmarked_only: bool = False) -> None:
+    """Refuse (OutputExistsError, one line naming the folder, nothing changed) to write a result
+    of ``kind`` ("run" or "comparison", with the run folders ``runs``) into ``out`` if: it holds
+    the other kind; it holds a completed result and not ``overwrite``; tapmp did not mark it
+    (marked_kind) and it holds anything but tapmp's lock file, unless ``overwrite`` (then
+    results are written beside those files); or an unmarked file would be replaced by one tapmp
+    writes (whatever ``overwrite`` says: tapmp never deletes what it did not write).
+    ``unmarked_only``: only the last two (before the lock is taken: a folder tapmp marked may be
+    another writer's, which the lock reports)."""
     out = Path(out)
-    existing = folder_kind(out) if out.exists() else None
-    if existing is not None and existing != kind:
-        marker = COMPARISON_JSON if existing == "comparison" else "run.json"
-        what = {"run": "a single run", "comparison": "a comparison"}
-        raise OutputExistsError(f"output folder {out} holds {what[existing]} ({marker}), not {what[kind]}: "
+    if not out.is_dir():
+        return  # made by output_lock (a file there is refused by the file system, one line)
+    marked = marked_kind(out)
+    if unmarked_only and marked is not None:
+        return
+    marker = MARKERS[kind]
+    if marked is not None and marked != kind:
+        raise OutputExistsError(f"output folder {out} holds {WHAT[marked]} ({MARKERS[marked]}), not {WHAT[kind]}: "
                                 f"choose another folder with --out")
-    if existing is not None and folder_completed(out) and not overwrite:
+    if marked is None:
+        foreign = [e.name for e in _entries(out)]
+        clobbered = _unmarked_clobbered(out, kind, runs)
+        if clobbered:
+            raise OutputExistsError(f"output folder {out} holds {_listing(clobbered)}, which tapmp did not write (no "
+                                    f"{marker} of tapmp marks the folder as {WHAT[kind]}) and would replace: nothing "
+                                    f"was changed; move {'it' if len(clobbered) == 1 else 'them'} away or choose "
+                                    "another folder with --out")
+        if foreign and not overwrite:
+            raise OutputExistsError(f"output folder {out} holds files tapmp did not write ({_listing(foreign)}; no "
+                                    f"{marker} of tapmp marks it as {WHAT[kind]}): nothing was changed; choose a new "
+                                    "or empty folder with --out, or pass --overwrite to write beside them")
+        return
+    if folder_completed(out) and not overwrite:
         raise OutputExistsError(f"output folder {out} already holds results of a completed {kind}: "
                                 "choose another with --out or pass --overwrite")
-    if kind == "run":
-        for f in RUN_FILES:
-            (out / f).unlink(missing_ok=True)
-        for fig in out.glob("run_fig*.png") if out.exists() else ():
-            fig.unlink()
+    for name in runs if kind == "comparison" else ():
+        check_output(out / name, True, "run")  # replaced as part of the comparison
+
+
+def prepare_output(out: Path, overwrite: bool, kind: str = "run", runs=()) -> Path:
+    """Create the output folder for a result of ``kind`` ("run" or "comparison", with the run
+    folders ``runs``) after :func:`check_output`. A run folder tapmp marked whose run failed, was
+    interrupted or never finished (or, with ``overwrite``, completed) is reused: of its files only
+    those tapmp writes (tapmp_names) are removed; anything else there stays. Call it holding the
+    folder's output_lock."""
+    out = Path(out)
+    check_output(out, overwrite, kind, runs)
+    if kind == "run" and marked_kind(out) == "run":
+        for name in tapmp_names("run"):
+            (out / name).unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     return out
 

@@ -6,6 +6,9 @@ motion). Synchronization errors follow Eq. 18. Axis errors are X_d - X, Z_d - Z
 in um and B_d - B in urad. MAE = mean |e|; STD = population standard deviation.
 Saturation of motor i: the share of samples whose force command |F_i| (the controller's
 output) is at the force limit (the plant's force_limit; the controller's if the plant's is 0).
+Effort: the RMS of each motor's force command above EFFORT_HZ (after a 4th-order Butterworth
+high-pass, started at rest on the first command), the part of the force that follows
+quantization, noise and cogging rather than the reference, whose content is below 1 Hz.
 Response to a force step (plant.disturbance_force_i from plant.disturbance_time on): the
 change of the mean tracking error from the window before the step to the last window of the
 run (each RESPONSE_WINDOW long, or what the run has), per motor and for the common mode
@@ -23,6 +26,43 @@ _GROUPS = ("tracking", "sync", "axis")
 _FORCES = tuple(f"controller.F{i}" for i in (1, 2, 3))
 AT_LIMIT = 1e-9  # |F| >= (1 - AT_LIMIT) force_limit counts as at the limit (a clipped value, to rounding)
 RESPONSE_WINDOW = 0.1  # [s] the windows before a force step and at the end of the run
+EFFORT_HZ = 100.0  # [Hz] the force RMS above this frequency is the effort metric (module doc)
+
+
+class _HighPassRms:
+    """RMS [N] of three force channels above EFFORT_HZ, streamed block by block (scipy's sosfilt
+    with its state carried over; the step from the first two time stamps)."""
+
+    def __init__(self):
+        self.sos = self.zi = None
+        self.sq = np.zeros(3)
+        self.n = 0
+        self.pending = None
+        self.step = None
+
+    def add(self, time: np.ndarray, forces: np.ndarray) -> None:
+        from scipy import signal
+        if self.pending is not None:
+            time, forces = np.concatenate([self.pending[0], time]), np.vstack([self.pending[1], forces])
+            self.pending = None
+        if self.sos is None:
+            if len(time) < 2:
+                self.pending = (time, forces)
+                return
+            self.step = float(time[1] - time[0])
+            if not 0.5 / self.step > EFFORT_HZ:
+                self.sos = False  # the sample rate cannot resolve the band
+                return
+            self.sos = signal.butter(4, EFFORT_HZ, "highpass", fs=1.0 / self.step, output="sos")
+            self.zi = signal.sosfilt_zi(self.sos)[:, :, None] * forces[0][None, None, :]
+        if self.sos is False:
+            return
+        y, self.zi = signal.sosfilt(self.sos, forces, axis=0, zi=self.zi)
+        self.sq += (y ** 2).sum(0)
+        self.n += y.shape[0]
+
+    def result(self):
+        return (np.sqrt(self.sq / self.n)).tolist() if self.n else None
 
 
 def saturation_limit(parameters: dict) -> float:
@@ -116,6 +156,7 @@ class ErrorStatistics:
         self.force_limit = float(force_limit)  # [N]; 0: no saturation is counted
         self.saturated = np.zeros(3, dtype=np.int64)  # samples with |F_i| at the limit
         self._forces = [self.columns.index(c) for c in _FORCES] if set(_FORCES) <= set(self.columns) else None
+        self.effort = _HighPassRms()
         # A system without the TAPMP plant and trajectory (e.g. the user's own plant FMU) runs,
         # but its errors cannot be computed: metrics.json says which columns are missing.
         self.missing = [c for c in REQUIRED if c not in self.columns]
@@ -141,6 +182,8 @@ class ErrorStatistics:
         if self.force_limit > 0.0 and self._forces is not None:
             at_limit = np.abs(data[:, self._forces]) >= self.force_limit * (1.0 - AT_LIMIT)
             self.saturated += at_limit.sum(0)
+        if self._forces is not None:
+            self.effort.add(signals["time"], data[:, self._forces])
         nb = signals["time"].shape[0]
         n = self.n + nb
         for g in _GROUPS:
@@ -171,6 +214,7 @@ class ErrorStatistics:
             "samples": int(self.n),
             "saturation_fraction": (self.saturated / max(self.n, 1)).tolist(),
             "force_limit_n": self.force_limit,
+            "force_rms_above_hz": EFFORT_HZ, "force_hf_rms_n": self.effort.result(),
             **move,
         }
         if self.response is not None:

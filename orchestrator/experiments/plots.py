@@ -14,6 +14,7 @@ labelled line, and a zoom panel with every sample of a short window.
 
 import difflib
 import math
+import os
 import re
 from pathlib import Path
 
@@ -25,8 +26,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from ..errors import UsageError  # noqa: E402
 from .metrics import error_signals  # noqa: E402
-from .folders import COMPARISON_JSON, folder_kind, read_json  # noqa: E402
-from .reading import ResultFolderError, read_results  # noqa: E402
+from .folders import COMPARISON_JSON, FORMATS, PART_FILE, folder_kind  # noqa: E402
+from .reading import ResultFolderError, json_object, read_results  # noqa: E402
 
 LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
               "pid-dc": "PID-DC",
@@ -126,12 +127,14 @@ def parse_window(text: str | None) -> tuple[float, float] | None:
 
 
 def _metrics(path: Path) -> dict:
-    return read_json(Path(path) / "metrics.json") or {}
+    """metrics.json of a run folder, {} if none; ResultFolderError if it is damaged."""
+    return json_object(path, "metrics.json")
 
 
 def _run_info(path: Path) -> dict:
-    """The scenario a run folder recorded (run.json), {} if none."""
-    return ((read_json(Path(path) / "run.json") or {}).get("scenario")) or {}
+    """The scenario a run folder recorded (run.json), {} if none; ResultFolderError if run.json is damaged."""
+    scenario = json_object(path, "run.json").get("scenario")
+    return scenario if isinstance(scenario, dict) else {}
 
 
 def horizon(path: Path) -> tuple | None:
@@ -150,15 +153,15 @@ def force_limit(path: Path) -> float:
     if isinstance(m.get("force_limit_n"), (int, float)):
         return float(m["force_limit_n"])
     s = _run_info(path)
-    limits = [float(t.get("force_limit", 0.0) or 0.0) for t in (s.get("plant") or {}, s.get("controller") or {})]
-    limits = [v for v in limits if v > 0]
+    limits = [t.get("force_limit") for t in (s.get("plant"), s.get("controller")) if isinstance(t, dict)]
+    limits = [float(v) for v in limits if isinstance(v, (int, float)) and v > 0]
     return min(limits) if limits else 0.0
 
 
 def _mean_tracking_mae(path: Path, rows=None) -> float:
     """Mean tracking MAE [µm] over the three motors of a run (metrics.json, else its rows)."""
     m = _metrics(path).get("tracking_mae_um")
-    if m:
+    if isinstance(m, list) and m and all(isinstance(v, (int, float)) for v in m):
         return float(np.mean(m))
     try:
         columns, data = rows or read_results(path)
@@ -189,11 +192,11 @@ def select_runs(folder: Path, names: list[str], wanted: list[str] | None = None,
 def _load_run(path: Path, rows=None, window=None) -> dict:
     """A run as the figures draw it: error_signals of its rows (in ``window`` [s] if given) plus
     "columns", "data", "name" (folder name), "force_limit" [N] and "horizon"."""
-    try:
-        columns, data = rows or read_results(path)
-    except ResultFolderError:
-        status = (read_json(path / "run.json") or {}).get("status", "unknown")
-        raise ResultFolderError(f"{path} holds no rows to plot (its run is {status}; run.json says why)") from None
+    path = Path(path)
+    if rows is None and not any(os.path.lexists(path / n) for n in (*FORMATS.values(), PART_FILE)):
+        status = json_object(path, "run.json").get("status", "unknown")
+        raise ResultFolderError(f"{path} holds no rows to plot (its run is {status}; run.json says why)")
+    columns, data = rows or read_results(path)
     if window is not None:
         t = data[:, 0]
         data = data[(t >= window[0]) & (t <= window[1])]
@@ -220,9 +223,7 @@ def load_folder(folder: Path, rows: dict | None = None, show: list[str] | None =
     if kind == "run":
         paths = {label(folder.name, _run_info(folder).get("law")): folder}
     elif kind == "comparison":
-        info = read_json(folder / COMPARISON_JSON) or {}
-        names = info.get("runs") or {p.name: None for p in sorted(folder.iterdir())
-                                     if (p / "run.json").is_file()}
+        names = _runs_of(folder)
         present = {n: law for n, law in names.items() if folder_kind(folder / n) == "run"}
         if show is not None:
             present = {n: present[n] for n in show if n in present}
@@ -567,9 +568,21 @@ def figure_runs(names: list[str], show: list[str] | None = None) -> list[str]:
 
 def _comparison_names(folder: Path) -> list[str]:
     """Folder names of the runs a comparison folder holds, in comparison.json's order."""
-    info = read_json(Path(folder) / COMPARISON_JSON) or {}
-    names = list(info.get("runs") or [p.name for p in sorted(Path(folder).iterdir()) if (p / "run.json").is_file()])
-    return [n for n in names if folder_kind(Path(folder) / n) == "run"]
+    return [n for n in _runs_of(folder) if folder_kind(Path(folder) / n) == "run"]
+
+
+def _runs_of(folder: Path) -> dict:
+    """{run folder name: law or None} of a comparison folder: comparison.json's runs, else (a
+    comparison written before it existed) its subfolders with a run.json. ResultFolderError if
+    comparison.json is damaged."""
+    runs = json_object(folder, COMPARISON_JSON).get("runs")
+    if runs is not None:
+        if not (isinstance(runs, dict) and all(isinstance(n, str) and n and "/" not in n and n not in (".", "..")
+                                               for n in runs)):
+            raise ResultFolderError(f"{Path(folder) / COMPARISON_JSON} is damaged: its runs are not a table of run "
+                                    "folder names")
+        return {n: law if isinstance(law, str) else None for n, law in runs.items()}
+    return {p.name: None for p in sorted(Path(folder).iterdir()) if (p / "run.json").is_file()}
 
 
 def default_out(folders: list[Path], labels: list[str]) -> Path:

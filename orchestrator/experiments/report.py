@@ -89,6 +89,34 @@ def modal_note(scenario) -> str:
             + robustness_matched(scenario).text())
 
 
+def robustness_section(runs: dict) -> list[str]:
+    """Markdown lines: each run's robustness on the sampled loop of `tapmp check` (tapmp analyze's
+    measures, orchestrator.experiments.analysis): Ms per mode, disk margins per loop and for all
+    motors at once, the all-loops gain margin with the K_T error it covers, the smallest delay margin
+    and the lowest actuator bandwidth. runs: {name: Scenario}."""
+    from . import analysis
+    first = next(iter(runs.values()))
+    result = {"runs": analysis.analyze_runs(runs, analysis.frequency_grid(first.step))}
+    lines = ["| run | Ms common, diff. Z, diff. B | disk margin per loop: " + ", ".join(analysis.BREAK_POINTS)
+             + " | all loops: disk margin (gain dB, phase deg) | all-loops gain margin (K_T error) "
+             "| delay margin [ms] (loop) | lowest actuator bandwidth [Hz] |", "|---" * 7 + "|"]
+    for run, r in result["runs"].items():
+        if r["verdict"] != "stable":
+            lines.append(f"| {run} | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}) "
+                         "| - | - | - | - | - |")
+            continue
+        cells = analysis.robustness_cells(run, r)
+        ms = ", ".join(f"{r['loops'][m]['Ms']:.3f}" for m in ("common", "diff. Z", "diff. B"))
+        lines.append("| " + " | ".join([cells[0], ms, *cells[1:]]) + " |")
+    return ["Computed on the linearized sampled loop of `tapmp check` (as `tapmp analyze`, docs/analysis.md): "
+            "Ms = peak sensitivity at the plant input with one mode open; disk margin alpha (symmetric): any "
+            "simultaneous gain in [(2 - alpha)/(2 + alpha), (2 + alpha)/(2 - alpha)] or phase within "
+            "+-2 atan(alpha/2) on the opened loops keeps the loop stable; the all-loops gain margin scales all three "
+            "motor forces at once (a K_T error, F = u / K_T); the delay margin is the smallest delay in one loop that "
+            "destabilizes it; the actuator bandwidth is that of a first-order lag on every motor below which the "
+            "loop is unstable.", "", *lines]
+
+
 def runs_table(runs: dict, results: dict, checks: dict) -> str:
     """Markdown table of the compare runs: what each isolates, its gains, the stability
     pre-check (spectral radius, verdict) and the share of samples at the force limit [%].
@@ -111,8 +139,10 @@ def summary_table(results: dict) -> str:
     """Markdown table: each run's mean tracking and synchronization MAE over the motors [um] and
     SC-DC's reduction against it [%] (positive: SC-DC has the smaller error)."""
     sc = results.get("sc-dc")
+    hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), None)
     lines = ["| run | mean tracking MAE [um] | mean sync MAE [um] | SC-DC's tracking reduction [%] "
-             "| SC-DC's sync reduction [%] |", "|---" * 5 + "|"]
+             "| SC-DC's sync reduction [%] | force RMS above " + (f"{hz:g} Hz" if hz else "the band") + " [N] |",
+             "|---" * 6 + "|"]
     for b in BASELINES:
         if b.name not in results:
             continue
@@ -120,8 +150,14 @@ def summary_table(results: dict) -> str:
         t, y = _mean(m["tracking_mae_um"]), _mean(m["sync_mae_um"])
         rt = reduction(t, _mean(sc["tracking_mae_um"])) if sc else float("nan")
         ry = reduction(y, _mean(sc["sync_mae_um"])) if sc else float("nan")
-        lines.append(f"| {b.label} | {t:.4f} | {y:.4f} | {rt:+.1f} | {ry:+.1f} |")
+        lines.append(f"| {b.label} | {t:.4f} | {y:.4f} | {rt:+.1f} | {ry:+.1f} | {effort_text(m)} |")
     return "\n".join(lines)
+
+
+def effort_text(m: dict) -> str:
+    """The metrics' force RMS above the effort band per motor [N] ("n/a" if not computed)."""
+    v = m.get("force_hf_rms_n")
+    return "n/a" if not v else ", ".join(f"{x:.3g}" for x in v)
 
 
 def _ms(x) -> str:
@@ -181,7 +217,8 @@ def write_comparison(path: Path, scenario, results: dict, command: str, runs: di
         "Errors use the plant's true motor positions. The paper's values are from its own plant and "
         "gains, copied as printed (see docs/paper-reproduction.md for what differs).", ""]
     if runs is not None:
-        parts += ["## Runs", "", runs_table(runs, results, checks or {}), "", modal_note(scenario), ""]
+        parts += ["## Runs", "", runs_table(runs, results, checks or {}), "", modal_note(scenario), "",
+                  "## Robustness of each run", "", *robustness_section(runs), ""]
     parts += ["## SC-DC against each run (mean over the three motors)", "", summary_table(results), "",
               comparison_tables(scenario.name, results)]
     moves = move_tables(results)

@@ -25,7 +25,7 @@ from . import metrics
 from ..engine.master import CoSimulation
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
-from .folders import FORMATS, ResultsWriteError, output_lock, prepare_output, write_json, write_result
+from .folders import FORMATS, ResultsWriteError, check_output, output_lock, prepare_output, write_json, write_result
 from .scenario import Scenario
 from .stops import StopRequest, stop_scope
 from .writers import CsvBlocks, Keeping, MatBlocks
@@ -72,6 +72,7 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     written, for a caller that plots them, as long as they total at most ``keep_bytes``;
     beyond that it is emptied (read the result file instead).
     """
+    check_output(out, overwrite, unmarked_only=True)  # before the lock file is made: a refused folder is left as it was
     with output_lock(out):
         out = prepare_output(out, overwrite)
         return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)

@@ -42,7 +42,7 @@ from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
-from ..engine.clocks import CLOCKS
+from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..engine.families import FAMILIES
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
@@ -78,6 +78,9 @@ SECTION_PARAMS = {
 }
 # Set from the scenario's own keys, never in [controller]: the controller samples once per step.
 _FROM_SCENARIO = {"law": "law", "T_s": "step"}
+# The largest integer setting: an FMI Integer (int32), and for record_every far more steps than any run
+# records, checked before the number reaches numpy or C.
+MAX_INT = 2**31 - 1
 STEP_TOLERANCE = 1e-9  # relative: how far (stop_time - start_time) / step may be from a whole number
 _OPEN_INPUT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.[^\s.][^\s]*")
 
@@ -139,6 +142,9 @@ def _section(table: dict, info) -> dict:
                              f"allowed is to set {key}")
         known(k, allowed, f"{section}.")
         out[k] = check_type(f"{section}.{k}", v, int if allowed[k].type == "Integer" else float)
+        if allowed[k].type == "Integer":  # before the value reaches C (fmi2Integer is an int32)
+            require(-MAX_INT - 1 <= out[k] <= MAX_INT, f"{section}.{k} = {v!r} is invalid: allowed is an FMI "
+                    f"Integer, from {-MAX_INT - 1} to {MAX_INT}")
     return out
 
 
@@ -228,8 +234,8 @@ class Scenario:
     gains: Annotated[str, one_of(sorted(GAIN_PRESETS))] = "default"
     gains_file: str = ""
     gain_overrides: Annotated[dict, BeforeValidator(_gain_overrides)] = field(default_factory=dict)
-    start_time: float = 0.0
-    stop_time: float = 2.5
+    start_time: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v), "a finite number [s]")] = 0.0
+    stop_time: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v), "a finite number [s]")] = 2.5
     step: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v) and v > 0.0, "a number > 0 [s]")] = 1e-4
     ordering: Annotated[str, one_of(ORDERINGS)] = "gauss-seidel"
     output: str = ""  # "" = results/<name>
@@ -242,7 +248,8 @@ class Scenario:
     limits: Annotated[dict, BeforeValidator(_limits)] = field(default_factory=dict)
     # ModelParams field -> controller/plant factor
     mismatch: Annotated[dict, BeforeValidator(_mismatch)] = field(default_factory=dict)
-    record_every: Annotated[int, rule(lambda v: is_number(v) and v >= 1, "an integer >= 1")] = 1
+    record_every: Annotated[int, rule(lambda v: is_number(v) and 1 <= v <= MAX_INT,
+                                      f"an integer from 1 to {MAX_INT}")] = 1
     # "element.variable" inputs left undriven on purpose
     open_inputs: Annotated[list, BeforeValidator(_open_inputs)] = field(default_factory=list)
     # explicit Gauss-Seidel step order: every SSP element name once
@@ -337,18 +344,44 @@ class Scenario:
 def _check_times(s: Scenario) -> None:
     """stop_time > start_time, and stop_time - start_time a whole number (>= 1) of steps: a run
     never goes past stop_time and never completes zero steps; otherwise the nearest valid stop
-    times are named."""
-    require(math.isfinite(s.start_time) and math.isfinite(s.stop_time) and s.stop_time > s.start_time,
+    times are named (or, where a double cannot tell them apart, that the grid cannot be
+    represented there). With clock = "nanoseconds" every time must fit its int64 count."""
+    require(s.stop_time > s.start_time,
             f"stop_time = {s.stop_time!r} is invalid: allowed is a number > start_time = {s.start_time!r} [s]")
-    n = (s.stop_time - s.start_time) / s.step
+    k = _whole_steps(s.start_time, s.stop_time, s.step)
+    if k is None:
+        n = (s.stop_time - s.start_time) / s.step
+        lo, hi = max(1, math.floor(n)), max(1, math.ceil(n))
+        nearest = sorted({t for t in (s.start_time + lo * s.step, s.start_time + hi * s.step)
+                          if _whole_steps(s.start_time, t, s.step) is not None})
+        where = (f"stop_time = {s.stop_time!r} is invalid: stop_time - start_time = {s.stop_time - s.start_time!r} s "
+                 f"is not a whole number of steps of {s.step!r} s")
+        if not nearest:  # t0 + k h rounds too coarsely at this magnitude to land on the grid
+            big = max(abs(s.start_time), abs(s.stop_time))
+            raise ValueError(f"{where}, and no stop time near it is: at |t| = {big:g} s a double resolves "
+                             f"{math.ulp(big):.3g} s, too coarse for steps of {s.step!r} s to be counted within "
+                             f"{STEP_TOLERANCE:g}: allowed are times nearer to 0 or a larger step")
+        raise ValueError(f"{where}: allowed are e.g. {' or '.join(_time_text(t, nearest) for t in nearest)}")
+    if s.clock == "nanoseconds":
+        problem = nanoseconds_problem(s.start_time, s.step, k)
+        require(problem is None, problem or "")
+
+
+def _whole_steps(start: float, stop: float, step: float) -> int | None:
+    """The number (>= 1) of steps of ``step`` from ``start`` to ``stop`` [s], None unless whole
+    within STEP_TOLERANCE (relative)."""
+    n = (stop - start) / step
     k = round(n)
-    if k >= 1 and abs(n - k) <= STEP_TOLERANCE * max(1.0, k):
-        return
-    lo, hi = max(1, math.floor(n)), max(1, math.ceil(n))
-    nearest = sorted({s.start_time + lo * s.step, s.start_time + hi * s.step})
-    raise ValueError(f"stop_time = {s.stop_time!r} is invalid: stop_time - start_time = "
-                     f"{s.stop_time - s.start_time!r} s is not a whole number of steps of {s.step!r} s: "
-                     f"allowed are e.g. {' or '.join(f'{t:.12g}' for t in nearest)}")
+    return k if k >= 1 and abs(n - k) <= STEP_TOLERANCE * max(1.0, k) else None
+
+
+def _time_text(t: float, others: list) -> str:
+    """``t`` [s] in as few digits (at least the usual 12 significant) as tell it from ``others``."""
+    for digits in range(12, 18):
+        text = f"{t:.{digits}g}"
+        if all(f"{o:.{digits}g}" != text for o in others if o != t):
+            return text
+    return repr(t)
 
 
 def _check_disturbance(s: Scenario) -> None:

@@ -11,8 +11,9 @@ for any positive diagonal gains. Its proof does not hold:
   sign: a Lipschitz bound gives |n^T K_T (u_d - u_1)| <= lambda_max(K_T) k_t |n| |e|, so the term
   may be positive, and Eq. 34's V' <= 0 does not follow. Along a growing mode V' > 0
   (``lyapunov_v``).
-* Eq. 31, the identity that turns Eq. 30 into Eq. 32, holds only when Lambda_p, B and D are
-  multiples of the identity (then S^T Lambda_p S = Lambda_p L); for the paper's own Eq. 40
+* Eq. 31, the identity that turns Eq. 30 into Eq. 32, holds only when Lambda_p and D are
+  multiples of the identity (then S^T Lambda_p S = Lambda_p L); B may differ per motor, a
+  per-motor D or Lambda_p breaks it; for the paper's own Eq. 40
   gains its two sides differ (``eq31_sides`` evaluates both from the definitions Eq. 18-24).
 
 A counterexample with every gain positive is ``COUNTEREXAMPLE``: with exact dynamics

@@ -234,7 +234,8 @@ class _MonteCarlo(BaseModel):
 
 
 _TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
-_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time")
+_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time", "ms_bound")
+MS_BOUND = 2.0  # default tune.ms_bound: the usual guideline Ms < 2 (6 dB; Skogestad and Postlethwaite, Sec. 2.4.3)
 
 
 def _write_to(w) -> str:
@@ -281,6 +282,10 @@ class _Tune(BaseModel):
     seed: Annotated[int, rule(lambda v: is_int(v, 0), "an integer >= 0", "tune.")] = 0
     write_to: Annotated[str, BeforeValidator(_write_to)] = Field(None, validate_default=True)
     compare_stop_time: Annotated[float, rule(lambda v: is_number(v) and v > 0, "a number > 0 [s]", "tune.")] = 2.5
+    # the largest peak sensitivity Ms allowed on any mode of a candidate (tuning.py); a design beyond is not run
+    ms_bound: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v) and v >= 1.0,
+                                    "a finite number >= 1 (the largest peak sensitivity Ms on any mode)",
+                                    "tune.")] = MS_BOUND
 
     @model_validator(mode="before")
     @classmethod

@@ -201,8 +201,9 @@ def plot_objective(path: Path, results: dict) -> Path:
         ax.semilogy(n, np.minimum.accumulate(vals), "-", label="best so far")
         if (~ok).any():
             ax.plot(n[~ok], np.full((~ok).sum(), vals[ok].max() if ok.any() else 1.0), "x", color="r",
-                    label="rejected (not stable) / failed")
-        ax.axhline(r["start"], color="grey", ls="--", label=f"start gains ({r['start']:.4f} µm)")
+                    label="rejected (not stable or beyond the Ms bound) / failed")
+        if r["start"] is not None:  # the start gains were run (not rejected)
+            ax.axhline(r["start"], color="grey", ls="--", label=f"start gains ({r['start']:.4f} µm)")
         ax.set_title(f"{law}: tuned {r['tuned']:.4f} µm", fontsize=10)
         ax.set_xlabel("evaluation [count]")
         ax.set_ylabel("objective (tracking + sync MAE)/2 [µm]")

@@ -6,7 +6,12 @@ scipy.optimize.differential_evolution searches the base-10 logarithm of the tune
 workers (through the real FMUs, orchestrator.studies.study.run_case) and records every
 evaluation as a row of study.csv. A candidate that the stability pre-check
 (orchestrator.experiments.stability) finds not stable is rejected without running (status
-"rejected"); rejected and failed candidates score PENALTY_UM.
+"rejected"); so is a stable candidate whose peak sensitivity Ms on any mode (common, the two
+differential modes; orchestrator.experiments.robustness.mode_peaks, the loop of `tapmp analyze`)
+exceeds the [tune] table's ms_bound (default 2, the usual 6 dB guideline): the objective is
+minimized subject to that robustness bound, so two tuned laws are compared at a stated, equal
+robustness ceiling. Rejected and failed candidates score PENALTY_UM, and a law none of whose
+candidates completed is an error, never a preset beyond the bound.
 
 The objective is orchestrator.studies.study.objective: (mean tracking MAE + mean synchronization
 MAE) / 2 over the three motors [um], on the study's base scenario (with its [set], e.g. a
@@ -37,12 +42,30 @@ from .study_file import StudyError, apply_changes
 class TuneObjective:
     """The objective of one law's candidates x = log10(gains), evaluated as study cases."""
 
-    def __init__(self, runner: CaseRunner, law: str, names: list):
+    def __init__(self, runner: CaseRunner, law: str, names: list, scenario=None, ms_bound: float | None = None):
         self.runner = runner
         self.law = law
         self.names = names
         self.count = 0
         self.cases = []
+        self.scenario = scenario  # the law's base scenario, for the Ms of a candidate
+        self.ms_bound = ms_bound
+
+    def beyond_bound(self, case: dict) -> str:
+        """Why the candidate is beyond ms_bound ("" if it is not, or if its loop is not stable:
+        the stability pre-check of run_case rejects that one)."""
+        from ..experiments.robustness import mode_peaks
+        from ..experiments.stability import check
+        if self.ms_bound is None or self.scenario is None:
+            return ""
+        sc = apply_changes(self.scenario, case["changes"], "tune")
+        if not check(sc).stable:
+            return ""
+        peaks = mode_peaks(sc)
+        mode = max(peaks, key=peaks.get)
+        if peaks[mode] <= self.ms_bound:
+            return ""
+        return f"not run: Ms {peaks[mode]:.4g} ({mode}) above tune.ms_bound = {self.ms_bound:g}"
 
     def case(self, x) -> dict:
         """The study case of candidate x (the next evaluation number)."""
@@ -61,7 +84,13 @@ class TuneObjective:
     def map(self, func, xs) -> list:
         """scipy's ``workers`` protocol: [func(x) for x in xs], here one batch of cases on Dask
         (func is this objective, wrapped by scipy; its batch is run instead of one by one)."""
-        rows = self.runner.run([self.case(x) for x in xs], reject_unstable=True)
+        cases = [self.case(x) for x in xs]
+        for c in cases:  # rejected here for its robustness: a row without a run (run() skips it)
+            if c["case"] not in self.runner.table.rows:
+                why = self.beyond_bound(c)
+                if why:
+                    self.runner.table.add(c, {"status": "rejected", "error": why})
+        rows = self.runner.run(cases, reject_unstable=True)
         return [case_value(r) for r in rows]
 
     def __call__(self, x) -> float:
@@ -71,9 +100,11 @@ class TuneObjective:
 def _preset_text(law, gains, objective_start, objective_tuned, base, command) -> str:
     lines = [f"# {law} gains tuned by `{command}`" if command else f"# {law} gains, tuned",
              f"# objective (mean tracking + sync MAE)/2 on {base.name}, {base.stop_time - base.start_time:g} s, "
-             f"h = {base.step:g} s: start {objective_start:.6g} um -> tuned {objective_tuned:.6g} um",
+             f"h = {base.step:g} s: start " + (f"{objective_start:.6g} um" if objective_start is not None else
+                                             "not run (rejected)") + f" -> tuned {objective_tuned:.6g} um",
              '# use in a scenario: gains_file = "<path of this file>"', f'law = "{law}"',
-             f"objective_start_um = {objective_start!r}", f"objective_tuned_um = {objective_tuned!r}",
+             *([f"objective_start_um = {objective_start!r}"] if objective_start is not None else []),
+             f"objective_tuned_um = {objective_tuned!r}",
              "", "[gains]"]
     for n in GAIN_NAMES:
         lines.append(f"{n} = [{', '.join(repr(float(v)) for v in gains[n])}]")
@@ -110,20 +141,28 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
             x0 = np.clip(np.log10([float(np.mean(getattr(g0, n))) for n in names]), lo, hi)
             runner = CaseRunner(client, scenario, ssp, out, table, study.keep_results, progress,
                                 f"{study.name} {law}", ship)
-            obj = TuneObjective(runner, law, names)
+            obj = TuneObjective(runner, law, names, scenario, spec.get("ms_bound"))
             res = differential_evolution(obj, list(zip(lo, hi)), x0=x0, popsize=spec["population"],
                                          maxiter=spec["generations"], seed=spec["seed"], polish=False,
                                          updating="deferred", workers=obj.map, tol=0.0)
             rows = [table.rows[c["case"]] for c in obj.cases]
             start_row = rows[0]  # differential_evolution evaluates x0 first
-            best_row = min(rows, key=case_value)
+            done = [r for r in rows if r.get("status") == "completed"]
+            if not done:  # never a preset beyond the bound or unstable
+                raise StudyError(f"tune: no candidate of {law} was stable with Ms <= tune.ms_bound = "
+                                 f"{spec.get('ms_bound')} in {len(rows)} evaluations: widen tune.bounds.{law} "
+                                 "or raise tune.ms_bound")
+            best_row = min(done, key=case_value)
             tuned = {n: tuple(float(v) for v in getattr(g0, n)) for n in GAIN_NAMES}
             for n in names:
                 tuned[n] = (float(best_row[n]),) * 3
             preset = write_to / f"{law}.toml"
-            preset.write_text(_preset_text(law, tuned, case_value(start_row), case_value(best_row), scenario, command))
+            preset.write_text(_preset_text(law, tuned, case_value(start_row) if start_row.get("status") == "completed"
+                                           else None, case_value(best_row), scenario, command))
             load_gain_file(preset)  # what we wrote must be a valid preset file
-            results[law] = {"preset": preset, "start": case_value(start_row), "tuned": case_value(best_row),
+            start_value = case_value(start_row) if start_row.get("status") == "completed" else None
+            results[law] = {"preset": preset, "start": start_value, "tuned": case_value(best_row),
+                            "start_note": start_row.get("error", ""),
                             "evaluations": len(rows), "result_fun": float(res.fun),
                             "rows": rows, "start_gains": {n: list(getattr(g0, n)) for n in GAIN_NAMES},
                             "tuned_gains": tuned}
@@ -183,9 +222,10 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
              f"study's changes ({', '.join(f'{k} = {v}' for k, v in study.set.items()) or 'none'}), "
              f"{short.stop_time - short.start_time:g} s at h = {short.step:g} s, {short.ordering}. "
              "Objective: (mean tracking MAE + mean synchronization MAE) / 2 over the three motors [um], "
-             "on the plant's true positions. Candidates the stability check finds not stable are rejected "
-             f"without running (scored {PENALTY_UM:g} um).", "",
-             "| law | evaluations | rejected (not stable) | failed / diverged | objective, start gains [um] | "
+             "on the plant's true positions. Candidates the stability check finds not stable, or whose peak "
+             f"sensitivity Ms on any mode exceeds tune.ms_bound = {spec.get('ms_bound')}, are rejected without "
+             f"running (scored {PENALTY_UM:g} um): the tuned gains stay within that robustness bound.", "",
+             "| law | evaluations | rejected (not stable or Ms beyond the bound) | failed / diverged | objective, start gains [um] | "
              "objective, tuned [um] | tuned gains (all motors) | preset file |",
              "|---|---|---|---|---|---|---|---|"]
     for law, r in results.items():
@@ -193,7 +233,8 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
         tuned = ", ".join(f"{n} = {r['tuned_gains'][n][0]:.4g}" for n in spec["bounds"][law])
         lines.append(f"| {law} | {r['evaluations']} | {st.count('rejected')} | "
                      f"{st.count('failed')} / {st.count('diverged')} | "
-                     f"{r['start']:.4f} | {r['tuned']:.4f} | {tuned} | `{Path(r['preset']).name}` |")
+                     + (f"{r['start']:.4f}" if r["start"] is not None else f"rejected ({r['start_note']})")
+                     + f" | {r['tuned']:.4f} | {tuned} | `{Path(r['preset']).name}` |")
     start_desc = "; ".join(f"{law}: " + ", ".join(f"{n} = {r['start_gains'][n][0]:g}" for n in spec["bounds"][law])
                            for law, r in results.items())
     lines += ["", f"Starting gains (the base scenario's `{short.gains}` preset): {start_desc}.", "",

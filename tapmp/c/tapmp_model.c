@@ -488,6 +488,85 @@ void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char
              "on its grid t0 + k T_s)", c->T_s, t, steps * c->T_s, steps);
 }
 
+/* --- the hidden values of an FMU state --- */
+
+/* The largest sample count checked: every whole number up to it is a double. */
+#define SAMPLE_COUNT_MAX 9007199254740992.0  /* 2^53 */
+
+int tapmp_plant_state_check(const double s[6], double sample, const double out[6], const char **name,
+                            double *value, const char **allowed)
+{
+    static const char *const names[6] = {"plant state X", "plant state Z", "plant state B", "plant state dX",
+                                         "plant state dZ", "plant state dB"};
+    static const char *const outputs[6] = {"output X", "output Z", "output B", "output dX", "output dZ",
+                                           "output dB"};
+    for (int i = 0; i < 6; i++)
+        if (!isfinite(s[i])) return offender(names[i], s[i], "a finite number", 1, name, value, allowed);
+    if (!(fabs(s[2]) < HALF_PI))
+        return offender(names[2], s[2], "|B| < pi/2 rad (the kinematic domain)", 3, name, value, allowed);
+    if (!(sample >= 0.0 && sample <= SAMPLE_COUNT_MAX && sample == floor(sample)))
+        return offender("plant sample count", sample, "a whole number in [0, 2^53] (the steps taken)", 1, name,
+                        value, allowed);
+    /* the outputs X..dB are the state itself (tapmp_plant_outputs): any difference is a forged state */
+    for (int i = 0; i < 6; i++)
+        if (!(out[i] == s[i]))
+            return offender(outputs[i], out[i], "the plant state's value it is computed from (the state and its "
+                            "outputs disagree)", 1, name, value, allowed);
+    return 0;
+}
+
+int tapmp_controller_state_check(const tapmp_params *p, const tapmp_gains *g, int law, double force_limit,
+                                 const tapmp_controller_state *st, const tapmp_clock *c, double t,
+                                 const char **name, double *value, const char **allowed)
+{
+    static const char *const integral[3] = {"controller integral1", "controller integral2", "controller integral3"};
+    static const char *const q_prev[3] = {"controller previous q1", "controller previous q2",
+                                          "controller previous q3"};
+    for (int i = 0; i < 3; i++)
+        if (!isfinite(st->integral[i])) return offender(integral[i], st->integral[i], "a finite number [m s]", 1,
+                                                        name, value, allowed);
+    if (st->has_q_prev) {
+        for (int i = 0; i < 3; i++)
+            if (!isfinite(st->q_prev[i]))
+                return offender(q_prev[i], st->q_prev[i], "a finite number [m]", 1, name, value, allowed);
+        /* a previous q was a sample that passed tapmp_feedforward's domain check */
+        double a = SQRT3 / (2.0 * p->L_1) * (2.0 * st->q_prev[1] - st->q_prev[0] - st->q_prev[2]);
+        if (!(fabs(a) < 1.0))
+            return offender("sqrt(3)/(2 L1)*(2 q2 - q1 - q3) of the controller's previous q", a,
+                            "|value| < 1 (the kinematic domain)", 3, name, value, allowed);
+    }
+    /* The integral's bound: the force its term of the command commands alone (the command with every
+     * error, rate and feedforward zero: Lambda_v D b I / K_T for SC-DC, the modal ki terms / K_T for
+     * PID-DC) may not exceed the force limit, or TAPMP_FORCE_CAP with none. Beyond that the integral
+     * has wound up past what the motors may be sent: the command sits at the limit whatever the errors
+     * do until the integral unwinds, and without a limit it commands forces no setting allows. The
+     * scenarios' runs stay near 5 N (1e-8 of the cap). APD-DC has no integral term: finite suffices. */
+    if (law == TAPMP_SCDC || law == TAPMP_PIDDC) {
+        const double zero[3] = {0.0, 0.0, 0.0};
+        double u[3];
+        if (law == TAPMP_SCDC) tapmp_scdc_command(zero, zero, zero, st->integral, zero, g, u);
+        else tapmp_pid_command(zero, zero, st->integral, zero, g, u);
+        double cap = force_limit > 0.0 ? force_limit : TAPMP_FORCE_CAP;
+        for (int i = 0; i < 3; i++)
+            if (!(fabs(u[i] / g->K_T[i]) <= cap))
+                return offender(integral[i], st->integral[i], force_limit > 0.0 ?
+                                "an integral whose term alone commands at most force_limit (|u_I/K_T| <= "
+                                "force_limit)" :
+                                "an integral whose term alone commands at most 1e9 N (|u_I/K_T| <= 1e9 N, the "
+                                "largest force_limit, as force_limit = 0)", 1, name, value, allowed);
+    }
+    double tol = TAPMP_SAMPLE_TOLERANCE * c->T_s;
+    if (!(isfinite(c->t0) && c->t0 <= t + tol))
+        return offender("controller clock t0", c->t0, "the start time: a finite number <= the state's time", 1,
+                        name, value, allowed);
+    /* the last instant sampled, t0 + k_last T_s, lies at or before the state's time */
+    double k = c->k_last;
+    if (!(k >= 0.0 && k == floor(k) && k <= (t - c->t0) / c->T_s + TAPMP_SAMPLE_TOLERANCE))
+        return offender("controller clock k_last", k, "a whole number of sample periods with t0 + k_last T_s <= "
+                        "the state's time (0 <= k_last <= (t - t0)/T_s)", 1, name, value, allowed);
+    return 0;
+}
+
 /* trajectory.circle_reference */
 static void circle_reference(double t, const tapmp_trajectory *tp, double ref[9])
 {

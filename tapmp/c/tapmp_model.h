@@ -247,6 +247,27 @@ TAPMP_LINKAGE int tapmp_clock_sampled(tapmp_clock *c, double k, double steps);
 TAPMP_LINKAGE void tapmp_clock_missed_text(const tapmp_clock *c, double t, double due, char *text, size_t size);
 TAPMP_LINKAGE void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char *text, size_t size);
 
+/* --- the hidden values of an FMU state (fmu_common/c/instance.c checks a state whole before it
+ * applies any of it) --- */
+/* TAPMP_FORCE_CAP [N]: the largest force limit a setting may ask for (force_limit's declared maximum
+ * in tapmp/interface.py), the cap of an integral's force when the controller has no limit. */
+#define TAPMP_FORCE_CAP 1e9
+/* A plant state s (X, Z, B, dX, dZ, dB) [m, m, rad, m/s, m/s, rad/s] with its sample count, and the
+ * outputs X..dB the same FMU state holds (out, 6 values): every value finite, |B| < pi/2 (3: outside
+ * the kinematic domain), the sample count a whole number in [0, 2^53], every output equal to the
+ * state value it is computed from. Returned and reported as the settings checks are. */
+TAPMP_LINKAGE int tapmp_plant_state_check(const double s[6], double sample, const double out[6], const char **name,
+                                          double *value, const char **allowed);
+/* A controller's loop state and clock at the communication point t [s], for its settings (p, g, law,
+ * force_limit [N], the clock's T_s [s]): every value finite; the previous q [m] inside the kinematic
+ * domain (3); the integral [m s] no larger than the force its term alone commands, |F_I| <= the force
+ * limit (TAPMP_FORCE_CAP without one); t0 <= t; k_last a whole number with t0 + k_last T_s <= t
+ * (within TAPMP_SAMPLE_TOLERANCE T_s). Returned and reported as the settings checks are. */
+TAPMP_LINKAGE int tapmp_controller_state_check(const tapmp_params *p, const tapmp_gains *g, int law,
+                                               double force_limit, const tapmp_controller_state *st,
+                                               const tapmp_clock *c, double t, const char **name,
+                                               double *value, const char **allowed);
+
 /* --- trajectory (tapmp/trajectory.py) --- */
 /* The move of `profile` (1, 2 or 3) from pose a to pose b (X, Z, B) with the limits per axis
  * v_max, a_max, j_max, every axis ending when the slowest does (move_plan). */

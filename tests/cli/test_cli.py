@@ -94,7 +94,7 @@ BAD_FILES = {
     "stop before start": ('name = "x"\nstart_time = 1.0\nstop_time = 0.5\n',
                           "stop_time = 0.5 is invalid: allowed is a number > start_time = 1.0"),
     "unknown limit": ('name = "x"\n[limits]\nmotor = 1.0\n', "limits.motor is unknown: allowed are motor_travel"),
-    "record_every 0": ('name = "x"\nrecord_every = 0\n', "record_every = 0 is invalid: allowed is an integer >= 1"),
+    "record_every 0": ('name = "x"\nrecord_every = 0\n', "record_every = 0 is invalid: allowed is an integer from 1 to 2147483647"),
 }
 
 

@@ -30,24 +30,25 @@ def test_compare_into_a_log_prints_a_summary_of_the_metrics_and_no_long_or_progr
     for stream in (res.stdout, res.stderr):
         assert "\r" not in stream
         assert all(len(line) <= 200 for line in stream.splitlines())
-    assert res.stderr.splitlines()[0] == (f"paper_simulation: 9 runs of 0.05 s (500 steps, csv) on 1 process(es) "
+    assert res.stderr.splitlines()[0] == (f"paper_simulation: {len(BASELINES)} runs of 0.05 s (500 steps, csv) on 1 process(es) "
                                           f"-> {out}")
     assert "paper_simulation: figures" in res.stderr.splitlines()
     lines = res.stdout.splitlines()
     assert len(lines) == 3 + len(BASELINES)
     assert lines[-1] == f"results, figures and the full tables (comparison.md) in {out}"
     assert lines[1].split() == ["run", "tracking", "MAE", "[um]", "sync", "MAE", "[um]", "vs", "APD-DC:", "tracking",
-                                "sync"]
+                                "sync", "F", "RMS", ">", "100", "Hz", "[N]"]
     metrics = {b.name: json.loads((out / b.name / "metrics.json").read_text()) for b in BASELINES}
     base_t, base_y = _mean(metrics["apd-dc"]["tracking_mae_um"]), _mean(metrics["apd-dc"]["sync_mae_um"])
     rows = {r.split()[0]: r.split()[1:] for r in lines[2:-1]}
     assert list(rows) == [b.name for b in BASELINES]
-    for name, (t, y, rt, ry) in rows.items():
+    for name, (t, y, rt, ry, f) in rows.items():
+        assert float(f) == pytest.approx(_mean(metrics[name]["force_hf_rms_n"]), rel=1e-3)  # effort, mean of motors
         mt, my = _mean(metrics[name]["tracking_mae_um"]), _mean(metrics[name]["sync_mae_um"])
         assert float(t) == pytest.approx(mt, abs=5e-5) and float(y) == pytest.approx(my, abs=5e-5)
         assert float(rt.rstrip("%")) == pytest.approx(100 * (base_t - mt) / base_t, abs=0.05)
         assert float(ry.rstrip("%")) == pytest.approx(100 * (base_y - my) / base_y, abs=0.05)
-    assert rows["apd-dc"][2:] == ["+0.0%", "+0.0%"]
+    assert rows["apd-dc"][2:4] == ["+0.0%", "+0.0%"]
     # the full Markdown is in comparison.md, not on the terminal
     md = (out / "comparison.md").read_text()
     assert "| `sc-dc` | SC-DC |" in md and "|" not in res.stdout

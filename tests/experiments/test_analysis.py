@@ -204,13 +204,13 @@ def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     assert data["frequency_grid"] == {"from_hz": 1.0, "to_hz": pytest.approx(5000.0), "points": 60,
                                       "spacing": "logarithmic"}
     assert set(data["runs"]) == {"sc-dc", "apd-dc", "apd-dc-matched", "apd-dc-diff-stiffness", "apd-dc-mode-matched",
-                                 "apd-dc-ms-matched", "pid-dc-mode-matched", "sc-dc-b0", "sc-dc-lp0"}
+                                 "apd-dc-ms-matched", "pid-dc-mode-matched", "pid-dc-full", "sc-dc-b0", "sc-dc-lp0"}
     scdc = data["runs"]["sc-dc"]
     assert set(scdc["loops"]) == set(BREAK_POINTS)
     import csv
     with open(out / "frequency_response.csv") as f:
         rows = list(csv.reader(f))
-    assert len(rows) == 61 and len(rows[0]) == 1 + 9 * 6 * 4 * 2
+    assert len(rows) == 61 and len(rows[0]) == 1 + 10 * 6 * 4 * 2
     col = rows[0].index("sc-dc|common|L|mag")
     # the magnitude of L crosses 1 at the reported gain crossover
     f = np.array([float(r[0]) for r in rows[1:]])
@@ -226,6 +226,13 @@ def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     # every closed-loop pole: f_n >= 0 and a damping in [-1, 1]; the spectral radius as check's
     assert all(p["f_n_hz"] >= 0 and -1.0 <= p["zeta"] <= 1.0 for p in scdc["poles"])
     assert scdc["spectral_radius"] == pytest.approx(check(load(PAPER)).spectral_radius, abs=1e-8)
+    # the robustness table: one row per run with the numbers of analysis.json
+    a = scdc["all_loops"]
+    row = next(x for x in text.splitlines() if x.startswith("| sc-dc | ") and "x (" in x)
+    assert f"{a['disk_margin']:.3f} ({a['disk_gm_db']:.2f}, {a['disk_pm_deg']:.1f})" in row
+    assert f"{a['gm_upper']:.3g}x ({a['kt_error_pct'][1]:+.0f} %)" in row
+    assert f"| {a['actuator_bandwidth_hz']:.4g} |" in row
+    assert all(0 < scdc["loops"][b]["delay_margin_s"] < 1e-2 for b in BREAK_POINTS)
 
 
 @pytest.mark.parametrize("args,message", [
@@ -234,7 +241,9 @@ def test_analyze_writes_json_figures_and_prints_the_table(tmp_path, capsys):
     (["--f-min", "-1"], "error: --f-min = -1.0 is invalid: allowed is a frequency in (0, 5000] Hz"),
     (["--f-max", "nan"], "error: --f-max = nan is invalid: allowed is a frequency in (0, 5000] Hz"),
     (["--f-min", "100", "--f-max", "10"], "error: --f-min = 100.0 is invalid: allowed is a frequency below"),
-    (["--points", "1"], "error: --points = 1 is invalid: allowed is an integer >= 2"),
+    (["--points", "1"], "error: --points = 1 is invalid: allowed is an integer from 2 to 100000"),
+    (["--points", "99999999999999999999"], "error: --points = 99999999999999999999 is invalid: allowed is an integer "
+                                          "from 2 to 100000"),
 ])
 def test_a_bad_frequency_grid_is_one_line_and_exit_2(tmp_path, capsys, args, message):
     code = main(["analyze", str(PAPER), "--out", str(tmp_path / "x"), *args])

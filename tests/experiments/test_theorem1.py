@@ -83,3 +83,14 @@ def test_tapmp_check_at_a_fine_step_agrees_with_the_continuous_eigenvalues(tmp_p
     apd = _check(tmp_path, "apd-dc")
     assert apd.returncode == 0, apd.stdout + apd.stderr
     assert apd.stdout.startswith("theorem1: stable:")
+
+
+@pytest.mark.parametrize("gain, holds", [("b", True), ("D", False), ("Lambda_p", False)])
+def test_eq31_survives_a_per_motor_b_but_not_a_per_motor_d_or_lambda_p(gain, holds):
+    from orchestrator.experiments.theorem1 import COUNTEREXAMPLE, eq31_sides
+    rng = np.random.default_rng(7)
+    state = [rng.normal(size=3) for _ in range(3)]
+    gains = {k: list(v) for k, v in COUNTEREXAMPLE.items()}
+    gains[gain] = [x * f for x, f in zip(gains[gain], (1.0, 1.5, 0.7))]
+    lhs, rhs = eq31_sides(*state, gains)
+    assert (abs(lhs - rhs) <= 1e-9 * abs(lhs)) == holds, (lhs, rhs)

@@ -61,3 +61,45 @@ def test_an_unknown_family_names_the_allowed_ones(tmp_path, capsys):
     assert "python" in capsys.readouterr().err
     assert main(["run", str(PAPER), "--set", 'fmus="java"', "--out", str(tmp_path / "o")]) == 2
     assert "fmus = 'java' is invalid: allowed are python, native, fmi3" in capsys.readouterr().err
+
+
+def test_the_paper_scenario_only_restates_every_fmus_defaults():
+    """Every value scenarios/paper_simulation.toml gives an FMU (its .ssv when exported) is that
+    FMU variable's start value, to the bit (dZ0 is -0.0 in both): the FMUs wired with their
+    defaults are the paper's simulation, the plant starting on the reference."""
+    import struct
+
+    from orchestrator.experiments.scenario import load
+    from tapmp.interface import ELEMENT, INITIAL_STATE, VARIABLES
+    from tapmp.trajectory import TrajectoryParams, reference
+
+    given = load(PAPER).parameters()
+    for model, table in VARIABLES.items():
+        start = {v.name: v.start for v in table}
+        values = given[ELEMENT[model]]
+        assert values, model
+        for name, value in values.items():
+            assert struct.pack("<d", float(value)) == struct.pack("<d", float(start[name])), (model, name, value)
+    assert INITIAL_STATE == reference(0.0, TrajectoryParams())[:6]  # the C model's reference, bit for bit
+    assert INITIAL_STATE[3] > 0.02 and INITIAL_STATE[5] > 0.2      # moving: 25 mm/s in X, 0.22 rad/s in B
+
+
+@pytest.mark.parametrize("family", ("fmi2", "fmi3"))
+def test_native_fmus_wired_with_their_defaults_run_the_paper_scenario_bit_for_bit(family, native_built):
+    """The master on the native SSP with no parameter set gives the same doubles as the paper
+    scenario with its parameters, in both orderings."""
+    from orchestrator.engine.master import CoSimulation
+
+    scenario = paper_scenario(0.05)
+    names = MOTOR_POSITIONS + COMMANDS
+    for ordering in ("gauss-seidel", "jacobi"):
+        ours = orchestrator_rows(native_built[family]["ssp"], scenario, names, ordering)
+        rows = []
+        with CoSimulation(native_built[family]["ssp"], {}, 0.0, scenario.step, ordering) as sim:
+            index = [sim.columns.index(n) for n in names]
+            rows.append([sim.row()[i] for i in index])
+            for _ in range(scenario.n_steps):
+                sim.step()
+                rows.append([sim.row()[i] for i in index])
+        assert np.array_equal(np.array(rows), ours), ordering
+        assert np.abs(ours[:, 6:]).max() > 1.0  # N: the loop did something

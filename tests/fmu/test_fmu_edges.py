@@ -95,7 +95,7 @@ def test_the_messages_name_variable_value_time_and_what_is_allowed(built, native
                                             "overflowed; check the inputs and parameters)",
         "time that is not finite": "currentCommunicationPoint = nan is invalid: allowed is a finite number (at t = 0 s)",
         "time that does not continue the last step": "currentCommunicationPoint = 0.5 is invalid: allowed is the end "
-                                                     "of the previous step, 0.00030000000000000003 s (within 1e-09 s)",
+                                                     "of the previous step, 0.00030000000000000003 s (within 1e-08 s)",
         "doStep in Initialization Mode": "fmi2DoStep is not allowed in Initialization Mode: allowed in Step Mode",
         "calls after terminate": "fmi2DoStep is not allowed in Terminated: allowed in Step Mode",
         "exit without enter": "fmi2ExitInitializationMode is not allowed in Instantiated: allowed in "

@@ -1,7 +1,9 @@
 """libFuzzer on the native FMUs: tests/fmu/fuzz/fuzz_fmi2.c and fuzz_fmi3.c drive each FMU of
 both FMI versions (its sources/all.c in the same translation unit) through arbitrary call
-sequences, built with clang -fsanitize=fuzzer,address,undefined (Debian's clang and
-libclang-rt-14-dev, installed by tests/run.sh).
+sequences, and fuzz_states.c hands each FMI 2.0 FMU mutated serialized states (seeded with real
+ones of the model, :func:`state_seeds`) and steps what it accepts, checking every output is
+finite and inside its declared range; built with clang -fsanitize=fuzzer,address,undefined
+(Debian's clang and libclang-rt-14-dev, installed by tests/run.sh).
 
 * Every target runs for TAPMP_FUZZ_SECONDS seconds (default 60) with no finding: no
   AddressSanitizer, LeakSanitizer or UndefinedBehaviorSanitizer report, no crash, no timeout.
@@ -25,7 +27,8 @@ pytestmark = pytest.mark.slow  # libFuzzer runs each target for TAPMP_FUZZ_SECON
 
 FUZZ = Path(__file__).parent / "fuzz"
 REGRESSIONS = FUZZ / "regressions"
-FAMILIES = ("fmi2", "fmi3")
+FAMILIES = ("fmi2", "fmi3", "states")
+SOURCES = {"fmi2": "fmi2", "fmi3": "fmi3", "states": "fmi2"}  # the FMUs whose sources each target includes
 TARGETS = [f"{family}_{model}" for family in FAMILIES for model in FMU_NAMES]
 SECONDS = int(os.environ.get("TAPMP_FUZZ_SECONDS", "60"))
 FLAGS = ["-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-fno-sanitize-recover=undefined"]
@@ -39,12 +42,45 @@ def fuzz_targets(native_built, tmp_path_factory):
     built = {}
     for target in TARGETS:
         family, model = target.split("_", 1)
-        src = extract_sources(native_built[family][model], root / target)
+        src = extract_sources(native_built[SOURCES[family]][model], root / target)
         exe = root / target / "fuzzer"
         proc = compile_c([*FLAGS, f"-I{src}", f"-I{FUZZ}", "-o", exe, FUZZ / f"fuzz_{family}.c", "-lm"], kind="clang")
         assert proc.returncode == 0, proc.stderr
         built[target] = exe
     return built
+
+
+@pytest.fixture(scope="module")
+def state_seeds(native_built, tmp_path_factory):
+    """{model: folder} of real serialized states of each FMI 2.0 FMU (fmpy): in Initialization
+    Mode, after initialization, after some steps with inputs, and terminated."""
+    from fmu_host import Host
+    root = tmp_path_factory.mktemp("state_seeds")
+    seeds = {}
+    for model in FMU_NAMES:
+        folder = seeds[model] = root / model
+        folder.mkdir()
+        host = Host(native_built["fmi2"][model], root / f"{model}-unzip", name="seeds")
+
+        def keep(label):
+            state = host.get_state()
+            (folder / label).write_bytes(bytes(host.fmu.serializeFMUstate(state)))
+            host.fmu.freeFMUstate(state)
+        host.enter_initialization(0.0)
+        keep("initialization")
+        host.fmu.exitInitializationMode()
+        keep("step-mode")
+        inputs = {"TAPMP_Plant": {"F1": 40.0, "F2": -25.0, "F3": 10.0},
+                  "TAPMP_Controller": {"X_d": 1e-3, "q1": 2e-4, "q2": 1e-4, "q3": -1e-4}}.get(model, {})
+        for k in range(60):
+            host.set({n: v * (1 + k % 7) for n, v in inputs.items()})
+            host.do_step(k * 1e-4, 1e-4)
+            if k in (6, 59):
+                keep(f"after-{k + 1}-steps")
+        host.fmu.terminate()
+        keep("terminated")
+        host.fmu.freeInstance()
+    return seeds
 
 
 def finding(output: str) -> bool:
@@ -53,7 +89,7 @@ def finding(output: str) -> bool:
 
 
 def test_every_native_fmu_of_both_versions_has_a_fuzz_target():
-    assert sorted(TARGETS) == sorted(f"{f}_{m}" for f in ("fmi2", "fmi3") for m in
+    assert sorted(TARGETS) == sorted(f"{f}_{m}" for f in ("fmi2", "fmi3", "states") for m in
                                      ("TAPMP_Plant", "TAPMP_Controller", "TAPMP_Trajectory"))
     assert {p.name for p in REGRESSIONS.iterdir()} <= set(TARGETS)
 
@@ -82,7 +118,7 @@ def test_the_inputs_the_fuzzer_found_defects_with_stay():
 
 
 @pytest.mark.parametrize("target", TARGETS)
-def test_fuzzing_finds_nothing(fuzz_targets, target, tmp_path):
+def test_fuzzing_finds_nothing(fuzz_targets, state_seeds, target, tmp_path):
     corpus = tmp_path / "corpus"
     corpus.mkdir()
     seeds = REGRESSIONS / target
@@ -90,6 +126,8 @@ def test_fuzzing_finds_nothing(fuzz_targets, target, tmp_path):
             f"-artifact_prefix={tmp_path}/", "-print_final_stats=1", str(corpus)]
     if seeds.is_dir():
         args.append(str(seeds))
+    if target.startswith("states_"):
+        args.append(str(state_seeds[target.split("_", 1)[1]]))
     proc = subprocess.run(args, capture_output=True, text=True, timeout=SECONDS + 300, env=ENV)
     found = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(("crash-", "leak-", "timeout-", "oom-")))
     assert proc.returncode == 0 and not finding(proc.stderr) and not found, (

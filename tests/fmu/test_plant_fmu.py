@@ -79,7 +79,7 @@ def test_non_finite_force_is_refused_with_name_value_and_time(built, load_fmu):
 
 
 @pytest.mark.parametrize("name,value,allowed", [
-    ("m_p", -1.0, "a number in [1e-06, 1e+06]"), ("I_y", 0.0, "a number in [1e-06, 1e+06]"), ("L_1", 0.0, "a number in [1e-06, 1000]"),
+    ("m_p", -1.0, "a number in [1e-12, 1e+06]"), ("I_y", 0.0, "a number in [1e-12, 1e+06]"), ("L_1", 0.0, "a number in [1e-06, 1000]"),
     ("c_v2", -0.5, "a number in [0, 1e+09]"), ("encoder_resolution", -1e-7, "a number in [0, 1]"),
     ("substeps", 0, "an integer in [1, 10000]"), ("B0", 1.6, "a number in [-1.5, 1.5]")])
 def test_invalid_parameter_fails_initialization_with_a_clear_message(built, load_fmu, name, value, allowed):

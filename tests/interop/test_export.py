@@ -1,12 +1,13 @@
 """`tapmp export`: the scenario travels with the SSP, and other tools run it as `tapmp run` does.
 
-The paper scenario (first 0.2 s) is exported with the real CLI from the pythonfmu SSP,
-then run by libcosim, Ecos (library and `ecos` executable), FMPy's simulate_ssp and
+The paper scenario (first 0.2 s) with its reference at twice the frequency (0.8 Hz; the paper's
+own values are every FMU's defaults, which a tool ignoring the parameter sets would run too) is
+exported with the real CLI from the pythonfmu SSP, then run by libcosim, Ecos (library and `ecos` executable), FMPy's simulate_ssp and
 `fmpy simulate` on the container FMU with nothing but what the export wrote: the SSP's
 parameter sets, its DefaultExperiment, and FILE.start-values.txt. Each is compared with
-the orchestrator (the engine of `tapmp run`) on that master's conventions. The paper
-scenario starts on the trajectory, moving at 25 mm/s: without the exported initial state
-(X0 ... dB0) the motors end up micrometres away, which every test checks too.
+the orchestrator (the engine of `tapmp run`) on that master's conventions. The scenario starts on
+its trajectory, moving at 50 mm/s: with the plant's default initial state instead (25 mm/s, the
+paper's reference) the motors end up micrometres away, which every test checks too.
 """
 
 import shutil
@@ -26,11 +27,16 @@ from orchestrator.engine import families
 from orchestrator.engine.container import CONTAINER
 from orchestrator.engine.ssp import OSP
 from orchestrator.experiments.export import SSD_MEMBER
+from tapmp.interface import INITIAL_STATE as DEFAULT_STATE
+
+DEFAULT_DX0 = DEFAULT_STATE[3]  # m/s: the plant's default, the paper reference's start (25 mm/s)
 
 NAMES = MOTOR_POSITIONS + COMMANDS
 SSD_NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
           "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon", "osp": OSP}
 INITIAL_STATE = ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")
+# What the export carries beyond the FMUs' defaults (the paper scenario itself restates them)
+FASTER = ("trajectory.f_xz=0.8", "trajectory.f_B=0.8")
 
 
 @pytest.fixture(scope="module")
@@ -43,15 +49,16 @@ def exported(built, tmp_path_factory):
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         assert main(["export", str(PAPER), "--out", str(out), "--ssp", str(built["ssp"]),
-                     "--set", "stop_time=0.2"]) == 0
-    return paper_scenario(), out, out.with_suffix(".start-values.txt"), buf.getvalue()
+                     "--set", "stop_time=0.2", *(a for kv in FASTER for a in ("--set", kv))]) == 0
+    return paper_scenario(0.2, *FASTER), out, out.with_suffix(".start-values.txt"), buf.getvalue()
 
 
 @pytest.fixture(scope="module")
 def without_initial_state(built):
-    """The orchestrator's Jacobi rows of the same scenario with the plant starting at rest
-    (no X0 ... dB0): what a tool would give if the initial state were not exported."""
-    sc = paper_scenario().with_changes(start_on_trajectory=False)
+    """The orchestrator's Jacobi rows of the same scenario with the plant starting from its
+    default initial state (the paper reference's, no X0 ... dB0 given): what a tool would give
+    if the initial state were not exported."""
+    sc = paper_scenario(0.2, *FASTER).with_changes(start_on_trajectory=False)
     return orchestrator_rows(built["ssp"], sc, NAMES, "jacobi")
 
 
@@ -222,7 +229,7 @@ def test_ecos_without_the_parameter_set_name_keeps_the_fmus_start_values(exporte
         finally:
             sim.free()
     assert values[scenario.name] == (scenario.parameters()["plant"]["dX0"], 200.0)
-    assert values[None][0] == 0.0 and values[None] != values[scenario.name]
+    assert values[None] == (DEFAULT_DX0, 200.0) and values[None] != values[scenario.name]
 
 
 def run_ecos_executable(ssp, parameter_set, folder, names):
@@ -299,12 +306,14 @@ def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, 
 
 def test_fmpy_simulate_ssp_ignores_the_bindings_by_itself(exported):
     """Without the parameter_set argument simulate_ssp runs the FMUs on their start values: the
-    plant starts at rest, so after one step it is nanometres, not 2.5 um (25 mm/s x 0.1 ms), along."""
+    plant starts on the paper's reference at 25 mm/s, so after one step it is 2.5 um along, not
+    the exported scenario's 5 um (50 mm/s x 0.1 ms)."""
     from fmpy.ssp.simulation import simulate_ssp
     _, ssp, _, _ = exported
     bare = simulate_ssp(str(ssp), stop_time=2e-4, step_size=1e-4)
     bound = simulate_ssp(str(ssp), stop_time=2e-4, step_size=1e-4, parameter_set=bound_parameter_set(ssp))
-    assert abs(bound["plant.X"][0]) > 2e-6 and abs(bare["plant.X"][0]) < 1e-7
+    assert bound["plant.X"][0] == pytest.approx(2 * DEFAULT_DX0 * 1e-4, rel=0.01)
+    assert bare["plant.X"][0] == pytest.approx(DEFAULT_DX0 * 1e-4, rel=0.01)
 
 
 # ---------------------------------------------------------------- the container FMU

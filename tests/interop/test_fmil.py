@@ -11,6 +11,7 @@ import subprocess
 import numpy as np
 import pytest
 from conftest import shared
+from fmil_gaps import fmil_counts, fmil_problems
 from fmpy import simulate_fmu
 
 from orchestrator.engine.container import CONTAINER
@@ -33,13 +34,17 @@ def test_fmil_parses_every_fmu_of_every_family_with_no_warning_or_error(built, n
     fmus = every_fmu(built, native_built)
     proc = subprocess.run([str(shared(FMIL_CHECK)), "parse", *map(str, fmus.values())], cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stderr == ""  # FMIL's warnings and errors go here
+    log = proc.stdout + proc.stderr  # FMIL's warnings and errors go to stderr
+    # nothing but FMIL 3.0.4's gaps in reading the FMI 3.0 terminalsAndIcons.xml (tests/fmu/fmil_gaps.py),
+    # which make fmil_check exit 1
+    assert fmil_problems(proc.stderr) == [] and fmil_counts(log) == (0, 0), log
+    assert proc.returncode == (1 if proc.stderr else 0), log
     reports = proc.stdout.split("\n/")
     assert len(reports) == len(fmus) == 10
     for (label, path), report in zip(fmus.items(), reports):
         assert path.name in report.splitlines()[0], (label, report)
-        assert "FMIL parse: 0 warnings, 0 errors" in report, (label, report)
+        if not label.startswith("fmi3"):
+            assert "FMIL parse: 0 warnings, 0 errors" in report, (label, report)
         version = "3.0" if label.startswith("fmi3") else "2.0"
         assert f"FMI {version}" in report, (label, report)
     # what FMIL read back: the container's 39 outputs, the plant's 15, in both versions
@@ -55,8 +60,9 @@ def test_fmil_steps_each_native_fmu_alone_as_fmpy_does(native_built, version, mo
     fmu = native_built[version][model]
     proc = subprocess.run([str(shared(FMIL_CHECK)), "alone", str(fmu), "out.csv", "0.2", "0.0001"], cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0 and proc.stderr == "", proc.stdout + proc.stderr
-    assert "2000 steps, 0 warnings, 0 errors" in proc.stdout, proc.stdout
+    log = proc.stdout + proc.stderr
+    assert "2000 steps," in proc.stdout and proc.returncode == (1 if proc.stderr else 0), log
+    assert fmil_problems(proc.stderr) == [] and fmil_counts(log) == (0, 0), log
     result = np.genfromtxt(tmp_path / "out.csv", delimiter=",", names=True)  # written with %.17g
     ours = simulate_fmu(str(fmu), stop_time=0.2, output_interval=1e-4)
     assert len(result) == len(ours) == 2001 and set(result.dtype.names) == set(ours.dtype.names)  # t = 0 ... 0.2

@@ -25,9 +25,9 @@ def message(make) -> str:
 
 
 @pytest.mark.parametrize("make, text", [
-    (lambda: ModelParams(I_y=0).validated(), "I_y = 0 is invalid: allowed is a number in [1e-06, 1e+06]"),
+    (lambda: ModelParams(I_y=0).validated(), "I_y = 0 is invalid: allowed is a number in [1e-12, 1e+06]"),
     (lambda: ModelParams(m_2=math.inf, g=-1.0).validated(), "m_2 = inf is invalid: allowed is a number in "
-     "[1e-06, 1e+06]"),
+     "[1e-12, 1e+06]"),
     (lambda: GAINS._replace(D=(1.0, -2, 1.0)).validated(), "D2 = -2 is invalid: allowed is a number in [0, 1e+09]"),
     (lambda: GAINS._replace(D=(2e9, 1.0, 1.0)).validated(), "D1 = 2000000000.0 is invalid: allowed is a number in "
      "[0, 1e+09]"),

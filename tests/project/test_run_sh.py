@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev"]  # libFuzzer and the sanitizers
+FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev", "chromium"]  # libFuzzer and the sanitizers; the FMU docs' renderer
 PACKAGES = ["libtbb12", "wine64", "qemu-user", "libc6-arm64-cross", "libminizip1", "libxml2", *FUZZ_PACKAGES]
 TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod")  # the real programs the script and stand-ins use
 

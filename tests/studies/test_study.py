@@ -141,7 +141,7 @@ def test_study_command_says_when_the_ssp_is_missing(tmp_path, capsys):
 
 def test_tuning_on_a_short_horizon_improves_the_objective_and_writes_a_usable_preset(built, client, tmp_path):
     text = ('[set]\nstop_time = 0.03\n[tune]\nlaws = ["sc-dc"]\npopulation = 4\ngenerations = 2\nseed = 3\n'
-            f'write_to = "{tmp_path / "tuned"}"\ncompare_stop_time = 0.05\n'
+            f'write_to = "{tmp_path / "tuned"}"\ncompare_stop_time = 0.05\nms_bound = 3.0\n'
             '[tune.bounds.sc-dc]\nLambda_v = [0.05, 30.0]\nD = [100.0, 5000.0]\n')
     summary = run_study(load_study(write_study(tmp_path, text)), built["ssp"], client, progress=False,
                         command="tapmp study s.toml", write_docs=True)
@@ -155,7 +155,8 @@ def test_tuning_on_a_short_horizon_improves_the_objective_and_writes_a_usable_pr
     assert rows[0]["Lambda_v"] == pytest.approx(0.36) and rows[0]["D"] == pytest.approx(900.0)  # the start
     assert rows[0]["objective"] == pytest.approx(r["start"])
     rejected = [row for row in rows if row["status"] == "rejected"]
-    assert rejected and all(row["spectral_radius"] >= 1.0 for row in rejected)
+    assert rejected and all("above tune.ms_bound = 3" in row["error"] or row["spectral_radius"] >= 1.0
+                            for row in rejected)
     assert all(not (tmp_path / "out" / "cases" / row["case"]).exists() for row in rejected)
     best = min((row for row in rows if row["status"] == "completed"), key=lambda row: row["objective"])
     preset = load_gain_file(tmp_path / "tuned" / "sc-dc.toml")

@@ -35,7 +35,7 @@ def test_run_and_compare_default_to_distinct_folders_under_the_current_directory
     assert cmp == {"kind": "comparison", "scenario": "paper_simulation", "status": "completed",
                    "runs": {"sc-dc": "sc-dc", "apd-dc": "apd-dc", "apd-dc-matched": "apd-dc",
                             "apd-dc-diff-stiffness": "apd-dc", "apd-dc-mode-matched": "pid-dc",
-                            "apd-dc-ms-matched": "pid-dc", "pid-dc-mode-matched": "pid-dc", "sc-dc-b0": "sc-dc", "sc-dc-lp0": "sc-dc"}}
+                            "apd-dc-ms-matched": "pid-dc", "pid-dc-mode-matched": "pid-dc", "pid-dc-full": "pid-dc", "sc-dc-b0": "sc-dc", "sc-dc-lp0": "sc-dc"}}
     assert not (base / "compare" / "results.csv").exists()  # nothing of a single run at its top
     assert "results in results/paper_simulation/sc-dc" in capsys.readouterr().out
 
