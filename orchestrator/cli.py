@@ -373,11 +373,10 @@ def check_runs(runs: dict) -> dict:
 
 
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None, written_by: str = "compare"):
+                   show: list | None = None, figures: bool = True, written_by: str = "compare"):
     """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
-    out/comparison.md and the figures (of the runs ``show``, default see plots.select_runs);
-    returns (runs, results, checks, comparison.md text)."""
-    from .experiments.plots import plot
+    out/comparison.md and, if ``figures``, the figures (of the runs ``show``, default see
+    plots.select_runs); returns (runs, results, checks, comparison.md text)."""
     from .experiments.pool import run_many
     from .experiments.estimate import check_output_size
     from .experiments.report import write_comparison
@@ -389,14 +388,57 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
         say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
             f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
         bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
-        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, True, bars,
-                           scenario.name)
+        drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
+        # without figures the runs' rows stay in the workers (no copy back to this process)
+        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, figures, bars,
+                           scenario.name, first=drawing.needed if drawing else (),
+                           on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
         results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
+        if not figures:
+            return runs, results, checks, text
         say(f"{scenario.name}: figures")
-        kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
-        plot(out, {name: (_run_columns(out / name), rows) for name, rows in kept.items()}, jobs, show)
+        drawing.finish(jobs)
     return runs, results, checks, text
+
+
+class _FiguresDuringRuns:
+    """A comparison's figures drawn as soon as the runs they show have ended: the pool starts
+    those runs first, and this process, which otherwise only waits, draws one figure at a time
+    while the other runs go on; what is left is drawn on every core when all have ended."""
+
+    def __init__(self, out: Path, names: list, show):
+        from .experiments.plots import figure_runs
+        self.out, self.names, self.show = out, names, show
+        self.needed = figure_runs(names, show)
+        self.rows = {}
+        self.figures = None
+        self.failed = False  # a figure failed while the runs went on: it is drawn (and fails) again at the end
+
+    def record(self, name: str, record: dict) -> None:
+        if record.get("rows") is not None:
+            self.rows[name] = (_run_columns(self.out / name), record["rows"])
+
+    def _ready(self) -> bool:
+        if self.figures is None and all(n in self.rows for n in self.needed):
+            from .experiments.plots import FigureSet
+            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
+        return self.figures is not None
+
+    def idle(self) -> None:
+        if self.failed:
+            return
+        try:
+            if self._ready():
+                self.figures.draw_next()
+        except Exception:  # noqa: B902  (raised at the end, after comparison.md, where it always was)
+            self.failed = True
+
+    def finish(self, jobs: int) -> None:
+        from .experiments.plots import FigureSet
+        if self.figures is None or self.failed:  # rows too large to keep (read from the files), or a failure
+            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
+        self.figures.draw_rest(jobs)
 
 
 def say(line: str) -> None:
@@ -500,17 +542,19 @@ def cmd_compare(args) -> int:
     command = args.command_line
     jobs = _jobs(args)
     show = _names(args.runs)
+    if show and args.no_figures:
+        raise UsageError("--runs chooses the runs the figures show: it cannot go with --no-figures")
     if show:  # before any run starts
         from .experiments.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show)
+                                      command, jobs, show, not args.no_figures)
     print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
     print("mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B (1,-2,1)")
     print(summary_table(results))
     for line in move_lines(results, ("X", "Z", "B")):  # the motors' too in each run's metrics.json
         print(line)
-    print(f"results, figures and the full tables (comparison.md) in {out}")
+    print(f"results{'' if args.no_figures else ', figures'} and the full tables (comparison.md) in {out}")
     return 0
 
 
@@ -835,6 +879,8 @@ def parser() -> argparse.ArgumentParser:
                    "sc-dc,apd-dc,pid-dc-mode-matched, or all; default: sc-dc, apd-dc and the better of "
                    "apd-dc-mode-matched and apd-dc-ms-matched by mean tracking MAE); every run still runs and is "
                    "in comparison.md")
+    c.add_argument("--no-figures", action="store_true", help="write no figures (the runs and comparison.md only; "
+                   "draw them later with `tapmp plot FOLDER`)")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write the paper-reproduction page (results/paper-reproduction.md)",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "

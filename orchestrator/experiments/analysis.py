@@ -614,7 +614,16 @@ def plant_rates(split: SplitLoop):
 
 def _input_response(split: SplitLoop, Ac, Bc, duration: float, after: float, decay: float = 0.0) -> np.ndarray:
     """The plant's state at the end of a step (split loop coordinates, n x 3) from a unit force per
-    channel applied for ``duration`` [s] with weight exp(-decay t), then ``after`` [s] unforced."""
+    channel applied for ``duration`` [s] with weight exp(-decay t), then ``after`` [s] unforced.
+    Kept per split loop: the delay search asks for the same fractions of a step in every direction."""
+    key = (duration, after, decay, Ac.tobytes(), Bc.tobytes())
+    cache = split.__dict__.setdefault("_responses", {})
+    if key not in cache:
+        cache[key] = _response_of(split, Ac, Bc, duration, after, decay)
+    return cache[key]
+
+
+def _response_of(split: SplitLoop, Ac, Bc, duration: float, after: float, decay: float) -> np.ndarray:
     n6 = Ac.shape[0]
     big = np.zeros((n6 + 3, n6 + 3))
     big[:n6, :n6], big[:n6, n6:] = Ac, Bc
