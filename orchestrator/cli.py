@@ -21,7 +21,7 @@ from .engine.master import CoSimulationError
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)
 from .engine.schedule import ScheduleError
-from .engine.ssp import ParameterAddressError
+from .engine.ssd import ParameterAddressError
 from .engine.tempdirs import remove_stale_folders
 from .errors import UsageError
 from .experiments.estimate import check_output_size

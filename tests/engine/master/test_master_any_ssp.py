@@ -10,6 +10,7 @@ import pytest
 
 from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.experiments.roles import ROLES
 from orchestrator.engine.schedule import (Connection, ScheduleError, check_algebraic_loops, gauss_seidel_order,
                                           initialization_order)
 from orchestrator.experiments.scenario import load
@@ -134,7 +135,7 @@ def rewrite_ssp(ssp: Path, out: Path, rename=None, add=(), rewire=None) -> Path:
 
 def record(ssp, parameters, n, ordering="gauss-seidel", order=None):
     """(columns, rows as an array, step order, initialization order) of n steps."""
-    with CoSimulation(ssp, parameters, 0.0, 1e-4, ordering, order=order) as sim:
+    with CoSimulation(ssp, parameters, 0.0, 1e-4, ordering, order=order, roles=ROLES) as sim:
         rows = [sim.row()]
         for _ in range(n):
             sim.step()
@@ -272,7 +273,7 @@ def test_a_bad_order_through_the_cli_is_one_line_and_exit_2(built, tmp_path, cap
 
 
 def _orders(ssp):
-    with CoSimulation(ssp, {}) as sim:
+    with CoSimulation(ssp, {}, roles=ROLES) as sim:
         return sim.step_order, sim.init_order
 
 

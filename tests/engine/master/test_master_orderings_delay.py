@@ -8,6 +8,7 @@ import pytest
 from conftest import paper_scenario
 
 from orchestrator.engine.master import CoSimulation
+from orchestrator.experiments.roles import ROLES
 
 FORCES = [f"controller.F{i}" for i in (1, 2, 3)]
 
@@ -17,7 +18,7 @@ def plant_inputs_and_commands(ssp, ordering, steps=300):
     controller's published commands at t_k and at t_{k+1} [N]."""
     sc = paper_scenario(steps * 1e-4)
     applied, before, after = [], [], []
-    with CoSimulation(ssp, sc.parameters(), sc.start_time, sc.step, ordering) as sim:
+    with CoSimulation(ssp, sc.parameters(), sc.start_time, sc.step, ordering, roles=ROLES) as sim:
         plant = sim.units["plant"]
         vrs = [v.valueReference for v in plant.md.modelVariables if v.name in ("F1", "F2", "F3")]
         cols = [sim.columns.index(f) for f in FORCES]
