@@ -36,7 +36,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     start = time.perf_counter()
     sys.path.insert(0, str(ROOT))
     from orchestrator import cli
-    from orchestrator.experiments import plots, pool
+    from orchestrator.experiments import compare, plots, pool
     from orchestrator.experiments.scenario import load
     times = {"imports": time.perf_counter() - start}
 
@@ -50,14 +50,14 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
             finally:
                 times[stage] = times.get(stage, 0.0) + time.perf_counter() - t
         setattr(module, name, wrapper)
-    timed(cli, "check_runs", "stability checks")
+    timed(compare, "check_runs", "stability checks")
     timed(pool, "run_many", "runs")
     timed(plots, "plot", "figures")
     sc = load(scenario, [f"stop_time={stop_time}"] if stop_time else [])
     ssp = cli.resolve_ssp(ssp, sc.fmus)
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         t = time.perf_counter()
-        cli.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
+        compare.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
         times["whole comparison"] = time.perf_counter() - t
     print(f"{'stage':18s}  {'wall [s]':>8s}")
     for stage, wall in times.items():

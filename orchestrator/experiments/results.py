@@ -25,8 +25,8 @@ from . import metrics
 from ..engine.master import CoSimulation
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
-from .roles import ROLES, SCENARIO_TABLES
 from .folders import FORMATS, ResultsWriteError, check_output, output_lock, prepare_output, write_json, write_result
+from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 from .stops import StopRequest, stop_scope
 from .writers import CsvBlocks, Keeping, MatBlocks

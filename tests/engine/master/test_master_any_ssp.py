@@ -10,9 +10,9 @@ import pytest
 
 from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from orchestrator.experiments.roles import ROLES
 from orchestrator.engine.schedule import (Connection, ScheduleError, check_algebraic_loops, gauss_seidel_order,
                                           initialization_order)
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.scenario import load
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -153,6 +153,17 @@ def test_renamed_elements_give_bit_identical_results(built, tmp_path, ordering):
     assert np.array_equal(rows1, rows0)
     assert order1 == [RENAME[e] for e in order0] and init1 == [RENAME[e] for e in init0]
     assert np.abs(rows0[-1, 1:]).max() > 0.0  # the loop moved: the comparison compares something
+
+
+def test_without_roles_the_master_names_columns_and_tables_by_element(built, tmp_path):
+    renamed = rewrite_ssp(built["ssp"], tmp_path / "renamed.ssp", rename=RENAME)
+    with CoSimulation(renamed, {"axis": {"k_pull": 0.0}}) as sim:  # no roles: the engine knows no TAPMP
+        assert {c.split(".")[0] for c in sim.columns} == {"time", "ref", "ctl", "axis"}
+        assert {"axis.q1", "ctl.F1"} <= set(sim.columns)
+    with pytest.raises(CoSimulationError, match=r"parameters given for unknown element\(s\) plant: allowed are "
+                                                r"ref, ctl, axis$"):
+        with CoSimulation(renamed, {"plant": {"k_pull": 0.0}}):
+            pass
 
 
 @pytest.mark.slow

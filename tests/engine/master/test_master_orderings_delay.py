@@ -40,3 +40,9 @@ def test_the_plant_steps_on_the_command_of_this_or_the_previous_sample(built, or
     assert np.array_equal(applied, expected)             # exactly, every step, every motor
     assert not np.allclose(applied, other, atol=1e-3)
 
+
+
+def test_the_plain_python_loop_offers_the_masters_orderings():
+    from orchestrator.engine.schedule import ORDERINGS
+    from tapmp.interface import ORDERINGS as PLAIN_LOOP_ORDERINGS  # tapmp.closed_loop's
+    assert PLAIN_LOOP_ORDERINGS == ORDERINGS
