@@ -5,12 +5,15 @@ fastest of --repeat. Run from the repository root after `bash build_fmus.sh`:
     .venv/bin/python benchmarks/bench_compare.py [--scenario scenarios/paper_simulation.toml] [--repeat 3]
                                                  [--jobs N] [--stop-time S] [--ssp FILE]
 
-Prints the wall time of each command and the ratio compare / run (target <= 3). --stages
+Prints the wall time of each command (`tapmp run`, `tapmp compare`, `tapmp compare --no-figures`)
+and the ratios compare / run (target <= 3) and compare --no-figures / run. --stages
 instead times the stages of one comparison in this process (imports, stability checks, the
-runs, the figures).
+runs, the figures): "runs" without the figures this process drew while the runs went on,
+"figures" all of them, "figures during the runs" the part drawn meanwhile.
 """
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -39,29 +42,42 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     from orchestrator.experiments import compare, plots, pool
     from orchestrator.experiments.scenario import load
     times = {"imports": time.perf_counter() - start}
+    during = [False]  # inside run_many: figures drawn there are taken out of the runs' time
 
-    def timed(module, name, stage):
-        original = getattr(module, name)
+    def timed(owner, name, stage):
+        original = getattr(owner, name)
 
         def wrapper(*a, **k):
             t = time.perf_counter()
+            inside = during[0]
+            if stage == "runs":
+                during[0] = True
             try:
                 return original(*a, **k)
             finally:
-                times[stage] = times.get(stage, 0.0) + time.perf_counter() - t
-        setattr(module, name, wrapper)
+                wall = time.perf_counter() - t
+                if stage == "runs":
+                    during[0] = False
+                times[stage] = times.get(stage, 0.0) + wall
+                if stage == "figures" and inside:
+                    times["runs"] = times.get("runs", 0.0) - wall
+                    times["figures during the runs"] = times.get("figures during the runs", 0.0) + wall
+        setattr(owner, name, wrapper)
     timed(compare, "check_runs", "stability checks")
     timed(pool, "run_many", "runs")
-    timed(plots, "plot", "figures")
+    for method in ("__init__", "draw_next", "draw_rest"):  # the figures, during the runs and after them
+        timed(plots.FigureSet, method, "figures")
     sc = load(scenario, [f"stop_time={stop_time}"] if stop_time else [])
     ssp = cli.resolve_ssp(ssp, sc.fmus)
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         t = time.perf_counter()
         compare.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
         times["whole comparison"] = time.perf_counter() - t
-    print(f"{'stage':18s}  {'wall [s]':>8s}")
-    for stage, wall in times.items():
-        print(f"{stage:18s}  {wall:8.2f}")
+    times.setdefault("figures during the runs", 0.0)
+    order = ("imports", "stability checks", "runs", "figures", "figures during the runs", "whole comparison")
+    print(f"{'stage':24s}  {'wall [s]':>8s}")
+    for stage in order:
+        print(f"{stage:24s}  {times.get(stage, 0.0):8.2f}")
 
 
 def main(argv=None) -> int:
@@ -81,21 +97,25 @@ def main(argv=None) -> int:
         from orchestrator.experiments.pool import parse_jobs
         stages(args.scenario, parse_jobs(args.jobs), args.stop_time, args.ssp)
         return 0
-    best = {"tapmp run": float("inf"), "tapmp compare": float("inf")}
+    best = {"tapmp run": float("inf"), "tapmp compare": float("inf"), "tapmp compare --no-figures": float("inf")}
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         for r in range(args.repeat):
             for name, cmd in (("tapmp run", ["run", args.scenario, "--out", f"{tmp}/run", *extra]),
                               ("tapmp compare", ["compare", args.scenario, "--out", f"{tmp}/compare", *extra,
-                                                 *jobs])):
+                                                 *jobs]),
+                              ("tapmp compare --no-figures", ["compare", args.scenario, "--out", f"{tmp}/compare",
+                                                              *extra, *jobs, "--no-figures"])):
                 wall = timed(cmd)
                 best[name] = min(best[name], wall)
-                print(f"run {r + 1}/{args.repeat} {name:14s} {wall:7.2f} s", file=sys.stderr)
+                print(f"run {r + 1}/{args.repeat} {name:26s} {wall:7.2f} s", file=sys.stderr)
     print(f"{Path(args.scenario).name}{' stop_time=%g' % args.stop_time if args.stop_time else ''}, "
           f"fastest of {args.repeat}")
-    print(f"{'command':14s}  {'wall [s]':>8s}")
+    print(f"{'command':26s}  {'wall [s]':>8s}  {'load':>5s}")
+    load = os.getloadavg()[0]
     for name, wall in best.items():
-        print(f"{name:14s}  {wall:8.2f}")
+        print(f"{name:26s}  {wall:8.2f}  {load:5.2f}")
     print(f"compare / run: {best['tapmp compare'] / best['tapmp run']:.2f}")
+    print(f"compare --no-figures / run: {best['tapmp compare --no-figures'] / best['tapmp run']:.2f}")
     return 0
 
 

@@ -269,14 +269,16 @@ def cmd_compare(args) -> int:
     command = args.command_line
     jobs = _jobs(args)
     show = _names(args.runs)
+    if show and args.no_figures:
+        raise UsageError("--runs chooses the runs the figures show: it cannot go with --no-figures")
     if show:  # before any run starts
         from .experiments.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show)
+                                      command, jobs, show, not args.no_figures)
     print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
     print(summary_table(results))
-    print(f"results, figures and the full tables (comparison.md) in {out}")
+    print(f"results{'' if args.no_figures else ', figures'} and the full tables (comparison.md) in {out}")
     return 0
 
 
@@ -550,6 +552,8 @@ def parser() -> argparse.ArgumentParser:
                    "sc-dc,apd-dc,pid-dc-mode-matched, or all; default: sc-dc, apd-dc and the better of "
                    "apd-dc-mode-matched and apd-dc-ms-matched by mean tracking MAE); every run still runs and is "
                    "in comparison.md")
+    c.add_argument("--no-figures", action="store_true", help="write no figures (the runs and comparison.md only; "
+                   "draw them later with `tapmp plot FOLDER`)")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write the paper-reproduction page (results/paper-reproduction.md)",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "

@@ -30,6 +30,9 @@ from pathlib import Path
 C_DIR = Path(__file__).resolve().with_name("c")
 SOURCE = C_DIR / "tapmp_model.c"
 HEADER = C_DIR / "tapmp_model.h"
+# the FMI-free closed loop stepped in C (tapmp.closed_loop.run): part of the library, not of the FMUs
+LOOP_SOURCE = C_DIR / "tapmp_loop.c"
+LOOP_HEADER = C_DIR / "tapmp_loop.h"
 
 
 class NativeModelError(RuntimeError):
@@ -44,11 +47,12 @@ def cdef_text(header: str) -> str:
     return re.sub(r"\bTAPMP_LINKAGE\b", "", "\n".join(lines))
 
 
-def header_number(name: str) -> float:
-    """The value of ``#define NAME NUMBER`` in tapmp_model.h (a constant cffi's ABI mode cannot read)."""
-    m = re.search(rf"^#define {re.escape(name)} (\S+)", HEADER.read_text(), flags=re.M)
+def header_number(name: str, header: Path = HEADER) -> float:
+    """The value of ``#define NAME NUMBER`` in ``header`` (tapmp_model.h unless given; a constant
+    cffi's ABI mode cannot read)."""
+    m = re.search(rf"^#define {re.escape(name)} (\S+)", header.read_text(), flags=re.M)
     if m is None:
-        raise NativeModelError(f"{HEADER} defines no {name}")
+        raise NativeModelError(f"{header} defines no {name}")
     return float(m.group(1))
 
 
@@ -62,8 +66,10 @@ def settings_header() -> str:
 
 
 def source_hash() -> str:
-    """16 hex digits of the SHA-256 of tapmp_model.c, tapmp_model.h and the generated tapmp_settings.h."""
-    data = b"\0".join((SOURCE.read_bytes(), HEADER.read_bytes(), settings_header().encode()))
+    """16 hex digits of the SHA-256 of tapmp_model.c, tapmp_model.h, the generated tapmp_settings.h
+    and the closed loop tapmp_loop.c, tapmp_loop.h."""
+    data = b"\0".join((SOURCE.read_bytes(), HEADER.read_bytes(), settings_header().encode(),
+                       LOOP_SOURCE.read_bytes(), LOOP_HEADER.read_bytes()))
     return hashlib.sha256(data).hexdigest()[:16]
 
 
@@ -73,7 +79,7 @@ def bundled_name() -> str:
 
 
 def compile_library(output: Path) -> Path:
-    """Compile tapmp_model.c into the shared library ``output`` with the native FMUs' flags
+    """Compile tapmp_model.c and tapmp_loop.c into the shared library ``output`` with the native FMUs' flags
     (tapmp.toolchain.CFLAGS) but exported symbols; NativeModelError if the compiler fails."""
     from .toolchain import CFLAGS, ToolchainError, compile_c
     # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
@@ -81,7 +87,7 @@ def compile_library(output: Path) -> Path:
     with tempfile.TemporaryDirectory(prefix="tapmp_settings_") as generated:
         Path(generated, SETTINGS_HEADER).write_text(settings_header())
         try:
-            return compile_c([SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
+            return compile_c([SOURCE, LOOP_SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
                              what="the C model")
         except ToolchainError as err:
             raise NativeModelError(str(err)) from None
@@ -115,12 +121,14 @@ _LOADED = None
 
 
 def load():
-    """(ffi, lib): cffi's FFI with tapmp_model.h's declarations and the loaded C model."""
+    """(ffi, lib): cffi's FFI with the declarations of tapmp_model.h and tapmp_loop.h and the
+    loaded C model."""
     global _LOADED
     if _LOADED is None:
         from cffi import FFI
         ffi = FFI()
         ffi.cdef(cdef_text(HEADER.read_text()))
+        ffi.cdef(cdef_text(LOOP_HEADER.read_text()))
         path = library_path()
         try:
             lib = ffi.dlopen(str(path))

@@ -58,13 +58,12 @@ def run_columns(folder: Path) -> list:
 
 
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None):
+                   show: list | None = None, figures: bool = True):
     """Run every compare run of ``scenario`` on the SSP file ``ssp`` into out/<run> (on ``jobs``
     processes, a progress bar each if ``progress``), write out/comparison.md (naming ``command``)
-    and the figures (of the runs ``show``, default see plots.select_runs); returns (runs, results,
-    checks, comparison.md text)."""
+    and, if ``figures``, the figures (of the runs ``show``, default see plots.select_runs);
+    returns (runs, results, checks, comparison.md text)."""
     from .baselines import compare_runs  # on first use: the command line starts without the models' algebra
-    from .plots import plot
     from .pool import run_many
     from .report import write_comparison
 
@@ -75,11 +74,54 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
         say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
             f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
         bars = (lambda name: progress_bar(f"{scenario.name} {name}", True)) if progress else None
-        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, True, bars,
-                           scenario.name)
+        drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
+        # without figures the runs' rows stay in the workers (no copy back to this process)
+        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, figures, bars,
+                           scenario.name, first=drawing.needed if drawing else (),
+                           on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
         results = {name: r["metrics"] for name, r in records.items()}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
+        if not figures:
+            return runs, results, checks, text
         say(f"{scenario.name}: figures")
-        kept = {name: r["rows"] for name, r in records.items() if r["rows"] is not None}
-        plot(out, {name: (run_columns(out / name), rows) for name, rows in kept.items()}, jobs, show)
+        drawing.finish(jobs)
     return runs, results, checks, text
+
+
+class _FiguresDuringRuns:
+    """A comparison's figures drawn as soon as the runs they show have ended: the pool starts
+    those runs first, and this process, which otherwise only waits, draws one figure at a time
+    while the other runs go on; what is left is drawn on every core when all have ended."""
+
+    def __init__(self, out: Path, names: list, show):
+        from .plots import figure_runs
+        self.out, self.names, self.show = out, names, show
+        self.needed = figure_runs(names, show)
+        self.rows = {}
+        self.figures = None
+        self.failed = False  # a figure failed while the runs went on: it is drawn (and fails) again at the end
+
+    def record(self, name: str, record: dict) -> None:
+        if record.get("rows") is not None:
+            self.rows[name] = (run_columns(self.out / name), record["rows"])
+
+    def _ready(self) -> bool:
+        if self.figures is None and all(n in self.rows for n in self.needed):
+            from .plots import FigureSet
+            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
+        return self.figures is not None
+
+    def idle(self) -> None:
+        if self.failed:
+            return
+        try:
+            if self._ready():
+                self.figures.draw_next()
+        except Exception:  # noqa: B902  (raised at the end, after comparison.md, where it always was)
+            self.failed = True
+
+    def finish(self, jobs: int) -> None:
+        from .plots import FigureSet
+        if self.figures is None or self.failed:  # rows too large to keep (read from the files), or a failure
+            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
+        self.figures.draw_rest(jobs)

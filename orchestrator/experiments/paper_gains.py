@@ -22,9 +22,10 @@ Readings of the units (the paper gives none):
 Plants: "encoder" is the scenario's plant as its TOML file gives it (100 nm encoder
 quantization, friction, pulling, 600 N saturation); "exact" is the same with the
 quantization off (encoder_resolution = 0), the measurement a continuous-time
-simulation would have. The loop is ``tapmp.closed_loop.simulate`` (plain Python, the
-FMUs' model functions in the same order): the FMUs at 1 us would take 100 times the
-steps of a 0.1 ms run through the co-simulation master.
+simulation would have. The loop is ``tapmp.closed_loop.run``: the FMI-free loop stepped in C
+(the FMUs' model functions in the same order, the same doubles as the readable Python loop
+``tapmp.closed_loop.simulate``); the FMUs at 1 us would take 100 times the steps of a 0.1 ms
+run through the co-simulation master.
 
 Per run: the metrics of orchestrator.experiments.metrics (tracking and synchronization
 MAE and STD per motor [um], every communication point from the start), the share of
@@ -38,10 +39,11 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from tapmp.closed_loop import simulate
+import numpy as np
+
+from tapmp.closed_loop import COLUMNS, run
 from tapmp.control import Gains
 from tapmp.errors import ModelInputError
-from tapmp.kinematics import inverse
 from tapmp.params import ModelParams
 
 from ..engine.families import SCENARIOS_DIR
@@ -68,7 +70,11 @@ _MASSES = ("m_p", "m_1", "m_2", "m_3", "I_y")
 _COLUMNS = ["time", "trajectory.q1_d", "trajectory.q2_d", "trajectory.q3_d",
             "plant.q1_true", "plant.q2_true", "plant.q3_true",
             "trajectory.X_d", "trajectory.Z_d", "trajectory.B_d", "plant.X", "plant.Z", "plant.B"]
-_BLOCK = 20000
+_BLOCK = 20000  # rows per ErrorStatistics.add (its pairwise update depends on the blocks)
+# the columns of tapmp.closed_loop.COLUMNS that make _COLUMNS, and the command F
+_ROW = [COLUMNS.index(c) for c in ("t", "q_d1", "q_d2", "q_d3", "q1_true", "q2_true", "q3_true",
+                                   "X_d", "Z_d", "B_d", "X", "Z", "B")]
+_F = [COLUMNS.index(c) for c in ("F1", "F2", "F3")]
 
 
 def reading_b(gains: Gains, controller: dict) -> tuple[dict, dict]:
@@ -127,39 +133,45 @@ def run_scenario(sc: Scenario) -> dict:
     travel, angle = lim["motor_travel"] or math.inf, lim["platform_angle"] or math.inf
     f_lim = plant.cfg.force_limit
     stats = ErrorStatistics(_COLUMNS)
-    rows = []
-    sat = [0, 0, 0]
+    pending = []  # rows not yet added, re-cut into blocks of _BLOCK as one row at a time would be
+    sat = np.zeros(3, dtype=np.int64)
 
     class _Diverged(Exception):
         pass
 
-    def record(t, ref, F, q_meas, q_true):
-        qd = inverse(ref[0], ref[1], ref[2], L1)
-        s = plant.state
-        rows.append((t, *qd, *q_true, ref[0], ref[1], ref[2], s[0], s[1], s[2]))
+    def record_rows(block):
+        data = block[:, _ROW]
+        diverged = ((np.abs(data[:, 4:7]) > travel).any(axis=1)) | (np.abs(data[:, 12]) > angle)
+        stop = int(np.argmax(diverged)) if diverged.any() else None
+        if stop is not None:
+            data, block = data[:stop + 1], block[:stop + 1]
         if f_lim > 0.0:
-            for i in range(3):
-                if abs(F[i]) >= f_lim:
-                    sat[i] += 1
-        if len(rows) >= _BLOCK:
-            stats.add(rows)
-            rows.clear()
-        if abs(q_true[0]) > travel or abs(q_true[1]) > travel or abs(q_true[2]) > travel or abs(s[2]) > angle:
-            raise _Diverged(t)
+            sat[:] += (np.abs(block[:, _F]) >= f_lim).sum(axis=0)
+        pending.append(data)
+        n = sum(len(b) for b in pending)
+        if n >= _BLOCK:
+            rows = np.concatenate(pending)
+            full = n - n % _BLOCK
+            for i in range(0, full, _BLOCK):
+                stats.add(rows[i:i + _BLOCK])
+            pending[:] = [rows[full:]]
+        if stop is not None:
+            raise _Diverged(float(data[-1, 0]))
 
     diverged_at = None
     t0 = time.perf_counter()
     try:
-        simulate(plant, ctrl, traj, sc.start_time, sc.n_steps, sc.step, sc.ordering, record)
+        run(plant, ctrl, traj, sc.start_time, sc.n_steps, sc.step, sc.ordering, record_rows, L1_ref=L1)
     except _Diverged as d:
         diverged_at = d.args[0]
     except ModelInputError as err:  # KinematicDomainError: the plant left its domain
         diverged_at = err.time if err.time is not None else float("nan")
     wall = time.perf_counter() - t0
-    stats.add(rows)
+    if pending:
+        stats.add(np.concatenate(pending))
     out = stats.result()
     n = out["samples"]
-    out["saturation_fraction"] = [s / n for s in sat]
+    out["saturation_fraction"] = [int(s) / n for s in sat]
     t1 = time.perf_counter()
     rep = stability.check(sc)
     out["check_s"] = time.perf_counter() - t1

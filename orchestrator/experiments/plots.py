@@ -498,33 +498,72 @@ def _draw(stem: str, path: str) -> str:
     return path
 
 
+class FigureSet:
+    """The figures of a run or comparison folder (see :func:`plot`), drawn one at a time
+    (:meth:`draw_next`: while a comparison's other runs still run) or the rest at once
+    (:meth:`draw_rest`). ``names``: the comparison's runs (default: those its folder holds
+    now); ``rows``, ``show``: see :func:`plot`."""
+
+    def __init__(self, folder: Path, rows: dict | None = None, show: list[str] | None = None,
+                 names: list[str] | None = None):
+        folder = Path(folder)
+        if folder_kind(folder) == "comparison":
+            show = select_runs(folder, names if names is not None else _comparison_names(folder), show, rows)
+        self.kind, self.runs = load_folder(folder, rows, show)
+        prefix = "run_" if self.kind == "run" else ""
+        self.paths = {stem: folder / f"{prefix}{stem}.png" for stem in _makers()}
+        self.left = list(reversed(list(self.paths)))  # not drawn yet, the heaviest first
+
+    def draw_next(self) -> bool:
+        """Draw and write the next figure in this process; False if none was left."""
+        global _RUNS
+        if not self.left:
+            return False
+        stem = self.left[0]
+        _RUNS = self.runs
+        try:
+            _draw(stem, str(self.paths[stem]))
+        finally:
+            _RUNS = {}
+        self.left.pop(0)  # only once written: a figure that fails stays to be drawn again
+        return True
+
+    def draw_rest(self, jobs: int = 1) -> list[Path]:
+        """Draw every figure not drawn yet (``jobs`` > 1: in that many forked processes); returns
+        the paths of all figures."""
+        global _RUNS
+        left, self.left = self.left, []
+        _RUNS = self.runs
+        try:
+            if jobs > 1 and len(left) > 1:
+                from concurrent.futures import ProcessPoolExecutor
+                from multiprocessing import get_context
+                with ProcessPoolExecutor(min(jobs, len(left)), mp_context=get_context("fork")) as pool:
+                    list(pool.map(_draw, left, [str(self.paths[s]) for s in left]))
+            else:
+                for stem in left:
+                    _draw(stem, str(self.paths[stem]))
+        finally:
+            _RUNS = {}
+        return list(self.paths.values())
+
+
 def plot(folder: Path, rows: dict | None = None, jobs: int = 1, show: list[str] | None = None) -> list[Path]:
     """Write the figures of a run folder (run_fig4_trajectory.png ... run_fig8_force_commands.png)
     or of a comparison folder (fig4_trajectory.png ... fig8_force_commands.png) into ``folder``;
     return their paths. ``rows``: see load_folder. ``jobs`` > 1 draws the figures in that many
     forked processes (the same files). ``show``: the comparison's runs to draw (folder names;
     default: see select_runs)."""
-    global _RUNS
-    folder = Path(folder)
-    if folder_kind(folder) == "comparison":
-        show = select_runs(folder, _comparison_names(folder), show, rows)
-    kind, runs = load_folder(folder, rows, show)
-    prefix = "run_" if kind == "run" else ""
-    paths = {stem: folder / f"{prefix}{stem}.png" for stem in _makers()}
-    _RUNS = runs
-    try:
-        if jobs > 1:
-            from concurrent.futures import ProcessPoolExecutor
-            from multiprocessing import get_context
-            with ProcessPoolExecutor(min(jobs, len(paths)), mp_context=get_context("fork")) as pool:
-                # the heaviest figures first, so the pool ends together
-                list(pool.map(_draw, reversed(list(paths)), [str(paths[s]) for s in reversed(list(paths))]))
-        else:
-            for stem, path in paths.items():
-                _draw(stem, str(path))
-    finally:
-        _RUNS = {}
-    return list(paths.values())
+    return FigureSet(folder, rows, show).draw_rest(jobs)
+
+
+def figure_runs(names: list[str], show: list[str] | None = None) -> list[str]:
+    """The runs of a comparison (folder names ``names``) whose results the figures need before
+    they can be drawn: the runs ``show`` names ("all": every run), else the default ones and
+    both fair baselines (select_runs picks the better of them by its metrics)."""
+    if show:
+        return list(names) if show == ["all"] else [n for n in names if n in show]
+    return [n for n in names if n in DEFAULT_RUNS or n in FAIR_BASELINES] or list(names)
 
 
 def _comparison_names(folder: Path) -> list[str]:

@@ -108,20 +108,26 @@ def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -
     return {"metrics": metrics, "rows": rows if keep and len(rows) else None}
 
 
-def run_many(tasks: dict, jobs: int, keep: bool = True, progress=None, label: str = "") -> dict:
+def run_many(tasks: dict, jobs: int, keep: bool = True, progress=None, label: str = "", first=(),
+             on_record=None, idle=None) -> dict:
     """Run ``tasks`` ({name: (scenario, ssp, out folder)}) on ``jobs`` processes (in this
     process if jobs == 1 or there is one task); {name: record of run_one} in the order of
     ``tasks``. The first failure is raised (see the module docstring). ``progress(name)``
     makes a per-run progress callback when running in this process; a pool shows one bar
     of completed runs instead (when ``progress`` is given). Every run folder is locked by this
-    process from the start to the end of the set (a pool's workers run in them)."""
+    process from the start to the end of the set (a pool's workers run in them).
+    ``first``: names of tasks to start before the others; ``on_record(name, record)`` is called
+    here as each run succeeds; ``idle()``, if given, is called here while a pool's runs are
+    still running (one short piece of work per call, e.g. one figure: this process is otherwise
+    only waiting)."""
     with ExitStack() as locks:
         for _, _, out in tasks.values():
             locks.enter_context(output_lock(out))
-        return _run_many(tasks, jobs, keep, progress, label)
+        return _run_many(tasks, jobs, keep, progress, label, first, on_record, idle)
 
 
-def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
+def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str, first=(), on_record=None,
+              idle=None) -> dict:
     records = {}
     if jobs == 1 or len(tasks) == 1:
         for name, (sc, ssp, out) in tasks.items():
@@ -132,6 +138,8 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
                 close()
             if "error" in records[name]:
                 _raise(records[name])
+            if on_record:
+                on_record(name, records[name])
         return records
     bar = None
     if progress:
@@ -141,7 +149,8 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
     cancel = context.Event()  # queued runs that a worker has already taken must not start either
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context,
                                initializer=_worker_init, initargs=(cancel,))
-    futures = {pool.submit(run_one, sc, ssp, out, keep, None, True): name for name, (sc, ssp, out) in tasks.items()}
+    order = [n for n in first if n in tasks] + [n for n in tasks if n not in first]
+    futures = {pool.submit(run_one, *tasks[name][:3], keep, None, True): name for name in order}
     try:
         pending = set(futures)
         while pending:
@@ -156,6 +165,10 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str) -> dict:
                         p.cancel()
                     wait(pending)
                     _raise(record)
+                if on_record:
+                    on_record(futures[f], record)
+            if pending and idle:
+                idle()
     except BaseException as err:
         cancel.set()
         if isinstance(err, KeyboardInterrupt):  # a stop signal here: stop the runs in the workers too

@@ -411,8 +411,8 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
               modal_table(("default", "paper_simulation", "paper_experiment")), "",
               "## The paper's gains, run", "",
               f"From `{pg_cmd}`: Eq. 40-41 (`paper_simulation.toml`) and Eq. 42-43 (`paper_experiment.toml`) "
-              f"with the paper's gains, {paper_gains_stop:g} s each, in the plain Python loop "
-              "(tapmp.closed_loop, the FMUs' model functions in the same order; the FMUs at 1 us would take 100 "
+              f"with the paper's gains, {paper_gains_stop:g} s each, in the FMI-free loop "
+              "(tapmp.closed_loop stepped in C, the FMUs' model functions in the same order; the FMUs at 1 us would take 100 "
               "times the steps of a 0.1 ms co-simulation). Steps 1 us and 10 us stand for the paper's "
               "continuous-time simulation, whose step it does not state; 0.1 ms is its servo cycle. Readings of "
               "the units: A, F = u / K_T (as implemented: feedback gains divided by K_T); B, u in newtons and "

@@ -1,7 +1,9 @@
 """Result file writers: rows appended in whole blocks to results.csv or (through
 results.part.npy) results.mat.
 
-results.csv is text, every value as the shortest text that reads back to it; results.mat
+results.csv is text, every value as the shortest text that reads back to it, formatted and
+written by a thread of its own while the run steps on (the compiled stepping core releases the
+GIL, so the text costs the run little wall time where a second core is free); results.mat
 is a MATLAB 5 MAT-file with one N x 1 double variable per column (names with "." as "_")
 plus ``columns``, the original names in order. A block is formatted in one operation (one
 orjson call for CSV, raw float64 bytes for MAT) and written with one os.write. After a
@@ -14,7 +16,9 @@ which reading.read_results reads as well.
 
 import io
 import os
+import queue
 import re
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -77,22 +81,75 @@ class CsvBlocks(_Blocks):
     1e+16). A block is formatted in one call to orjson's numpy serializer (compiled,
     about 20x faster than Python's %-formatting of every value) and its JSON rows turned
     into lines; a block holding a non-finite value (never written by the master, which
-    stops before) is formatted with Python's repr."""
+    stops before) is formatted with Python's repr.
+
+    Formatting and writing run in a thread of their own, started at the first block: write()
+    hands a copy of the block over (at most QUEUED blocks wait, so memory stays bounded) and
+    returns while the run steps on. A write that fails (a full disk) cuts the file back to its
+    whole blocks as before; its ResultsWriteError is raised by the next write() or by finish(),
+    and nothing after it is written. finish() waits until every block is on disk."""
+
+    QUEUED = 4  # blocks waiting for the writing thread: bounded memory, and enough to ride out a slow write
 
     def __init__(self, out: Path, columns):
         super().__init__(Path(out) / FORMATS["csv"], columns)
         self.header = (",".join(self.columns) + "\n").encode()
         self.line = ",".join(["%r"] * len(self.columns)) + "\n"
+        self._queue = queue.Queue(self.QUEUED)
+        self._thread = None
+        self._error = None  # the first failure of the writing thread, raised in the caller's thread
 
     def write(self, block: np.ndarray, quiet: bool = False) -> None:
-        """Append the rows of ``block`` (n x columns); the header goes with the first block."""
-        if not block.shape[0]:
+        """Hand the rows of ``block`` (n x columns) to the writing thread (the header goes with the
+        first block); raises the ResultsWriteError of an earlier block that failed (unless ``quiet``)."""
+        self._raise(quiet)
+        if not block.shape[0] or self._error is not None:
             return
-        data = (self.header if self.size == 0 else b"") + format_csv_rows(block, self.line)
-        self._append(data, block.shape[0], float(block[-1, 0]), quiet)
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name=f"write {self.path}", daemon=True)
+            self._thread.start()
+        self._queue.put((np.array(block, dtype=np.float64), quiet))  # a copy: the caller reuses its buffer
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            try:
+                if item is None:
+                    return
+                block, quiet = item
+                if self._error is None:
+                    data = (self.header if self.size == 0 else b"") + format_csv_rows(block, self.line)
+                    self._append(data, block.shape[0], float(block[-1, 0]), quiet)
+            except BaseException as err:  # noqa: B902  (raised again in the caller's thread)
+                self._error = err
+            finally:
+                self._queue.task_done()
+
+    def _raise(self, quiet: bool) -> None:
+        if self._error is not None and not quiet:
+            err, self._error = self._error, _Reported(self._error)
+            if not isinstance(err, _Reported):
+                raise err
 
     def finish(self, quiet: bool = False) -> None:
-        """Nothing left to do: every block is on disk as it is written."""
+        """Wait until every block handed over is on disk; raise the failure of one (unless ``quiet``)."""
+        if self._thread is not None:
+            self._queue.join()
+        self._raise(quiet)
+
+    def close(self) -> None:
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
+            self._thread = None
+        super().close()
+
+
+class _Reported:
+    """A failure of the writing thread already raised: later blocks are dropped, not reported again."""
+
+    def __init__(self, err: BaseException):
+        self.err = err
 
 
 def format_csv_rows(block: np.ndarray, line: str | None = None) -> bytes:

@@ -21,6 +21,7 @@ and compares every worker's tapmp version and model source hash with the client'
 (check_workers); a worker that joins later is checked by the plugin before each case.
 """
 
+import dataclasses
 import hashlib
 import os
 import shutil
@@ -220,13 +221,23 @@ def remove_case_folder(folder: Path) -> None:
     shutil.rmtree(folder, ignore_errors=True)
 
 
+@dataclasses.dataclass
+class Shipping:
+    """How a study's cases reach its workers: ``plugin``, the name of the study's worker plugin
+    ("" on the local cluster: no check, no data); ``data``: the SSP and the case files travel as
+    data (else as paths on a shared file system); ``address``: the scheduler's, for messages."""
+
+    plugin: str = ""
+    data: bool = False
+    address: str = ""
+
+
 @contextmanager
 def shipping(client, ssp: Path, address: str, data: bool, timeout: float):
     """For the duration of a study on the scheduler at ``address``: at least one worker (waited
     for up to ``timeout`` [s]), every worker checked against the client, and the study's plugin
     registered (with the SSP's bytes if ``data``) and removed at the end. Yields the
-    study.Shipping the CaseRunner uses."""
-    from .study import Shipping
+    Shipping the CaseRunner uses."""
     wait_for_workers(client, timeout, address)
     check_workers(client)
     plugin = study_plugin(ssp if data else None)

@@ -39,6 +39,8 @@ import numpy as np
 
 from ..experiments.config import require
 from ..experiments.scenario import Scenario, create
+from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, this_plugin,
+                     unpack_folder)
 from .study_file import Study, StudyError, apply_changes, base_value, load_study
 
 STUDY_CSV = "study.csv"
@@ -151,7 +153,6 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     folder = None
     try:
         if plugin:
-            from .remote import case_folder, this_plugin
             shipped = this_plugin(plugin)
             if shipped is None:
                 raise StudyError(f"Dask worker {row['worker']} has not received the study's data (plugin {plugin}): "
@@ -183,7 +184,6 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
         if isinstance(err, DivergenceError):
             row["status"] = "diverged"
     if folder is not None:
-        from .remote import pack_folder, remove_case_folder
         try:
             row["files"] = pack_folder(Path(case_dir))
         finally:
@@ -377,18 +377,6 @@ POLL_S = 0.05  # how often the client looks for finished cases when none is read
 WATCH_S = 2.0  # how often it asks the scheduler whether any worker is left while it waits [s]
 
 
-@dataclasses.dataclass
-class Shipping:
-    """How a study's cases reach its workers (orchestrator.studies.remote): ``plugin``, the name of
-    the study's worker plugin ("" on the local cluster: no check, no data); ``data``: the SSP and
-    the case files travel as data (else as paths on a shared file system); ``address``: the
-    scheduler's, for messages."""
-
-    plugin: str = ""
-    data: bool = False
-    address: str = ""
-
-
 class CaseRunner:
     """Runs cases on a Dask client and records their rows in a StudyTable.
 
@@ -427,7 +415,6 @@ class CaseRunner:
         from dask.distributed import as_completed
         from tqdm import tqdm
 
-        from .remote import gain_values_of
 
         rows = {c["case"]: self.table.rows[c["case"]] for c in cases if c["case"] in self.table.rows}
         todo = [c for c in cases if c["case"] not in rows]
@@ -478,7 +465,6 @@ class CaseRunner:
         """The case's files into its folder (data mode), then its row into study.csv."""
         files = row.pop("files", None)
         if files:
-            from .remote import unpack_folder
             self.bytes_received += unpack_folder(files, self.out / "cases" / case["case"], self.ssp)
         self.table.add(case, row)
 

@@ -199,3 +199,38 @@ def test_compare_refuses_an_unknown_run_before_running_anything(built, tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'apd-dc-mode-matchd'" in err[0] and "did you mean apd-dc-mode-matched?" in err[0]
     assert not out.exists()
+
+
+def test_compare_with_no_figures_writes_the_runs_and_comparison_md_and_plot_draws_them_later(built, tmp_path,
+                                                                                           capsys):
+    """--no-figures: every run folder and comparison.md, no PNG; `tapmp plot` on the folder then
+    draws the five comparison figures from the files; --runs with --no-figures is refused."""
+    out = tmp_path / "cmp"
+    assert main(["compare", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.02",
+                 "--no-progress", "--no-figures"]) == 0
+    printed = capsys.readouterr().out
+    assert (out / "comparison.md").is_file() and (out / "sc-dc" / "metrics.json").is_file()
+    assert not list(out.rglob("*.png")) and "results and the full tables (comparison.md) in" in printed
+    assert main(["plot", str(out)]) == 0
+    assert sorted(p.name for p in out.glob("*.png")) == ["fig4_trajectory.png", "fig5_tracking_errors.png",
+                                                         "fig6_sync_errors.png", "fig7_axis_errors.png",
+                                                         "fig8_force_commands.png"]
+    capsys.readouterr()
+    assert main(["compare", PAPER, "--ssp", str(built["ssp"]), "--out", str(tmp_path / "other"),
+                 "--no-progress", "--no-figures", "--runs", "sc-dc"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --runs chooses the runs the figures show: it cannot go with --no-figures"]
+    assert not (tmp_path / "other").exists()
+
+
+def test_figures_drawn_while_the_runs_go_on_are_the_pictures_plot_draws_from_the_files(built, tmp_path):
+    """compare draws its figures from the rows the runs hand back, starting while the other runs
+    still run (the runs they show start first); `tapmp plot` on the finished folder reads the
+    rows from the result files: the same five PNG files, byte for byte."""
+    out = tmp_path / "cmp"
+    assert main(["compare", PAPER, "--ssp", str(built["ssp"]), "--out", str(out), "--set", "stop_time=0.05",
+                 "--no-progress"]) == 0
+    drawn = {p.name: p.read_bytes() for p in out.glob("*.png")}
+    assert len(drawn) == 5
+    assert main(["plot", str(out)]) == 0
+    assert {p.name: p.read_bytes() for p in out.glob("*.png")} == drawn

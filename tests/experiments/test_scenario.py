@@ -40,7 +40,7 @@ def test_set_overrides_any_value_and_gain_scalars_apply_to_all_motors():
     ('ordering="random"', r"ordering = 'random' is invalid: allowed are gauss-seidel, jacobi"),
     ('clock="wall"', r"clock = 'wall' is invalid: allowed are exact, accumulated, nanoseconds"),
     ('connection_start="one"', r"connection_start = 'one' is invalid: allowed are propagated, zero"),
-    ("plant.m_p=-1", r"plant.m_p = -1.0 is invalid: allowed is a number in \[1e-06, 1e\+06\]"),
+    ("plant.m_p=-1", r"plant.m_p = -1.0 is invalid: allowed is a number in \[1e-12, 1e\+06\]"),
     ("plant.substeps=0", r"plant.substeps = 0 is invalid: allowed is an integer in \[1, 10000\]"),
     ("controller.velocity_source=2", r"velocity_source = 2 is invalid: allowed are 0 or 1"),
     ("gain_overrides.K_T=0", r"gain_overrides.K_T1 = 0.0 is invalid: allowed is a number in \[1e-12, 1e\+12\]"),

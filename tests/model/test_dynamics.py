@@ -84,7 +84,7 @@ def test_energy_is_conserved_without_force_and_friction():
 
 
 @pytest.mark.parametrize("field,value,allowed", [
-    ("m_p", -1.0, r"a number in \[1e-06, 1e\+06\]"), ("I_y", 0.0, r"a number in \[1e-06, 1e\+06\]"),
+    ("m_p", -1.0, r"a number in \[1e-12, 1e\+06\]"), ("I_y", 0.0, r"a number in \[1e-12, 1e\+06\]"),
     ("L_1", 0.0, r"a number in \[1e-06, 1000\]")])
 def test_invalid_model_parameters_are_named(field, value, allowed):
     with pytest.raises(ModelInputError, match=f"{field} = {value}.*{allowed}"):

@@ -94,18 +94,31 @@ def test_bench_memory_prints_the_peak_of_two_runs(built, tmp_path):
     assert json.loads((tmp_path / "m.json").read_text())["runs"][1]["steps"] == 400
 
 
-def test_throughput_prints_cases_per_minute(built, tmp_path):
+def test_throughput_prints_cases_per_minute_bytes_and_cpu_per_case_on_a_loopback_cluster(built, tmp_path):
     study = tmp_path / "tiny.toml"
     study.write_text(f'[study]\nname = "tiny"\nbase = "{ROOT / "scenarios" / "paper_simulation.toml"}"\n'
                      f'output = "{tmp_path / "out"}"\n[set]\nstop_time = 0.01\n'
                      '[grid]\n"gain_overrides.D" = [450.0, 900.0]\n')
     out = bench("throughput.py", "--study", study, "--ssp", built["ssp"], "--workers", "1", tmp_path=tmp_path)
-    m = re.search(rf"^1 worker\(s\): 2 cases in ({NUMBER}) s = ({NUMBER}) cases/min, speedup x1.00 \(a case takes "
-                  rf"({NUMBER}) s on its worker; load average before the run {NUMBER}\)$", out, re.M)
+    assert "loopback cluster (dask scheduler + dask worker)" in out
+    m = re.search(rf"^\| 1 \| 2 \| ({NUMBER}) \| ({NUMBER}) \| x1.00 \| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) "
+                  rf"\| ({NUMBER}) \| {NUMBER} \|$", out, re.M)
     assert m, out
-    wall, rate = float(m.group(1)), float(m.group(2))
+    wall, rate, received, client, scheduler, worker = map(float, m.groups())
     # rate = 2 cases / the wall time, which is printed rounded to 0.1 s
     assert 120 / (wall + 0.05) <= rate * 1.001 and (wall <= 0.05 or rate <= 120 / (wall - 0.05) * 1.001)
+    # every case's run.json and metrics.json came back (compressed); every process worked for them
+    assert received > 200 and client > 0 and scheduler > 0 and worker > 0
+
+
+def test_bench_loop_prints_both_loops_and_the_same_doubles(tmp_path):
+    out = bench("bench_loop.py", "--stop-time", "0.005", "--repeat", "1", tmp_path=tmp_path)
+    rows = table(out, "loop")
+    assert [r[0] for r in rows] == ["python", "compiled"] and all(float(r[1]) > 0 for r in rows)
+    assert "same doubles: yes" in out.splitlines()
+    m = re.search(rf"^python / compiled: ({NUMBER})$", out, re.M)
+    # the ratio of the times per step (printed to 0.01 us; the wall times to 1 ms are too coarse here)
+    assert m and float(m.group(1)) == pytest.approx(float(rows[0][2]) / float(rows[1][2]), rel=0.03, abs=0.1)
 
 
 def test_reference_run_regenerates_the_stored_reference_bit_for_bit(tmp_path):
@@ -118,16 +131,20 @@ def test_bench_compare_prints_compare_against_one_run(native_built, tmp_path):
     out = bench("bench_compare.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02", "--repeat", "1",
                 tmp_path=tmp_path)
     rows = table(out, "command")
-    assert [r[0] for r in rows] == ["tapmp run", "tapmp compare"] and all(float(r[1]) > 0 for r in rows)
-    m = re.search(rf"^compare / run: ({NUMBER})$", out, re.M)
-    # the ratio of the printed (rounded) times: as close as their last digits allow
-    assert m and float(m.group(1)) == pytest.approx(float(rows[1][1]) / float(rows[0][1]), rel=0.03)
+    assert [r[0] for r in rows] == ["tapmp run", "tapmp compare", "tapmp compare --no-figures"]
+    assert all(float(r[1]) > 0 for r in rows)
+    # the ratios of the printed (rounded) times: as close as their last digits allow
+    for label, row in (("compare", rows[1]), ("compare --no-figures", rows[2])):
+        m = re.search(rf"^{label} / run: ({NUMBER})$", out, re.M)
+        assert m and float(m.group(1)) == pytest.approx(float(row[1]) / float(rows[0][1]), rel=0.03)
 
 
 def test_bench_compare_times_the_stages_of_a_comparison(native_built, tmp_path):
     out = bench("bench_compare.py", "--stages", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02",
                 "--jobs", "1", tmp_path=tmp_path)
     rows = dict(table(out, "stage"))
-    assert list(rows) == ["imports", "stability checks", "runs", "figures", "whole comparison"]
+    assert list(rows) == ["imports", "stability checks", "runs", "figures", "figures during the runs",
+                          "whole comparison"]
     parts = sum(float(rows[k]) for k in ("stability checks", "runs", "figures"))
     assert 0 < parts <= float(rows["whole comparison"]) + 0.02
+    assert 0 <= float(rows["figures during the runs"]) <= float(rows["figures"])

@@ -197,17 +197,27 @@ def test_gains_file_errors_name_the_file_and_what_is_allowed(tmp_path):
     assert math.isclose(load(scenario).gain_values().K_T[2], 1e-5)
 
 
-def test_a_study_whose_cases_fail_exits_1_after_every_row_counting_each_status(built, tmp_path, capsys):
-    path = write_study(tmp_path, '[set]\nstop_time = 0.02\n"gain_overrides.D" = 2e9\n'
-                       '[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
-    code = main(["study", path, "--ssp", built["ssp"], "--workers", "1", "--no-progress"])
+def test_a_study_whose_cases_fail_exits_1_after_every_row_counting_each_status(faulty_ssps, tmp_path, capsys):
+    # the plant FMU of this SSP fails its doStep from t = 0.5 ms on (tests/faults.py): every case fails
+    path = write_study(tmp_path, '[set]\nstop_time = 0.002\n[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
+    code = main(["study", path, "--ssp", faulty_ssps["status"], "--workers", "1", "--no-progress"])
     out = capsys.readouterr().out.splitlines()
     assert code == 1
     assert out[-1].startswith("s: 2 cases (2 run now, ") and out[-1].endswith(
         f"s): 0 completed, 0 diverged, 2 failed -> {tmp_path / 'out' / 'study.csv'}")
     rows = rows_of(tmp_path / "out")
     assert [r["status"] for r in rows.values()] == ["failed", "failed"]
-    assert all("D1 = 2000000000.0 is invalid" in r["error"] for r in rows.values())
+    assert all(r["error"] == "CoSimulationError: plant: doStep failed at t = 0.0005 s: a call returned ERROR, "
+               "above fmi2Warning" for r in rows.values()), rows
+
+
+def test_a_study_setting_outside_its_range_is_refused_before_any_case(built, tmp_path, capsys):
+    path = write_study(tmp_path, '[set]\nstop_time = 0.02\n"gain_overrides.D" = 2e9\n'
+                       '[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
+    code = main(["study", path, "--ssp", built["ssp"], "--workers", "1", "--no-progress"])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and len(err) == 1 and "D1 = 2000000000.0 is invalid: allowed is a number in [0, 1e+09]" in err[0]
+    assert not (tmp_path / "out" / "study.csv").exists()
 
 
 @pytest.mark.parametrize("damage", ["[]", '{"name": "s"}', '{"fingerprint": "ab', "\x00\xff"])

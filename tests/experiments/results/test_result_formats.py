@@ -49,6 +49,47 @@ def test_csv_and_mat_hold_the_co_simulations_doubles_bit_for_bit(built, tmp_path
                                                                       "run.json"]
 
 
+@pytest.mark.slow
+def test_the_default_result_file_reads_back_to_the_co_simulations_doubles(built, tmp_path, capsys):
+    """`tapmp run` with no --format: results.csv, written by its own thread while the run steps
+    (three blocks and a partial one), holds every double bit for bit, read by tapmp's reader and by
+    Python's csv module with float() alike, header first, rows in time order."""
+    import csv
+    sc = load(PAPER, ["stop_time=0.35"])
+    columns, rows = alone(built["ssp"], sc, 3500)
+    out = tmp_path / "run"
+    assert main(["run", str(PAPER), "--ssp", str(built["ssp"]), "--set", "stop_time=0.35", "--out", str(out),
+                 "--no-progress"]) == 0
+    assert json.loads((out / "run.json").read_text())["results_file"] == "results.csv"
+    cols, data = read_results(out)
+    assert cols == columns and np.array_equal(data.view(np.int64), rows.view(np.int64))
+    with open(out / "results.csv", newline="") as f:
+        header, *text = list(csv.reader(f))
+    assert header == columns
+    assert np.array_equal(np.array([[float(x) for x in r] for r in text]).view(np.int64), rows.view(np.int64))
+
+
+def test_a_write_that_fails_in_the_writing_thread_is_raised_in_the_run_once(tmp_path):
+    """results.csv on a device that is always full (/dev/full): the block handed to the writing
+    thread fails there; the run gets its ResultsWriteError (one line naming the file, errno and the
+    rows kept) from finish(), once; blocks after it are dropped, not written."""
+    from orchestrator.experiments.folders import ResultsWriteError
+    from orchestrator.experiments.writers import CsvBlocks
+    (tmp_path / "results.csv").symlink_to("/dev/full")
+    writer = CsvBlocks(tmp_path, ["time", "x"])
+    try:
+        writer.write(np.array([[0.0, 1.5], [1e-4, 2.5]]))
+        with pytest.raises(ResultsWriteError) as err:
+            writer.finish()
+        assert str(err.value) == (f"cannot write {tmp_path / 'results.csv'}: No space left on device (errno 28): "
+                                  "it keeps no rows, whole rows only")
+        writer.write(np.array([[2e-4, 3.5]]))  # dropped: the failure was reported
+        writer.finish()
+        assert writer.rows == 0
+    finally:
+        writer.close()
+
+
 def test_the_mat_file_has_one_variable_per_column_as_matlab_reads_it(built, tmp_path):
     sc = load(PAPER, ["stop_time=0.01", 'format="mat"'])
     run_scenario(sc, built["ssp"], tmp_path / "r")
