@@ -21,14 +21,14 @@ from .engine.master import CoSimulationError
 from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, default_build_dir,
                                resolve_ssp)
 from .engine.schedule import ScheduleError
-from .engine.ssp import ParameterAddressError
+from .engine.ssd import ParameterAddressError
 from .engine.tempdirs import remove_stale_folders
 from .errors import UsageError
 from .experiments.estimate import check_output_size
 from .experiments.export import ExportError
-from .experiments.folders import (OutputExistsError, OutputInUseError, ResultsWriteError, check_output, output_lock,
-                                  prepare_output, write_comparison_status)
-from .experiments.progress import Progress
+from .experiments.compare import run_comparison
+from .experiments.folders import OutputExistsError, OutputInUseError, ResultsWriteError, output_lock
+from .experiments.progress import progress_bar, say
 from .experiments.reading import ResultFolderError
 from .experiments.results import one_line, run_scenario
 from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
@@ -67,30 +67,28 @@ def scenario_file(name: str) -> str:
     return str(shipped) if shipped.is_file() else name
 
 
-def _progress_bar(desc: str, enabled: bool):
-    """(update, close) of a run's progress: a bar on a terminal (for runs longer than a
-    second), else one line per 10 % of a run longer than two seconds; nothing if not enabled."""
-    if not enabled:
-        return None, lambda: None
-    bar = Progress(desc, "step")
-    return bar, bar.close
-
-
 def _run_one(scenario, ssp, out, overwrite, progress, label):
-    update, close = _progress_bar(label, progress)
+    update, close = progress_bar(label, progress)
     try:
         return run_scenario(scenario, ssp, out, overwrite, update)
     finally:
         close()
 
 
+def _recording_changes(args) -> dict:
+    """The --format and --record-every of ``args`` (where given) as scenario changes."""
+    changes = {}
+    if getattr(args, "format", None):
+        changes["format"] = args.format
+    if getattr(args, "record_every", None) is not None:
+        changes["record_every"] = record_every(args.record_every)
+    return changes
+
+
 def _recording(args, scenario):
     """``scenario`` with the --format and --record-every of ``args`` (where given)."""
-    if getattr(args, "format", None):
-        scenario = scenario.with_changes(format=args.format)
-    if getattr(args, "record_every", None) is not None:
-        scenario = scenario.with_changes(record_every=record_every(args.record_every))
-    return scenario
+    changes = _recording_changes(args)
+    return scenario.with_changes(**changes) if changes else scenario
 
 
 def _load(args):
@@ -115,31 +113,6 @@ def result_base(scenario) -> Path:
     """The scenario's result folder: its ``output``, else results/<name> (relative to the
     current directory); `tapmp run` writes into <base>/<law>, `tapmp compare` into <base>/compare."""
     return Path(scenario.output or Path("results") / scenario.name)
-
-
-@contextmanager
-def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict):
-    """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
-    for the duration; comparison.json records "running", then "completed", or "failed" /
-    "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
-    an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
-    unless empty (see folders.check_output)."""
-    laws = {name: sc.law for name, sc in runs.items()}
-    # before the lock file is made: a refused folder stays as it was
-    check_output(out, overwrite, "comparison", laws, unmarked_only=True)
-    with output_lock(out):
-        prepare_output(out, overwrite, "comparison", laws)
-        write_comparison_status(out, scenario.name, laws, "running")
-        try:
-            yield out
-        except BaseException as err:
-            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
-            try:
-                write_comparison_status(out, scenario.name, laws, status, error=one_line(err))
-            except (OSError, ResultsWriteError):
-                pass  # e.g. a full disk: the error itself is raised all the same
-            raise
-        write_comparison_status(out, scenario.name, laws, "completed")
 
 
 def warn_if_implausible(scenario) -> None:
@@ -240,92 +213,6 @@ def compare_runs(scenario):
     return runs(scenario)
 
 
-def check_runs(runs: dict) -> dict:
-    """The stability pre-check of every run ({name: StabilityReport}); one warning line on stderr
-    for each run that is not stable (it runs anyway)."""
-    from .experiments.stability import check
-    checks = {}
-    for name, sc in runs.items():
-        r = checks[name] = check(sc)
-        if not r.stable:
-            print(f"warning: {sc.name} {name}: the sampled closed loop is {r.verdict} (spectral radius "
-                  f"{r.spectral_radius:.4g}, stable needs < 1 - 1e-6); it runs anyway", file=sys.stderr, flush=True)
-    return checks
-
-
-def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None, figures: bool = True):
-    """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
-    out/comparison.md and, if ``figures``, the figures (of the runs ``show``, default see
-    plots.select_runs); returns (runs, results, checks, comparison.md text)."""
-    from .experiments.pool import run_many
-    from .experiments.report import write_comparison
-
-    runs = compare_runs(scenario)
-    check_output_size(runs.values(), out, scenario.name, jobs)  # before anything is written
-    checks = check_runs(runs)
-    with comparison_folder(out, overwrite, scenario, runs):  # runs in subfolders; comparison.md, figures here
-        say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
-            f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
-        bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
-        drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
-        # without figures the runs' rows stay in the workers (no copy back to this process)
-        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, figures, bars,
-                           scenario.name, first=drawing.needed if drawing else (),
-                           on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
-        results = {name: r["metrics"] for name, r in records.items()}
-        text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
-        if not figures:
-            return runs, results, checks, text
-        say(f"{scenario.name}: figures")
-        drawing.finish(jobs)
-    return runs, results, checks, text
-
-
-class _FiguresDuringRuns:
-    """A comparison's figures drawn as soon as the runs they show have ended: the pool starts
-    those runs first, and this process, which otherwise only waits, draws one figure at a time
-    while the other runs go on; what is left is drawn on every core when all have ended."""
-
-    def __init__(self, out: Path, names: list, show):
-        from .experiments.plots import figure_runs
-        self.out, self.names, self.show = out, names, show
-        self.needed = figure_runs(names, show)
-        self.rows = {}
-        self.figures = None
-        self.failed = False  # a figure failed while the runs went on: it is drawn (and fails) again at the end
-
-    def record(self, name: str, record: dict) -> None:
-        if record.get("rows") is not None:
-            self.rows[name] = (_run_columns(self.out / name), record["rows"])
-
-    def _ready(self) -> bool:
-        if self.figures is None and all(n in self.rows for n in self.needed):
-            from .experiments.plots import FigureSet
-            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
-        return self.figures is not None
-
-    def idle(self) -> None:
-        if self.failed:
-            return
-        try:
-            if self._ready():
-                self.figures.draw_next()
-        except Exception:  # noqa: B902  (raised at the end, after comparison.md, where it always was)
-            self.failed = True
-
-    def finish(self, jobs: int) -> None:
-        from .experiments.plots import FigureSet
-        if self.figures is None or self.failed:  # rows too large to keep (read from the files), or a failure
-            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
-        self.figures.draw_rest(jobs)
-
-
-def say(line: str) -> None:
-    """One line on stderr saying what a long command starts doing."""
-    print(line, file=sys.stderr, flush=True)
-
-
 def summary_rows(results: dict) -> list[tuple]:
     """(run, mean tracking MAE [um], mean sync MAE [um], tracking and sync reduction [%] against
     APD-DC) per run of a comparison ({run: metrics}); the means over the three motors."""
@@ -375,12 +262,6 @@ def _jobs(args) -> int:
     return parse_jobs(args.jobs)
 
 
-def _run_columns(folder: Path) -> list:
-    """The columns a run recorded (its run.json)."""
-    import json
-    return json.loads((Path(folder) / "run.json").read_text())["columns"]
-
-
 def cmd_compare(args) -> int:
     scenario = _load(args)
     warn_if_implausible(scenario)
@@ -425,12 +306,8 @@ def cmd_reproduce(args) -> int:
     runs = [sc for f in files if f.is_file() for sc in compare_runs(_recording(args, load(f))).values()]
     check_output_size(runs, results, "reproduce", jobs)  # every compare run, before the first starts
 
-    def compare(scenario, out):
-        scenario = _recording(args, scenario)
-        return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress,
-                              f"tapmp compare {out.parent.name}", jobs)
-
-    text = reproduce(Path(args.scenarios), results, page, compare, command,
+    text = reproduce(Path(args.scenarios), results, page, command, ssp_of=lambda sc: _ssp(args, sc),
+                     changes=_recording_changes(args), progress=not args.no_progress, jobs=jobs,
                      paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args),
                      say=say)
     print(f"wrote {page}")

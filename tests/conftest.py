@@ -250,9 +250,10 @@ def orchestrator_rows(ssp, scenario, names, ordering="jacobi", **conventions):
     import numpy as np
 
     from orchestrator.engine.master import CoSimulation
+    from orchestrator.experiments.roles import ROLES
     rows = []
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      **conventions) as sim:
+                      **conventions, roles=ROLES) as sim:
         index = [sim.columns.index(n) for n in names]
         rows.append([sim.row()[i] for i in index])
         for _ in range(scenario.n_steps):
