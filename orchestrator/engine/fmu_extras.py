@@ -499,3 +499,66 @@ def extra_members(model: str, family: str, host_fmu: Path, platforms=None,
         members["terminalsAndIcons/icon.svg"] = icon_svg(model)
         members["terminalsAndIcons/icon.png"] = icon_png(model)
     return members
+
+
+# --- the FMI Cross-Check layout -------------------------------------------------------------
+
+CROSS_CHECK_PLATFORMS = {"linux64": "linux64", "win64": "win64", "darwin64": "darwin64"}  # binaries/ -> tree
+EXPORTING_TOOL = "tapmp"
+
+
+def cross_check_readme(model: str, platform: str, version: str) -> bytes:
+    """ReadMe.txt of one model's Cross-Check folder: what it is, the experiment, how to run it."""
+    inputs_note = (f"{model}_in.csv holds the input stimulus (what the FMU receives in the closed loop at every "
+                   "0.1 ms communication point); hold each value until the next row.\n" if inputs(model) else
+                   "The FMU has no inputs.\n")
+    import re
+    what = re.sub(r"<[^>]+>", "", _what(model))  # the documentation's HTML as plain text
+    return (f"{model} {version}: {what}\n\n"
+            f"Exported by tapmp {version} (three-axis parallel motion platform co-simulation), FMI 2.0 "
+            f"Co-Simulation, platform {platform}. The FMU carries its documentation in documentation/index.html.\n\n"
+            f"Experiment ({model}_ref.opt): the first {REFERENCE_STOP * 1e3:g} ms of the paper's simulation "
+            f"(scenarios/paper_simulation.toml) at the {SERVO_STEP * 1e3:g} ms communication step, every "
+            "parameter at its start value (the FMU's defaults are that scenario).\n" + inputs_note +
+            f"{model}_ref.csv holds the expected outputs at every communication point, computed by this FMU alone "
+            "in FMPy (fixed-step co-simulation; the FMU integrates internally with RK4, so the tolerance is not "
+            "used). Any importer stepping the FMU at the same points gets the same values to the last printed "
+            "digit.\n").encode()
+
+
+def cross_check_tree(fmus: dict[str, Path], out_dir: Path, version: str | None = None) -> list[Path]:
+    """Write the FMI Cross-Check layout of the native FMI 2.0 Co-Simulation FMUs ``fmus``
+    ({model: path}) under ``out_dir``: fmus/2.0/cs/<platform>/tapmp/<version>/<model>/ with the
+    FMU, <model>_ref.csv, <model>_in.csv (models with inputs), <model>_ref.opt and ReadMe.txt,
+    for every Cross-Check platform the FMU has binaries for. The CSV and options files are the
+    FMU's own reference experiment (FMI-LS-REF). Returns the model folders written."""
+    import shutil
+    import zipfile
+
+    from tapmp import __version__
+    version = version or __version__
+    written = []
+    for model, fmu in fmus.items():
+        fmu = Path(fmu)
+        with zipfile.ZipFile(fmu) as z:
+            names = set(z.namelist())
+            root = ET.fromstring(z.read("modelDescription.xml"))
+            if root.get("fmiVersion") != "2.0" or root.find("CoSimulation") is None:
+                raise ValueError(f"{fmu} is not an FMI 2.0 Co-Simulation FMU: the Cross-Check layout is for those")
+            files = {f"{model}_ref.csv": z.read(f"{LS_REF}/{SCENARIO}_ref.csv"),
+                     f"{model}_ref.opt": z.read(f"{LS_REF}/{SCENARIO}_ref.opt")}
+            if f"{LS_REF}/{SCENARIO}_in.csv" in names:
+                files[f"{model}_in.csv"] = z.read(f"{LS_REF}/{SCENARIO}_in.csv")
+        platforms = [tree for folder, tree in CROSS_CHECK_PLATFORMS.items()
+                     if any(n.startswith(f"binaries/{folder}/") for n in names)]
+        if not platforms:
+            raise ValueError(f"{fmu} has no binaries for a Cross-Check platform ({', '.join(CROSS_CHECK_PLATFORMS)})")
+        for platform in platforms:
+            folder = Path(out_dir) / "fmus" / "2.0" / "cs" / platform / EXPORTING_TOOL / version / model
+            folder.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(fmu, folder / f"{model}.fmu")
+            for name, data in files.items():
+                (folder / name).write_bytes(data)
+            (folder / "ReadMe.txt").write_bytes(cross_check_readme(model, platform, version))
+            written.append(folder)
+    return written

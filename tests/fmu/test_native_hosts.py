@@ -22,6 +22,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+import compatibility
 import fmpy
 import lief
 import numpy as np
@@ -179,7 +180,7 @@ def windows_path(path: Path) -> str:
 
 @pytest.mark.windows
 @pytest.mark.parametrize("family", FAMILIES)
-def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_built, family, tmp_path):
+def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_built, family, tmp_path, request):
     steps = 2000
     linux_exe = compile_host(family, tmp_path)
     windows_exe = compile_host(family, tmp_path, windows=True)
@@ -206,6 +207,13 @@ def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_
         assert np.all(np.abs(win - linux) <= 1e-12 * np.abs(linux)), (model, win - linux)
     assert np.abs(results[PLANT][0][:3]).min() > 0.01  # the platform has moved (cm), so this compares something
     assert np.all(np.abs(results[CONTROLLER][0][:3]) > 0.0)
+    wine = subprocess.run([wine_binary(), "--version"], env=env, capture_output=True, text=True, timeout=60)
+    compatibility.record(
+        request, tool="wine", version=wine.stdout.split()[0].removeprefix("wine-"), fmi=f"{family[3]}.0",
+        interface="CS", platform="x86_64-windows (wine on x86_64-linux)",
+        command=f"wine {family}_host.exe FMU_FOLDER MODEL 2000 0.0001 ... (tests/fmu/c_host/{family}_host.c)",
+        difference=compatibility.difference(max(compatibility.relative(w, lx) for lx, w in results.values()),
+                                            "relative", "the x86_64-linux binaries, after 2,000 steps"))
     # measured: identical bit for bit (0.0); first wine start ~10 s, then < 1 s per run
     print(family, "wine seconds", seconds,
           "max relative difference", {m: float(np.max(np.abs(w - lx) / np.maximum(np.abs(lx), 1e-300)))
