@@ -14,6 +14,7 @@ import pytest
 from fmpy import read_model_description
 
 from fmu_host import Host
+from orchestrator.engine.build_native import ME_STATES, state_derivative_dependencies
 from orchestrator.engine.container import CONTAINER, container_dependencies
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, dependencies
 from tapmp.kinematics import inverse
@@ -53,11 +54,17 @@ def test_model_description_declares_the_interface(fmus, family, model):
     path = fmus[family][model]
     md = read_model_description(str(path))
     fmi3 = family == "fmi3"
-    assert _declared(md, fmi3) == _expected(model, fmi3)
+    expected = _expected(model, fmi3)
+    # the FMI 2.0 plant's Model Exchange state derivatives: <Derivatives> and <InitialUnknowns>
+    derivatives = state_derivative_dependencies(model) if family == "fmi2" and model in ME_STATES else {}
+    expected[1].update({name: initial for name, (_, initial) in derivatives.items()})
+    assert _declared(md, fmi3) == expected
+    assert {d.variable.name: tuple(k.name for k in d.dependencies) for d in md.derivatives} == {
+        name: step for name, (step, _) in derivatives.items()}
     root = ET.fromstring(zipfile.ZipFile(path).read("modelDescription.xml"))
     unknowns = root.find("ModelStructure").iter()
     listed = [u for u in unknowns if u.tag in ("Unknown", "Output", "InitialUnknown")]
-    assert len(listed) == 2 * sum(v.causality == "output" for v in VARIABLES[model])
+    assert len(listed) == 2 * sum(v.causality == "output" for v in VARIABLES[model]) + 2 * len(derivatives)
     for u in listed:  # every unknown says what it depends on; every listed known is "dependent"
         deps, kinds = u.get("dependencies"), u.get("dependenciesKind")
         assert deps is not None, ET.tostring(u)

@@ -318,7 +318,7 @@ def run_fmu_check(fmu: Path, tmp_path: Path) -> tuple[subprocess.CompletedProces
 @pytest.mark.parametrize("kind", ["native", "pythonfmu"])
 @pytest.mark.parametrize("model", FMU_NAMES)
 def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(
-        native_built, built, kind, model, tmp_path):
+        native_built, built, kind, model, tmp_path, request):
     fmu = native_built["fmi2"][model] if kind == "native" else built[model]
     proc, log, csv = run_fmu_check(fmu, tmp_path)
     summary = log[log.find("FMU check summary:"):]
@@ -331,3 +331,10 @@ def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(
     data = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
     assert header == ["time", *outputs(model)]
     assert data.shape == (101, 1 + len(outputs(model))) and np.all(np.isfinite(data))  # t = 0, 1e-4 ... 0.01
+    ours = fmpy.simulate_fmu(str(fmu), stop_time=0.01, output_interval=STEP)
+    fmpy_rows = np.array([ours[n] for n in outputs(model)]).T
+    compatibility.record(
+        request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0", interface="CS",
+        command=f"fmuCheck.linux64 -h 1e-4 -s 0.01 {'native/fmi2/' if kind == 'native' else 'build/'}{model}.fmu",
+        difference=compatibility.difference(compatibility.relative(data[:, 1:], fmpy_rows), "relative",
+                                            "FMPy simulate_fmu (fmuCheck accumulates t += h)"))

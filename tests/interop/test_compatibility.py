@@ -19,7 +19,7 @@ def test_the_page_is_the_rendering_of_the_committed_rows_sorted_and_unique():
     assert keys == sorted(set(keys))  # sorted, no key twice
     assert compatibility.JSON_FILE.read_text() == compatibility.json_text(rows)
     assert compatibility.MD_FILE.read_text() == compatibility.render(rows)
-    assert all(r["result"] for r in rows) and all(" vs " in r["difference"] for r in rows)
+    assert all(r["result"].startswith("passed") and r["difference"] for r in rows)
 
 
 def test_the_table_covers_every_tool_and_platform_the_suite_runs():
