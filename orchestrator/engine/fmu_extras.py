@@ -414,6 +414,22 @@ def documentation_html(model: str, family: str, platforms=None) -> bytes:
             f" <code>fmusim ... --input-file {LS_REF}/{SCENARIO}_in.csv</code> feeds the stimulus.")
     fmpy_input = "" if not inputs(model) else (
         f"\n    input=read_csv('{SCENARIO}_in.csv'),")
+    me = model == PLANT and family == "fmi2"  # the plant offers Model Exchange in FMI 2.0 (build_native.ME_STATES)
+    interfaces = "Co-Simulation and Model Exchange" if me else "Co-Simulation"
+    me_section = "" if not me else f"""<h2>Model Exchange</h2>
+<p>The same model identifier offers FMI 2.0 Model Exchange: the host integrates the continuous states
+<code>X, Z, B, dX, dZ, dB</code> (the outputs of those names) from their derivatives <code>der(X)</code> ...
+<code>der(dB)</code>, computed by the same C model as the Co-Simulation step. There are no event indicators:
+the right-hand side is smooth in the state (the Coulomb friction is tanh-smoothed; the force saturation acts
+on the inputs F1..F3, which the host sets). The one discontinuity, the external force step at
+<code>disturbance_time</code>, is a time event. The encoder positions <code>q1..q3</code> are a
+piecewise-constant function of the state (quantized to <code>encoder_resolution</code>); they feed no
+derivative, so they need no event, and are declared continuous. The measurement noise is drawn once per
+communication step, so <code>noise_rms</code> must be 0 in Model Exchange. OMSimulator picks Model Exchange
+when an FMU offers both (<code>--mode=cs</code> selects the FMU's own RK4).</p>
+<pre>fmusim --interface-type me --solver cvode --tolerance 1e-10 --stop-time {REFERENCE_STOP!r} --output-interval 1e-4 --output-file out.csv {model}.fmu
+simulate_fmu('{model}.fmu', fmi_type='ModelExchange', solver='CVode', relative_tolerance=1e-10, stop_time={REFERENCE_STOP!r})</pre>
+"""
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{model} (FMI {version})</title>
 <style>body{{font-family:sans-serif;max-width:60em;margin:1em auto;padding:0 1em;color:#102030}}
@@ -435,7 +451,7 @@ the variable, the value and what is allowed.</p>
 {''.join(rows)}
 </table>
 <h2>This FMU</h2>
-<p>FMI {version} Co-Simulation, native C (no Python at run time), model identifier <code>{model}</code>;
+<p>FMI {version} {interfaces}, native C (no Python at run time), model identifier <code>{model}</code>;
 binaries for {e(plats)}; the C sources in <code>sources/</code> (compile <code>sources/all.c</code>).
 DefaultExperiment: 0 to {DEFAULT_EXPERIMENT['stopTime']:g} s at the {SERVO_STEP * 1e3:g} ms servo step.</p>
 <h2>Reference experiment</h2>
@@ -454,7 +470,7 @@ result = simulate_fmu('{model}.fmu', stop_time={REFERENCE_STOP!r}, step_size=1e-
 <p>OMSimulator:</p>
 <pre>OMSimulator --mode=cs --stopTime={REFERENCE_STOP!r} --stepSize=1e-4 --resultFile=out.csv {model}.fmu</pre>
 <p>Wire it with the other two TAPMP FMUs as in the diagram (the SSP TAPMP.ssp does this) to run the closed loop.</p>
-<h2>License</h2>
+{me_section}<h2>License</h2>
 <p>MIT, see <a href="licenses/license.txt">licenses/license.txt</a>.</p>
 </body></html>
 """
