@@ -309,7 +309,8 @@ def run_fmu_check(fmu: Path, tmp_path: Path) -> tuple[subprocess.CompletedProces
     unpack = tmp_path / "unpack"
     unpack.mkdir()
     csv, log = tmp_path / "out.csv", tmp_path / "log.txt"
-    proc = subprocess.run([str(FMU_CHECK), "-h", "1e-4", "-s", "0.01", "-t", str(unpack), "-o", str(csv),
+    # -k cs: the Co-Simulation interface (the plant offers Model Exchange too, which fmuCheck takes first)
+    proc = subprocess.run([str(FMU_CHECK), "-k", "cs", "-h", "1e-4", "-s", "0.01", "-t", str(unpack), "-o", str(csv),
                            "-e", str(log), str(fmu)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     return proc, log.read_text(), csv
 
@@ -335,6 +336,6 @@ def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(
     fmpy_rows = np.array([ours[n] for n in outputs(model)]).T
     compatibility.record(
         request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0", interface="CS",
-        command=f"fmuCheck.linux64 -h 1e-4 -s 0.01 {'native/fmi2/' if kind == 'native' else 'build/'}{model}.fmu",
+        command=f"fmuCheck.linux64 -k cs -h 1e-4 -s 0.01 {'native/fmi2/' if kind == 'native' else 'build/'}{model}.fmu",
         difference=compatibility.difference(compatibility.relative(data[:, 1:], fmpy_rows), "relative",
                                             "FMPy simulate_fmu (fmuCheck accumulates t += h)"))
