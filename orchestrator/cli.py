@@ -129,7 +129,12 @@ def cmd_build(args) -> int:
         if p not in PLATFORMS:
             raise UsageError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
     build_mod.build_all(out)
-    build_native(out / "native", platforms=args.platform)
+    native = build_native(out / "native", platforms=args.platform)
+    if args.cross_check:
+        from .engine.fmu_extras import cross_check_tree
+        fmus = {m: p for m, p in native["fmi2"].items() if m != "ssp"}
+        for folder in cross_check_tree(fmus, out / "cross-check"):
+            print(f"wrote {folder}")
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")
@@ -471,6 +476,10 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--platform", action="append", metavar="P",
                    help="build the native FMUs' binaries for these platforms only (repeatable): "
                    f"{', '.join(PLATFORM_NAMES)} (default: all)")
+    b.add_argument("--cross-check", action="store_true",
+                   help="also write the FMI Cross-Check layout of the native FMI 2.0 FMUs into OUT/cross-check: "
+                   "fmus/2.0/cs/<platform>/tapmp/<version>/<model>/ with the FMU, its reference experiment "
+                   "(_ref.csv, _in.csv, _ref.opt) and ReadMe.txt")
     b.set_defaults(func=cmd_build)
 
     def source_args(sp):

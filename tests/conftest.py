@@ -23,6 +23,9 @@ from fmpy.logging import addLoggerProxy
 
 from orchestrator.engine.build import build_all
 
+# The compatibility rows (tests/interop/compatibility.py): its check after every test
+pytest_plugins = ("compatibility",)
+
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
 REQUIRE_SHARED = ("CI", "TAPMP_REQUIRE_SHARED")  # environment variables that make a missing file a failure
