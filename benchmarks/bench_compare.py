@@ -39,7 +39,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     start = time.perf_counter()
     sys.path.insert(0, str(ROOT))
     from orchestrator import cli
-    from orchestrator.experiments import plots, pool
+    from orchestrator.experiments import compare, plots, pool
     from orchestrator.experiments.scenario import load
     times = {"imports": time.perf_counter() - start}
     during = [False]  # inside run_many: figures drawn there are taken out of the runs' time
@@ -63,7 +63,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
                     times["runs"] = times.get("runs", 0.0) - wall
                     times["figures during the runs"] = times.get("figures during the runs", 0.0) + wall
         setattr(owner, name, wrapper)
-    timed(cli, "check_runs", "stability checks")
+    timed(compare, "check_runs", "stability checks")
     timed(pool, "run_many", "runs")
     for method in ("__init__", "draw_next", "draw_rest"):  # the figures, during the runs and after them
         timed(plots.FigureSet, method, "figures")
@@ -71,7 +71,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     ssp = cli.resolve_ssp(ssp, sc.fmus)
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         t = time.perf_counter()
-        cli.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
+        compare.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)
         times["whole comparison"] = time.perf_counter() - t
     times.setdefault("figures during the runs", 0.0)
     order = ("imports", "stability checks", "runs", "figures", "figures during the runs", "whole comparison")

@@ -40,6 +40,7 @@ import numpy as np  # noqa: E402
 
 from orchestrator.engine import build  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.results import run_scenario  # noqa: E402
 from orchestrator.experiments.scenario import load  # noqa: E402
 from orchestrator.engine.ssp import write_ssp  # noqa: E402
@@ -186,7 +187,7 @@ def time_loop(ssp: Path, scenario, stepper: str = "python") -> float:
     """Wall seconds of the master loop (steps and rows stored in blocks, no file output) with
     the Python loop or the compiled core (``stepper``)."""
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                      scenario.ordering, stepper=stepper) as sim:
+                      scenario.ordering, stepper=stepper, roles=ROLES) as sim:
         block = np.empty((1000, len(sim.columns)))
         left = scenario.n_steps
         start = time.perf_counter()

@@ -33,6 +33,7 @@ import numpy as np  # noqa: E402
 from orchestrator.cli import main  # noqa: E402
 from orchestrator.engine.families import resolve_ssp  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.envelope import envelope  # noqa: E402
 from orchestrator.experiments.results import BLOCK  # noqa: E402
 from orchestrator.experiments.scenario import load  # noqa: E402
@@ -45,7 +46,8 @@ def cosim_alone(scenario, ssp) -> float:
     start = time.perf_counter()
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, scenario.ordering,
                       check=envelope(scenario), clock=scenario.clock,
-                      connection_start=scenario.connection_start, open_inputs=scenario.open_inputs) as sim:
+                      connection_start=scenario.connection_start, open_inputs=scenario.open_inputs,
+                      roles=ROLES) as sim:
         block = np.empty((BLOCK, len(sim.columns)))
         left = scenario.n_steps
         while left:  # the stepping of tapmp run: blocks of rows, compiled core unless TAPMP_STEPPER=python

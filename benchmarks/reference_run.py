@@ -15,6 +15,7 @@ sys.path.insert(0, str(ROOT))
 
 from orchestrator.engine.build import build_all  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.scenario import load  # noqa: E402
 
 REFERENCE = ROOT / "tests" / "data" / "reference_run.csv"
@@ -30,7 +31,7 @@ def run_case(ssp: Path, law: str, ordering: str):
                     [f"law={law!r}", f"ordering={ordering!r}", f"stop_time={STOP}"])
     rows = []
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                      scenario.ordering) as sim:
+                      scenario.ordering, roles=ROLES) as sim:
         index = [sim.columns.index(s) for s in ("time", *SIGNALS)]
         for k in range(scenario.n_steps + 1):
             if k:

@@ -82,3 +82,55 @@ int model_check_hidden(const tapmp_instance *state, const double hidden[], char 
     int bad = tapmp_plant_state_check(hidden, hidden[6], state->reals + VR_X, &name, &x, &allowed);
     return tapmp_range_text(bad, name, x, allowed, msg, size);
 }
+
+/* --- Model Exchange (FMI 2.0): the host integrates the state X, Z, B, dX, dZ, dB itself --- */
+
+void model_me_get_states(const tapmp_instance *inst, double x[])
+{
+    for (int i = 0; i < 6; i++) x[i] = inst->m.plant.s[i];
+}
+
+/* A state from the host's integrator: finite with |B| < pi/2 (the kinematic domain), else 0 + msg.
+ * The outputs follow it (the encoder positions quantize the true ones). */
+int model_me_set_states(tapmp_instance *inst, const double x[], char *msg, size_t size)
+{
+    int ok = fabs(x[2]) < 1.5707963267948966;
+    for (int i = 0; i < 6; i++) ok = ok && isfinite(x[i]);
+    if (!ok) {
+        char value[6 * 40 + 16] = "(", v[40];
+        for (int i = 0; i < 6; i++)
+            snprintf(value + strlen(value), sizeof value - strlen(value), "%s%s", i ? ", " : "", tapmp_repr(x[i], v));
+        strcat(value, ")");
+        return tapmp_invalid_text(msg, size, "plant state (X, Z, B, dX, dZ, dB)", value,
+                                  "finite values with |B| < pi/2 rad", 1, inst->time);
+    }
+    for (int i = 0; i < 6; i++) inst->m.plant.s[i] = x[i];
+    publish(inst);
+    return 1;
+}
+
+/* d/dt of the state at the instance's time, for the forces F1..F3 set now. */
+void model_me_derivatives(const tapmp_instance *inst, double dx[])
+{
+    const double F[3] = {inst->reals[VR_F1], inst->reals[VR_F2], inst->reals[VR_F3]};
+    tapmp_plant_derivatives(&inst->m.plant, inst->time, inst->m.plant.s, F, dx);
+}
+
+/* The one time event: the external force step at disturbance_time, if it is on and still ahead. */
+double model_me_next_event_time(const tapmp_instance *inst)
+{
+    const tapmp_plant_config *c = &inst->m.plant.c;
+    int on = c->disturbance_force[0] != 0.0 || c->disturbance_force[1] != 0.0 || c->disturbance_force[2] != 0.0;
+    return on && inst->time < c->disturbance_time ? c->disturbance_time : INFINITY;
+}
+
+/* Settings Model Exchange cannot honour: the measurement noise is drawn once per communication
+ * step, which Model Exchange does not have. */
+int model_me_check(const tapmp_instance *inst, char *msg, size_t size)
+{
+    char v[40];
+    if (inst->reals[VR_noise_rms] == 0.0) return 1;
+    return tapmp_invalid_text(msg, size, "noise_rms", tapmp_repr(inst->reals[VR_noise_rms], v),
+                              "0 in Model Exchange (the noise is drawn once per communication step; use "
+                              "Co-Simulation)", 0, 0.0);
+}

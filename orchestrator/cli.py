@@ -32,7 +32,7 @@ def user_errors() -> tuple:
     from .engine.build_native import NativeBuildError
     from .engine.master import CoSimulationError
     from .engine.schedule import ScheduleError
-    from .engine.ssp import ParameterAddressError
+    from .engine.ssd import ParameterAddressError
     from .experiments.export import ExportError
     from .experiments.folders import OutputExistsError, OutputInUseError, ResultsWriteError
     from .experiments.reading import ResultFolderError
@@ -111,32 +111,30 @@ def study_file(name: str) -> str:
     return named_file(name, "studies")
 
 
-def _progress_bar(desc: str, enabled: bool):
-    """(update, close) of a run's progress: a bar on a terminal (for runs longer than a
-    second), else one line per 10 % of a run longer than two seconds; nothing if not enabled."""
-    if not enabled:
-        return None, lambda: None
-    from .experiments.progress import Progress
-    bar = Progress(desc, "step")
-    return bar, bar.close
-
-
 def _run_one(scenario, ssp, out, overwrite, progress, label):
+    from .experiments.progress import progress_bar
     from .experiments.results import run_scenario
-    update, close = _progress_bar(label, progress)
+    update, close = progress_bar(label, progress)
     try:
         return run_scenario(scenario, ssp, out, overwrite, update)
     finally:
         close()
 
 
+def _recording_changes(args) -> dict:
+    """The --format and --record-every of ``args`` (where given) as scenario changes."""
+    changes = {}
+    if getattr(args, "format", None):
+        changes["format"] = args.format
+    if getattr(args, "record_every", None) is not None:
+        changes["record_every"] = record_every(args.record_every)
+    return changes
+
+
 def _recording(args, scenario):
     """``scenario`` with the --format and --record-every of ``args`` (where given)."""
-    if getattr(args, "format", None):
-        scenario = scenario.with_changes(format=args.format)
-    if getattr(args, "record_every", None) is not None:
-        scenario = scenario.with_changes(record_every=record_every(args.record_every))
-    return scenario
+    changes = _recording_changes(args)
+    return scenario.with_changes(**changes) if changes else scenario
 
 
 def _load(args):
@@ -164,36 +162,6 @@ def result_base(scenario) -> Path:
     return Path(scenario.output or Path("results") / scenario.name)
 
 
-@contextmanager
-def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict, written_by: str = "compare"):
-    """Hold and prepare ``out`` as a comparison folder of ``runs`` ({folder name: scenario})
-    for the duration; comparison.json records "running", then "completed", or "failed" /
-    "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
-    an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
-    unless empty (see folders.check_output). comparison.json records ``written_by``, the command
-    ("compare" or "reproduce") that wrote it."""
-    from .experiments.folders import (ResultsWriteError, check_output, output_lock, prepare_output,
-                                      write_comparison_status)
-    from .experiments.results import one_line
-    laws = {name: sc.law for name, sc in runs.items()}
-    # before the lock file is made: a refused folder stays as it was
-    check_output(out, overwrite, "comparison", laws, unmarked_only=True)
-    with output_lock(out):
-        prepare_output(out, overwrite, "comparison", laws)
-        write_comparison_status(out, scenario.name, laws, "running", written_by=written_by)
-        try:
-            yield out
-        except BaseException as err:
-            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
-            try:
-                write_comparison_status(out, scenario.name, laws, status, error=one_line(err),
-                                        written_by=written_by)
-            except (OSError, ResultsWriteError):
-                pass  # e.g. a full disk: the error itself is raised all the same
-            raise
-        write_comparison_status(out, scenario.name, laws, "completed", written_by=written_by)
-
-
 def warn_if_implausible(scenario) -> None:
     """One warning line on stderr per parameter far outside this machine's usual range."""
     from .experiments.plausibility import implausible
@@ -216,7 +184,12 @@ def cmd_build(args) -> int:
     def log(line):
         print(line, flush=True)  # progress, also when the output is a pipe
     build_all(out, log)
-    build_native(out / "native", platforms=args.platform, log=log)
+    native = build_native(out / "native", platforms=args.platform, log=log)
+    if args.cross_check:
+        from .engine.fmu_extras import cross_check_tree
+        fmus = {m: p for m, p in native["fmi2"].items() if m != "ssp"}
+        for folder in cross_check_tree(fmus, out / "cross-check"):
+            print(f"wrote {folder}")
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")
@@ -359,124 +332,6 @@ def compare_runs(scenario):
     return runs(scenario)
 
 
-def check_runs(runs: dict) -> dict:
-    """The stability pre-check of every run ({name: StabilityReport}); one warning line on stderr
-    for each run that is not stable (it runs anyway)."""
-    from .experiments.stability import check, radius_text
-    checks = {}
-    for name, sc in runs.items():
-        r = checks[name] = check(sc)
-        if not r.stable:
-            print(f"warning: {sc.name} {name}: the sampled closed loop is {r.verdict} (spectral radius "
-                  f"{radius_text(r.spectral_radius)}, stable needs < 1 - 1e-6); it runs anyway", file=sys.stderr, flush=True)
-    return checks
-
-
-def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None, figures: bool = True, written_by: str = "compare"):
-    """Run every compare run of ``scenario`` into out/<run> (on ``jobs`` processes), write
-    out/comparison.md and, if ``figures``, the figures (of the runs ``show``, default see
-    plots.select_runs); returns (runs, results, checks, comparison.md text)."""
-    from .experiments.pool import run_many
-    from .experiments.estimate import check_output_size
-    from .experiments.report import write_comparison
-
-    runs = compare_runs(scenario)
-    check_output_size(runs.values(), out, scenario.name, jobs)  # before anything is written
-    checks = check_runs(runs)
-    with comparison_folder(out, overwrite, scenario, runs, written_by):  # runs in subfolders; comparison.md, figures here
-        say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
-            f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
-        bars = (lambda name: _progress_bar(f"{scenario.name} {name}", True)) if progress else None
-        drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
-        # without figures the runs' rows stay in the workers (no copy back to this process)
-        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, figures, bars,
-                           scenario.name, first=drawing.needed if drawing else (),
-                           on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
-        results = {name: r["metrics"] for name, r in records.items()}
-        text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
-        if not figures:
-            return runs, results, checks, text
-        say(f"{scenario.name}: figures")
-        drawing.finish(jobs)
-    return runs, results, checks, text
-
-
-class _FiguresDuringRuns:
-    """A comparison's figures drawn as soon as the runs they show have ended: the pool starts
-    those runs first, and this process, which otherwise only waits, draws one figure at a time
-    while the other runs go on; what is left is drawn on every core when all have ended."""
-
-    def __init__(self, out: Path, names: list, show):
-        from .experiments.plots import figure_runs
-        self.out, self.names, self.show = out, names, show
-        self.needed = figure_runs(names, show)
-        self.rows = {}
-        self.figures = None
-        self.failed = False  # a figure failed while the runs went on: it is drawn (and fails) again at the end
-
-    def record(self, name: str, record: dict) -> None:
-        if record.get("rows") is not None:
-            self.rows[name] = (_run_columns(self.out / name), record["rows"])
-
-    def _ready(self) -> bool:
-        if self.figures is None and all(n in self.rows for n in self.needed):
-            from .experiments.plots import FigureSet
-            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
-        return self.figures is not None
-
-    def idle(self) -> None:
-        if self.failed:
-            return
-        try:
-            if self._ready():
-                self.figures.draw_next()
-        except Exception:  # noqa: B902  (raised at the end, after comparison.md, where it always was)
-            self.failed = True
-
-    def finish(self, jobs: int) -> None:
-        from .experiments.plots import FigureSet
-        if self.figures is None or self.failed:  # rows too large to keep (read from the files), or a failure
-            self.figures = FigureSet(self.out, self.rows, self.show, self.names)
-        self.figures.draw_rest(jobs)
-
-
-def say(line: str) -> None:
-    """One line on stderr saying what a long command starts doing."""
-    print(line, file=sys.stderr, flush=True)
-
-
-@contextmanager
-def heartbeat(tell=say, every: float = 10.0):
-    """A ``tell(line)`` for the duration that also repeats the last line with the seconds since it
-    whenever ``every`` seconds pass without one, so a long phase is never silent."""
-    import time
-    last = {"line": None, "since": time.monotonic(), "beat": time.monotonic()}
-    lock, done = threading.Lock(), threading.Event()
-
-    def told(line):
-        with lock:
-            now = time.monotonic()
-            last.update(line=line, since=now, beat=now)
-            tell(line)
-
-    def watch():
-        while not done.wait(1.0):
-            with lock:
-                now = time.monotonic()
-                if last["line"] is not None and now - last["beat"] >= every:
-                    tell(f"{last['line']} (still running, {now - last['since']:.0f} s)")
-                    last["beat"] = now
-
-    watcher = threading.Thread(target=watch, daemon=True)
-    watcher.start()
-    try:
-        yield told
-    finally:
-        done.set()
-        watcher.join()
-
-
 def summary_rows(results: dict) -> list[tuple]:
     """(run, mean tracking MAE [um], mean sync MAE [um], tracking and sync reduction [%] against
     APD-DC) per run of a comparison ({run: metrics}); the means over the three motors."""
@@ -529,12 +384,6 @@ def _jobs(args) -> int:
     return parse_jobs(args.jobs)
 
 
-def _run_columns(folder: Path) -> list:
-    """The columns a run recorded (its run.json)."""
-    import json
-    return json.loads((Path(folder) / "run.json").read_text())["columns"]
-
-
 def cmd_compare(args) -> int:
     scenario = _load(args)
     warn_if_implausible(scenario)
@@ -547,6 +396,7 @@ def cmd_compare(args) -> int:
     if show:  # before any run starts
         from .experiments.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
+    from .experiments.compare import run_comparison
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
                                       command, jobs, show, not args.no_figures)
     print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
@@ -556,6 +406,40 @@ def cmd_compare(args) -> int:
         print(line)
     print(f"results{'' if args.no_figures else ', figures'} and the full tables (comparison.md) in {out}")
     return 0
+
+
+@contextmanager
+def heartbeat(tell=None, every: float = 10.0):
+    """A ``tell(line)`` (default: experiments.progress.say, a line on stderr) for the duration that
+    also repeats the last line with the seconds since it whenever ``every`` seconds pass without
+    one, so a long phase is never silent."""
+    import time
+    if tell is None:
+        from .experiments.progress import say as tell
+    last = {"line": None, "since": time.monotonic(), "beat": time.monotonic()}
+    lock, done = threading.Lock(), threading.Event()
+
+    def told(line):
+        with lock:
+            now = time.monotonic()
+            last.update(line=line, since=now, beat=now)
+            tell(line)
+
+    def watch():
+        while not done.wait(1.0):
+            with lock:
+                now = time.monotonic()
+                if last["line"] is not None and now - last["beat"] >= every:
+                    tell(f"{last['line']} (still running, {now - last['since']:.0f} s)")
+                    last["beat"] = now
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        yield told
+    finally:
+        done.set()
+        watcher.join()
 
 
 def check_reproduce_may_replace(folder: Path, overwrite: bool) -> None:
@@ -600,18 +484,13 @@ def cmd_reproduce(args) -> int:
                              + " and ".join(f"{name}.toml" for name in SCENARIOS))
     runs = [sc for f in files if f.is_file() for sc in compare_runs(_recording(args, load(f))).values()]
     check_output_size(runs, results, "reproduce", jobs)  # every compare run, before the first starts
-
     for f in files:  # before the first run: a comparison `tapmp compare` completed is not replaced silently
         if f.is_file():
             check_reproduce_may_replace(results / f.stem / "compare", args.overwrite)
 
-    def compare(scenario, out):
-        scenario = _recording(args, scenario)
-        return run_comparison(scenario, _ssp(args, scenario), out, True, not args.no_progress, command, jobs,
-                              written_by="reproduce")
-
     with heartbeat() as tell:
-        text = reproduce(Path(args.scenarios), results, page, compare, command,
+        text = reproduce(Path(args.scenarios), results, page, command, ssp_of=lambda sc: _ssp(args, sc),
+                         changes=_recording_changes(args), progress=not args.no_progress, jobs=jobs,
                          paper_gains_stop=args.paper_gains_stop_time, workers=args.workers, ssp=_ssp(args),
                          say=tell)
     print(f"wrote {page}")
@@ -632,6 +511,7 @@ def cmd_study(args) -> int:
     from .engine.tempdirs import remove_stale_folders
     from .experiments.estimate import check_output_size
     from .experiments.folders import output_lock
+    from .experiments.progress import say
     from .studies.study import MAX_CASES, StudyError, check_case_count, close_client, load_study, open_client
     study = load_study(study_file(args.study))
     every = record_every(args.record_every) if args.record_every is not None else None
@@ -795,6 +675,10 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--platform", action="append", metavar="P",
                    help="build the native FMUs' binaries for these platforms only (repeatable): "
                    f"{', '.join(PLATFORM_NAMES)} (default: all)")
+    b.add_argument("--cross-check", action="store_true",
+                   help="also write the FMI Cross-Check layout of the native FMI 2.0 FMUs into OUT/cross-check: "
+                   "fmus/2.0/cs/<platform>/tapmp/<version>/<model>/ with the FMU, its reference experiment "
+                   "(_ref.csv, _in.csv, _ref.opt) and ReadMe.txt")
     b.add_argument("--clean-cache", action="store_true", help="first remove from the compiled-code cache "
                    "($TAPMP_CACHE, else ~/.cache/tapmp) the libraries and lock files older than this package's C "
                    "sources (left by earlier versions, checkouts and environments; rebuilt when used again)")

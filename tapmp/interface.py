@@ -23,12 +23,10 @@ TRAJECTORY = "TAPMP_Trajectory"
 FMU_NAMES = (TRAJECTORY, CONTROLLER, PLANT)
 # Element names in the SSP system, per model.
 ELEMENT = {TRAJECTORY: "trajectory", CONTROLLER: "controller", PLANT: "plant"}
-# Orderings of one macro step (docs/master.md): one element after the other on the latest outputs,
-# or all on the outputs at t (one extra step of delay in the feedback path).
+# Orderings of one macro step of the FMI-free loop (tapmp.closed_loop), the master's own
+# (orchestrator.engine.schedule.ORDERINGS; docs/master.md): one element after the other on the latest
+# outputs, or all on the outputs at t (one extra step of delay in the feedback path).
 ORDERINGS = ("gauss-seidel", "jacobi")
-# How connections start: outputs propagated in Initialization Mode, or every connection at 0
-# until the first step (FMPy's simulate_ssp).
-CONNECTION_STARTS = ("propagated", "zero")
 # Every modelDescription's DefaultExperiment [s]: the servo cycle as step, the paper's run as stop.
 DEFAULT_EXPERIMENT = {"startTime": START_TIME, "stopTime": STOP_TIME, "stepSize": SERVO_STEP}
 

@@ -23,6 +23,9 @@ from fmpy.logging import addLoggerProxy
 
 from orchestrator.engine.build import build_all
 
+# The compatibility rows (tests/interop/compatibility.py): its check after every test
+pytest_plugins = ("compatibility",)
+
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
 REQUIRE_SHARED = ("CI", "TAPMP_REQUIRE_SHARED")  # environment variables that make a missing file a failure
@@ -250,9 +253,10 @@ def orchestrator_rows(ssp, scenario, names, ordering="jacobi", **conventions):
     import numpy as np
 
     from orchestrator.engine.master import CoSimulation
+    from orchestrator.experiments.roles import ROLES
     rows = []
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      **conventions) as sim:
+                      **conventions, roles=ROLES) as sim:
         index = [sim.columns.index(n) for n in names]
         rows.append([sim.row()[i] for i in index])
         for _ in range(scenario.n_steps):

@@ -156,3 +156,39 @@ def test_the_markers_are_registered_strictly():
     ini = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
     assert "--strict-markers" in ini["addopts"].split()
     assert sorted(m.split(":")[0] for m in ini["markers"]) == ["interop", "slow", "windows"]
+
+
+@pytest.mark.slow  # a fresh interpreter: what importing the master loads, nothing loaded before it
+def test_importing_the_master_loads_no_tapmp_module():
+    import subprocess
+    import sys
+    code = ("import sys, orchestrator.engine.master\n"
+            "print(' '.join(sorted(m for m in sys.modules if m == 'tapmp' or m.startswith('tapmp.'))))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert proc.stdout.split() == [], f"importing orchestrator.engine.master loads {proc.stdout.strip()}"
+
+
+def test_no_layer_below_the_command_line_names_it_in_code():
+    # an import is caught above; this catches a dotted name handed around as a string
+    # ("orchestrator.cli.some_function") by which a lower layer would call up into the CLI
+    named = []
+    for layer in LAYERS:
+        for path in sorted((PKG / layer).rglob("*.py")):
+            tree = ast.parse(path.read_text(), str(path))
+            docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                          if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                          and n.body and isinstance(n.body[0], ast.Expr)
+                          and isinstance(n.body[0].value, ast.Constant)}
+            named += [f"{path.relative_to(ROOT)}:{n.lineno}" for n in ast.walk(tree)
+                      if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docstrings
+                      and "orchestrator.cli" in n.value]
+    assert not named, f"below the command line, code names orchestrator.cli: {named}"
+
+
+def test_the_compare_workflow_lives_in_the_experiments_layer():
+    import inspect
+    from orchestrator import cli
+    from orchestrator.experiments import compare, reproduction
+    # the CLI and the reproduction call it downward; the reproduction is handed no compare function
+    assert cli.run_comparison is compare.run_comparison is reproduction.run_comparison
+    assert "compare" not in inspect.signature(reproduction.reproduce).parameters

@@ -171,6 +171,19 @@ TAPMP_LINKAGE int model_event_update(tapmp_instance *inst, double out[], char *m
     ((void)(msg), (void)(size), memcpy((out), (inst)->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof(double)), 1)
 #endif
 
+/* Model Exchange, for a model that defines MODEL_N_STATES (the plant): its continuous state
+ * (MODEL_N_STATES values), set by the host's integrator (1, or 0 + msg if it is outside the
+ * model's domain; the outputs follow it), its derivatives at inst->time for the inputs set now,
+ * the time of its next time event (INFINITY: none), and whether the settings suit Model
+ * Exchange (1, or 0 + msg). fmi2_api.c maps the FMI 2.0 Model Exchange functions onto them. */
+#ifdef MODEL_N_STATES
+TAPMP_LINKAGE void model_me_get_states(const tapmp_instance *inst, double x[]);
+TAPMP_LINKAGE int model_me_set_states(tapmp_instance *inst, const double x[], char *msg, size_t size);
+TAPMP_LINKAGE void model_me_derivatives(const tapmp_instance *inst, double dx[]);
+TAPMP_LINKAGE double model_me_next_event_time(const tapmp_instance *inst);
+TAPMP_LINKAGE int model_me_check(const tapmp_instance *inst, char *msg, size_t size);
+#endif
+
 /* A model whose instances hold resources outside the instance (the pythonfmu family: a
  * Python object) defines MODEL_OWN_RESOURCES in its header and these; for the others they
  * do nothing. model_prepare runs before the instance exists (0 + why on failure: logged as

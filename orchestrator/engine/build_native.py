@@ -195,6 +195,72 @@ def _variability(v: Var) -> str:
     return v.variability or ("continuous" if v.type == "Real" else "discrete")
 
 
+# Model Exchange (FMI 2.0, the plant): its continuous states, in the order of fmi2GetContinuousStates
+# (fmu_plant/plant.c). Their derivatives der(X) ... der(dB) follow the table's variables (value
+# references N_VARS ...). The model has no event indicators: see fmu_common/c/fmi2_api.c.
+ME_STATES = {PLANT: ("X", "Z", "B", "dX", "dZ", "dB")}
+_DER_UNIT = {"m": "m/s", "rad": "rad/s", "m/s": "m/s2", "rad/s": "rad/s2"}
+
+
+def _model_exchange(root: ET.Element, cs: ET.Element, model: str) -> None:
+    """<ModelExchange> beside <CoSimulation>, under the same model identifier and sources."""
+    me = ET.Element("ModelExchange", {
+        "modelIdentifier": model, "needsExecutionTool": "false", "completedIntegratorStepNotNeeded": "true",
+        "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
+        "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true", "providesDirectionalDerivative": "false"})
+    files = ET.SubElement(me, "SourceFiles")
+    for f in cs.find("SourceFiles"):
+        ET.SubElement(files, "File", name=f.get("name"))
+    root.insert(list(root).index(cs), me)  # the schema's order: ModelExchange, CoSimulation
+
+
+# Settings that do not enter the right-hand side (the measured positions and the CS integrator only)
+_NOT_IN_RHS = {"encoder_resolution", "noise_rms", "noise_seed", "substeps"}
+
+
+def state_derivative_dependencies(model: str) -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
+    """{"der(X)": (what it depends on in Continuous-Time Mode, in Initialization Mode), ...} for
+    Model Exchange, by variable name in the order of the variables: der(X) is dX (the state dX;
+    initially its start dX0); der(dX) ... are the accelerations, of every state and the forces
+    F1..F3, initially of every parameter of the right-hand side and the forces."""
+    table = VARIABLES[model]
+    states = ME_STATES[model]
+    inputs = tuple(v.name for v in table if v.causality == "input")
+    rhs = tuple(v.name for v in table if v.causality in ("input", "parameter") and v.name not in _NOT_IN_RHS)
+    out = {}
+    for k, state in enumerate(states):
+        if k < 3:
+            rate = states[k + 3]
+            out[f"der({state})"] = ((rate,), (f"{rate}0",))
+        else:
+            out[f"der({state})"] = ((*states, *inputs), rhs)
+    return out
+
+
+def _state_derivatives(model: str, variables: ET.Element, structure: ET.Element, index: dict) -> None:
+    """The state derivatives der(X) ... as local variables with their `derivative` attribute, listed in
+    <Derivatives> and <InitialUnknowns> with what they depend on (:func:`state_derivative_dependencies`)."""
+    table = VARIABLES[model]
+    units = {v.name: v.unit for v in table}
+    derivatives = ET.Element("Derivatives")
+    initial = structure.find("InitialUnknowns")
+    first = len(list(variables)) + 1
+    for k, (name, (step, init)) in enumerate(state_derivative_dependencies(model).items()):
+        state = ME_STATES[model][k]
+        sv = ET.SubElement(variables, "ScalarVariable", {
+            "name": name, "valueReference": str(len(table) + k),
+            "description": f"time derivative of {state} (Model Exchange)", "causality": "local",
+            "variability": "continuous"})
+        ET.SubElement(sv, "Real", {"derivative": str(index[state]), "unit": _DER_UNIT[units[state]]})
+        ET.SubElement(derivatives, "Unknown", {"index": str(first + k),
+                                               "dependencies": " ".join(str(index[n]) for n in step),
+                                               "dependenciesKind": " ".join("dependent" for _ in step)})
+        ET.SubElement(initial, "Unknown", {"index": str(first + k),
+                                           "dependencies": " ".join(str(index[n]) for n in init),
+                                           "dependenciesKind": " ".join("dependent" for _ in init)})
+    structure.insert(list(structure).index(initial), derivatives)
+
+
 def model_description_fmi2(model: str) -> bytes:
     """modelDescription.xml (FMI 2.0 co-simulation) of the native ``model``."""
     table = VARIABLES[model]
@@ -213,7 +279,11 @@ def model_description_fmi2(model: str) -> bytes:
     files = ET.SubElement(cs, "SourceFiles")
     for name in c_sources(model, "fmi2"):
         ET.SubElement(files, "File", name=name)
-    root.append(unit_definitions(v.unit for v in table if v.unit))
+    units = [v.unit for v in table if v.unit]
+    if model in ME_STATES:
+        _model_exchange(root, cs, model)
+        units += [_DER_UNIT[v.unit] for v in table if v.name in ME_STATES[model]]
+    root.append(unit_definitions(units))
     _categories_and_experiment(root, "fmi2Error")
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
@@ -225,8 +295,10 @@ def model_description_fmi2(model: str) -> bytes:
         if v.causality == "output":
             outputs.append(vr + 1)
     index = {v.name: vr + 1 for vr, v in enumerate(table)}  # FMI 2.0 declares no independent variable
-    fmi2_model_structure(ET.SubElement(root, "ModelStructure"), [(i, table[i - 1].name) for i in outputs],
-                         dependencies(model), index)
+    structure = ET.SubElement(root, "ModelStructure")
+    fmi2_model_structure(structure, [(i, table[i - 1].name) for i in outputs], dependencies(model), index)
+    if model in ME_STATES:
+        _state_derivatives(model, variables, structure, index)
     return to_bytes(root)
 
 

@@ -414,6 +414,22 @@ def documentation_html(model: str, family: str, platforms=None) -> bytes:
             f" <code>fmusim ... --input-file {LS_REF}/{SCENARIO}_in.csv</code> feeds the stimulus.")
     fmpy_input = "" if not inputs(model) else (
         f"\n    input=read_csv('{SCENARIO}_in.csv'),")
+    me = model == PLANT and family == "fmi2"  # the plant offers Model Exchange in FMI 2.0 (build_native.ME_STATES)
+    interfaces = "Co-Simulation and Model Exchange" if me else "Co-Simulation"
+    me_section = "" if not me else f"""<h2>Model Exchange</h2>
+<p>The same model identifier offers FMI 2.0 Model Exchange: the host integrates the continuous states
+<code>X, Z, B, dX, dZ, dB</code> (the outputs of those names) from their derivatives <code>der(X)</code> ...
+<code>der(dB)</code>, computed by the same C model as the Co-Simulation step. There are no event indicators:
+the right-hand side is smooth in the state (the Coulomb friction is tanh-smoothed; the force saturation acts
+on the inputs F1..F3, which the host sets). The one discontinuity, the external force step at
+<code>disturbance_time</code>, is a time event. The encoder positions <code>q1..q3</code> are a
+piecewise-constant function of the state (quantized to <code>encoder_resolution</code>); they feed no
+derivative, so they need no event, and are declared continuous. The measurement noise is drawn once per
+communication step, so <code>noise_rms</code> must be 0 in Model Exchange. OMSimulator picks Model Exchange
+when an FMU offers both (<code>--mode=cs</code> selects the FMU's own RK4).</p>
+<pre>fmusim --interface-type me --solver cvode --tolerance 1e-10 --stop-time {REFERENCE_STOP!r} --output-interval 1e-4 --output-file out.csv {model}.fmu
+simulate_fmu('{model}.fmu', fmi_type='ModelExchange', solver='CVode', relative_tolerance=1e-10, stop_time={REFERENCE_STOP!r})</pre>
+"""
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{model} (FMI {version})</title>
 <style>body{{font-family:sans-serif;max-width:60em;margin:1em auto;padding:0 1em;color:#102030}}
@@ -435,7 +451,7 @@ the variable, the value and what is allowed.</p>
 {''.join(rows)}
 </table>
 <h2>This FMU</h2>
-<p>FMI {version} Co-Simulation, native C (no Python at run time), model identifier <code>{model}</code>;
+<p>FMI {version} {interfaces}, native C (no Python at run time), model identifier <code>{model}</code>;
 binaries for {e(plats)}; the C sources in <code>sources/</code> (compile <code>sources/all.c</code>).
 DefaultExperiment: 0 to {DEFAULT_EXPERIMENT['stopTime']:g} s at the {SERVO_STEP * 1e3:g} ms servo step.</p>
 <h2>Reference experiment</h2>
@@ -454,7 +470,7 @@ result = simulate_fmu('{model}.fmu', stop_time={REFERENCE_STOP!r}, step_size=1e-
 <p>OMSimulator:</p>
 <pre>OMSimulator --mode=cs --stopTime={REFERENCE_STOP!r} --stepSize=1e-4 --resultFile=out.csv {model}.fmu</pre>
 <p>Wire it with the other two TAPMP FMUs as in the diagram (the SSP TAPMP.ssp does this) to run the closed loop.</p>
-<h2>License</h2>
+{me_section}<h2>License</h2>
 <p>MIT, see <a href="licenses/license.txt">licenses/license.txt</a>.</p>
 </body></html>
 """
@@ -499,3 +515,66 @@ def extra_members(model: str, family: str, host_fmu: Path, platforms=None,
         members["terminalsAndIcons/icon.svg"] = icon_svg(model)
         members["terminalsAndIcons/icon.png"] = icon_png(model)
     return members
+
+
+# --- the FMI Cross-Check layout -------------------------------------------------------------
+
+CROSS_CHECK_PLATFORMS = {"linux64": "linux64", "win64": "win64", "darwin64": "darwin64"}  # binaries/ -> tree
+EXPORTING_TOOL = "tapmp"
+
+
+def cross_check_readme(model: str, platform: str, version: str) -> bytes:
+    """ReadMe.txt of one model's Cross-Check folder: what it is, the experiment, how to run it."""
+    inputs_note = (f"{model}_in.csv holds the input stimulus (what the FMU receives in the closed loop at every "
+                   "0.1 ms communication point); hold each value until the next row.\n" if inputs(model) else
+                   "The FMU has no inputs.\n")
+    import re
+    what = re.sub(r"<[^>]+>", "", _what(model))  # the documentation's HTML as plain text
+    return (f"{model} {version}: {what}\n\n"
+            f"Exported by tapmp {version} (three-axis parallel motion platform co-simulation), FMI 2.0 "
+            f"Co-Simulation, platform {platform}. The FMU carries its documentation in documentation/index.html.\n\n"
+            f"Experiment ({model}_ref.opt): the first {REFERENCE_STOP * 1e3:g} ms of the paper's simulation "
+            f"(scenarios/paper_simulation.toml) at the {SERVO_STEP * 1e3:g} ms communication step, every "
+            "parameter at its start value (the FMU's defaults are that scenario).\n" + inputs_note +
+            f"{model}_ref.csv holds the expected outputs at every communication point, computed by this FMU alone "
+            "in FMPy (fixed-step co-simulation; the FMU integrates internally with RK4, so the tolerance is not "
+            "used). Any importer stepping the FMU at the same points gets the same values to the last printed "
+            "digit.\n").encode()
+
+
+def cross_check_tree(fmus: dict[str, Path], out_dir: Path, version: str | None = None) -> list[Path]:
+    """Write the FMI Cross-Check layout of the native FMI 2.0 Co-Simulation FMUs ``fmus``
+    ({model: path}) under ``out_dir``: fmus/2.0/cs/<platform>/tapmp/<version>/<model>/ with the
+    FMU, <model>_ref.csv, <model>_in.csv (models with inputs), <model>_ref.opt and ReadMe.txt,
+    for every Cross-Check platform the FMU has binaries for. The CSV and options files are the
+    FMU's own reference experiment (FMI-LS-REF). Returns the model folders written."""
+    import shutil
+    import zipfile
+
+    from tapmp import __version__
+    version = version or __version__
+    written = []
+    for model, fmu in fmus.items():
+        fmu = Path(fmu)
+        with zipfile.ZipFile(fmu) as z:
+            names = set(z.namelist())
+            root = ET.fromstring(z.read("modelDescription.xml"))
+            if root.get("fmiVersion") != "2.0" or root.find("CoSimulation") is None:
+                raise ValueError(f"{fmu} is not an FMI 2.0 Co-Simulation FMU: the Cross-Check layout is for those")
+            files = {f"{model}_ref.csv": z.read(f"{LS_REF}/{SCENARIO}_ref.csv"),
+                     f"{model}_ref.opt": z.read(f"{LS_REF}/{SCENARIO}_ref.opt")}
+            if f"{LS_REF}/{SCENARIO}_in.csv" in names:
+                files[f"{model}_in.csv"] = z.read(f"{LS_REF}/{SCENARIO}_in.csv")
+        platforms = [tree for folder, tree in CROSS_CHECK_PLATFORMS.items()
+                     if any(n.startswith(f"binaries/{folder}/") for n in names)]
+        if not platforms:
+            raise ValueError(f"{fmu} has no binaries for a Cross-Check platform ({', '.join(CROSS_CHECK_PLATFORMS)})")
+        for platform in platforms:
+            folder = Path(out_dir) / "fmus" / "2.0" / "cs" / platform / EXPORTING_TOOL / version / model
+            folder.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(fmu, folder / f"{model}.fmu")
+            for name, data in files.items():
+                (folder / name).write_bytes(data)
+            (folder / "ReadMe.txt").write_bytes(cross_check_readme(model, platform, version))
+            written.append(folder)
+    return written

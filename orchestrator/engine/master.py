@@ -21,10 +21,11 @@ graph and the FMUs' declared direct feedthrough: ``orchestrator.engine.schedule`
   masters and FMPy's ``simulate_ssp`` do.
 An algebraic loop (a cycle of connections through direct feedthrough only) is refused.
 
-Parameters address elements by SSP name; ``plant``, ``controller`` and ``trajectory`` (the
-scenario's tables) also address the one element whose FMU is TAPMP_Plant, TAPMP_Controller,
-TAPMP_Trajectory (:data:`ROLES`), whatever the SSP calls it. Recorded columns are
-``element.output``, with such an element written by its role, so the TAPMP system records
+Reading the SSP (parse, check the elements, extract the FMUs, bind the parameter tables) is
+``orchestrator.engine.ssd``. Parameters address elements by SSP name; the caller's ``roles``
+({role: modelName}) also address the one element whose FMU is that model, whatever the SSP calls
+it (the TAPMP roles plant, controller, trajectory: orchestrator.experiments.roles). Recorded
+columns are ``element.output``, with such an element written by its role, so a system records
 the same columns under any element names.
 
 Conventions of other masters, to reproduce them bit for bit (tests/interop/test_libcosim.py,
@@ -50,10 +51,8 @@ announce is refused: the others have stepped past it already.
 
 import math
 import os
-import re
 import shutil
 import weakref
-import zipfile
 from ctypes import byref, c_double, c_int64
 from pathlib import Path
 
@@ -61,17 +60,14 @@ from fmpy import calloc, free
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
                        fmi2CallbackLoggerTYPE)
-from fmpy.ssp.ssd import read_ssd
-
-from tapmp.interface import CONNECTION_STARTS, ORDERINGS
 
 from . import stepper as stepper_core
-from .archive import ExtractBudget, ExtractLimitError, MEMBER_RULE, inside_archive
+from .archive import ExtractBudget, ExtractLimitError
 from .clocks import Clock
 from .errors import CoSimulationError, DivergenceError
-from .schedule import (Connection, ScheduleError, check_algebraic_loops, check_order, gauss_seidel_order,
-                       initialization_order)
-from .ssp import ROLES, ParameterAddressError, resolve_parameters
+from .schedule import (CONNECTION_STARTS, ORDERINGS, Connection, ScheduleError, check_algebraic_loops, check_order,
+                       gauss_seidel_order, initialization_order)
+from .ssd import ParameterAddressError, check_elements, column_prefixes, extract_fmus, read_ssp, resolve_parameters
 from .tempdirs import make_folder
 from .units import Unit
 
@@ -98,10 +94,6 @@ class OutputCheck:
         return f"{column} = {value!r} at t = {t:.6g} s is not finite: the co-simulation diverged"
 
 
-_ELEMENT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_NAME_RULE = "a name matching [A-Za-z_][A-Za-z0-9_]* (letters, digits, _), unique in the system"
-
-
 class CoSimulation:
     """A running co-simulation of an SSP system; use as a context manager.
 
@@ -113,7 +105,9 @@ class CoSimulation:
     ``start_time`` and ``step_size`` are in s; ``clock`` and ``connection_start`` select
     the conventions described in the module docstring. Every FMU input must be driven by
     a connection unless ``open_inputs`` names it ("element.variable"): such an input keeps
-    its start value. ``parameters`` keys are element names or the role names of :data:`ROLES`.
+    its start value. ``parameters`` keys are element names or the role names of ``roles``
+    ({role: modelName}, which also name that element's columns: ssd.column_prefixes);
+    ``other_tables`` are further names offered when a parameter table addresses nothing.
     ``order`` (Gauss-Seidel only) lists every element once in the order they step; without
     it the order comes from the graph (``orchestrator.engine.schedule``). After entering,
     :attr:`step_order` and :attr:`init_order` hold the element names in the orders used.
@@ -123,7 +117,7 @@ class CoSimulation:
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
                  check: OutputCheck | None = None, clock: str = "exact",
                  connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None,
-                 event_mode: bool = False):
+                 event_mode: bool = False, roles: dict | None = None, other_tables=()):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -161,6 +155,8 @@ class CoSimulation:
         self.open_inputs = tuple(open_inputs)
         self.ssp_path = Path(ssp_path)
         self.parameters = parameters
+        self.roles = dict(roles or {})
+        self.other_tables = tuple(other_tables)
         self.t0 = float(start_time)
         self.h = float(step_size)
         self.ordering = ordering
@@ -201,11 +197,11 @@ class CoSimulation:
             self._budget = ExtractBudget()  # of the SSP's members and the FMUs' together
         except ExtractLimitError as err:
             raise CoSimulationError(str(err)) from None
-        ssd, members = self._read_ssp()
-        elements = self._check_elements(ssd.system.elements, members)  # before anything is extracted
+        ssd, members = read_ssp(self.ssp_path, self._budget)
+        elements = check_elements(self.ssp_path, ssd.system.elements, members)  # before anything is extracted
         self.tmp = make_folder()
         weakref.finalize(self, shutil.rmtree, str(self.tmp), True)  # also if close() is never reached
-        fmus = self._extract(members, elements)
+        fmus = extract_fmus(self.ssp_path, members, elements, self.tmp / "ssp", self._budget)
         self.callbacks = fmi2CallbackFunctions()
         self.callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
         self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
@@ -256,7 +252,7 @@ class CoSimulation:
                 self._call(unit, unit.slave.enterStepMode, "enterStepMode", self.t0)
             if propagate:  # else the outputs (and so the connections) stay 0 until the first step
                 self._call(unit, unit.read_outputs, "getReal")
-        prefix = self._column_prefixes()
+        prefix = column_prefixes({n: u.md.modelName for n, u in self.units.items()}, self.roles)
         self.columns = ["time"] + [f"{prefix[n]}.{o}" for n, u in self.units.items() for o in u.outputs]
         self._row_units = list(self.units.values())
         self._step_units = [self.units[n] for n in self.step_order]
@@ -300,110 +296,13 @@ class CoSimulation:
         except ScheduleError as err:
             raise CoSimulationError(f"SSP file {self.ssp_path}: {err}") from None
 
-    def _role_element(self, role: str) -> str | None:
-        """The element whose FMU is the model of ``role`` (:data:`ROLES`) if exactly one is."""
-        hits = [n for n, u in self.units.items() if u.md.modelName == ROLES[role]]
-        return hits[0] if len(hits) == 1 else None
-
-    def _column_prefixes(self) -> dict:
-        """{element: prefix of its columns}: the role name for the one element with a role's FMU
-        (unless another element bears that name), else the element name."""
-        prefix = {n: n for n in self.units}
-        for role in ROLES:
-            element = self._role_element(role)
-            if element is not None and (role not in self.units or role == element):
-                prefix[element] = role
-        return prefix
-
     def _resolve_parameters(self) -> dict:
-        """``parameters`` keyed by element (ssp.resolve_parameters: by name, or by role)."""
+        """``parameters`` keyed by element (ssd.resolve_parameters: by name, or by role)."""
         models = {n: u.md.modelName for n, u in self.units.items()}
         try:
-            return resolve_parameters(self.parameters, models, self.ssp_path)
+            return resolve_parameters(self.parameters, models, self.ssp_path, self.roles, self.other_tables)
         except ParameterAddressError as err:
             raise CoSimulationError(str(err), err.element) from None
-
-    def _read_ssp(self):
-        """The SSD of the SSP file and its archive members {normalized name: member name};
-        refuses an archive with a member named by an absolute path or one with ``..``."""
-        try:
-            with zipfile.ZipFile(self.ssp_path) as z:  # the SSD is parsed in memory: its size counts too
-                size = z.getinfo("SystemStructure.ssd").file_size if "SystemStructure.ssd" in z.namelist() else 0
-            if size > self._budget.limit:
-                raise ExtractLimitError(str(self._budget.refuse(f"SSP file {self.ssp_path}", "SystemStructure.ssd",
-                                                                size)))
-            ssd = read_ssd(str(self.ssp_path))
-            with zipfile.ZipFile(self.ssp_path) as z:
-                names = [i.filename for i in z.infolist() if not i.is_dir()]
-        except ExtractLimitError as err:
-            raise CoSimulationError(str(err)) from None
-        except Exception as err:
-            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
-                                    "holding SystemStructure.ssd and the FMUs)") from err
-        members = {}
-        for name in names:
-            inside = inside_archive(name)
-            if inside is None:
-                raise CoSimulationError(f"SSP file {self.ssp_path}: archive member {name!r} points outside the "
-                                        f"archive: {MEMBER_RULE}")
-            members[inside] = name
-        return ssd, members
-
-    def _check_elements(self, elements, members: dict) -> dict:
-        """{element name: (source, normalized member name)}, in the order of the SSD; raise unless every
-        element is an FMU component with a unique identifier name (it names a folder) and a
-        source that is a member of the archive."""
-        out = {}
-        for e in elements:
-            name = getattr(e, "name", None)
-            if not isinstance(name, str) or not _ELEMENT_NAME.fullmatch(name):
-                raise CoSimulationError(f"SSP file {self.ssp_path}: element name {name!r} is invalid: "
-                                        f"allowed is {_NAME_RULE}")
-            where = f"SSP file {self.ssp_path}: element {name}"
-            if name in out:
-                raise CoSimulationError(f"{where} is defined twice: allowed is {_NAME_RULE}", name)
-            source = getattr(e, "source", None)
-            if type(e).__name__ != "Component" or not isinstance(source, str):
-                raise CoSimulationError(f"{where} is a {type(e).__name__}: allowed are FMU components "
-                                        "(ssd:Component with a source)", name)
-            inside = inside_archive(source)
-            if inside is None:
-                raise CoSimulationError(f"{where}: source {source!r} points outside the archive: "
-                                        f"{MEMBER_RULE}", name)
-            if inside not in members:
-                raise CoSimulationError(f"SSP file {self.ssp_path}: the FMU {source} of element {name} is missing "
-                                        f"from the archive: allowed are its members "
-                                        f"{', '.join(m for m in members if m.endswith('.fmu')) or '(no FMU)'}",
-                                        name)
-            out[name] = (source, inside)
-        return out
-
-    def _extract(self, members: dict, elements: dict) -> dict:
-        """Copy the FMU of every element out of the archive into ``tmp/ssp`` (only those
-        members, each checked to land inside it); returns {element name: FMU path}."""
-        root = (self.tmp / "ssp").resolve()
-        paths = {}
-        try:
-            with zipfile.ZipFile(self.ssp_path) as z:
-                for name, (source, inside) in elements.items():
-                    target = (root / inside).resolve()
-                    if not target.is_relative_to(root):  # cannot happen after _inside_archive; be sure
-                        raise CoSimulationError(f"SSP file {self.ssp_path}: element {name}: source {source!r} "
-                                                f"points outside the archive: {MEMBER_RULE}", name)
-                    if not target.exists():
-                        target.parent.mkdir(parents=True, exist_ok=True)
-                        self._budget.copy(z, z.getinfo(members[inside]), target, f"SSP file {self.ssp_path}")
-                    paths[name] = target
-        except CoSimulationError:
-            raise
-        except ExtractLimitError as err:
-            raise CoSimulationError(str(err)) from None
-        except OSError as err:
-            raise CoSimulationError(f"cannot extract SSP file {self.ssp_path} into {self.tmp}: {err}") from err
-        except Exception as err:
-            raise CoSimulationError(f"cannot read SSP file {self.ssp_path}: {err} (an SSP is a zip archive "
-                                    "holding SystemStructure.ssd and the FMUs)") from err
-        return paths
 
     def _connect(self, connections) -> None:
         """Wire the SSP connections, output to input; reject, before any FMU is instantiated,

@@ -30,6 +30,13 @@ gives Gauss-Seidel controller, plant, trajectory and initialization trajectory, 
 
 from dataclasses import dataclass
 
+# Orderings of one macro step (docs/master.md): one element after the other on the latest outputs,
+# or all on the outputs at t (one extra step of delay in a feedback path).
+ORDERINGS = ("gauss-seidel", "jacobi")
+# How connections start: outputs propagated in Initialization Mode, or every connection at 0
+# until the first step (FMPy's simulate_ssp).
+CONNECTION_STARTS = ("propagated", "zero")
+
 
 class ScheduleError(ValueError):
     """The system cannot be ordered (an algebraic loop) or a given order is invalid."""

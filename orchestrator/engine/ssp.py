@@ -1,5 +1,6 @@
-"""Write the TAPMP system as an SSP 1.0 archive (SystemStructure.ssd plus the FMUs), and
-address its elements by name or role.
+"""Write the TAPMP system as an SSP 1.0 archive (SystemStructure.ssd plus the FMUs), and the
+vendor annotations of its DefaultExperiment (``tapmp export`` writes them too). Reading an SSP
+is orchestrator.engine.ssd.
 
 The connections come from ``tapmp.interface.CONNECTIONS``; fmpy's SSD reader
 (``fmpy.ssp.ssd.read_ssd``) validates the file against the SSP 1.0 schema.
@@ -9,7 +10,6 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from tapmp.errors import suggestion
 from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, UNITS, VARIABLES
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -23,60 +23,6 @@ ET.register_namespace("oms", OMS)  # OMSimulator matches the literal prefix "oms
 OSP_ANNOTATION = "com.opensimulationplatform"
 OMS_ANNOTATION = "org.openmodelica"
 SERVO_STEP = 1e-4     # [s] the communication step of the built SSPs, the FMUs' DefaultExperiment stepSize
-
-
-# Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address.
-ROLES = {role: model for model, role in ELEMENT.items()}
-# A scenario's own tables besides the roles: a misspelled one reaches the master as an element
-# table, so these are among the names offered when a table addresses no element.
-SCENARIO_TABLES = ("gain_overrides", "limits", "mismatch")
-
-
-class ParameterAddressError(ValueError):
-    """A parameter table addresses no element, several, or sets a value twice; ``element`` names it."""
-
-    def __init__(self, message: str, element: str):
-        super().__init__(message)
-        self.element = element
-
-
-def resolve_parameters(parameters: dict, models: dict, ssp_path) -> dict:
-    """``parameters`` ({table: {name: value}}) keyed by the SSP's element names.
-
-    A key that names an element addresses it; a role name (:data:`ROLES`) the one element
-    whose FMU is that role's model (``models``: {element: modelName}); an empty table sets
-    nothing (e.g. [plant] of a system with its own plant FMU). ParameterAddressError for a
-    role with no or several elements, an unknown key (even with an empty table: a misspelled
-    table name), or a value set by both name and role.
-    The master and ``tapmp export`` both address elements through this function.
-    """
-    out = {}
-    for key, table in parameters.items():
-        if key not in models and key not in ROLES:
-            raise ParameterAddressError(
-                f"parameters given for unknown element(s) {key}: allowed are {', '.join(models)} (or "
-                f"{', '.join(ROLES)} for the element whose FMU is TAPMP_Plant, ...)"
-                + suggestion(key, [*models, *ROLES, *SCENARIO_TABLES]), key)
-        if not table:
-            continue
-        if key in models:
-            element = key
-        else:
-            hits = [e for e, m in models.items() if m == ROLES[key]]
-            if len(hits) != 1:
-                what = "none" if not hits else f"{len(hits)} ({', '.join(hits)})"
-                raise ParameterAddressError(
-                    f"parameters [{key}] address the element whose FMU is {ROLES[key]}, and SSP file "
-                    f"{ssp_path} has {what}: allowed is a table named after the element, one of "
-                    f"{', '.join(models)}", key)
-            element = hits[0]
-        target = out.setdefault(element, {})
-        for name, value in table.items():
-            if name in target:
-                raise ParameterAddressError(f"{element}.{name} is set twice (by the tables of the element name "
-                                            "and of its role): allowed is one value", element)
-            target[name] = value
-    return out
 
 
 def _q(ns: str, tag: str) -> str:

@@ -23,8 +23,6 @@ import sys
 from ctypes import POINTER, Structure, c_double, c_int32, c_int64, c_void_p
 from pathlib import Path
 
-from tapmp.toolchain import build_cached, cache_dir
-
 SOURCE = Path(__file__).with_name("stepper.c")
 STEPPERS = ("auto", "compiled", "python")
 # No -ffast-math, no contraction: the core only copies and compares doubles, and must keep them.
@@ -58,6 +56,7 @@ def compile_core(source: Path, output: Path) -> Path:
 
 def library_path() -> Path:
     """Where the compiled core of this source and compiler command lives in the cache."""
+    from tapmp.toolchain import cache_dir  # on first use: importing the master loads no tapmp module
     key = hashlib.sha256(SOURCE.read_bytes() + "\0".join(compiler_command(SOURCE, Path("x"))).encode())
     return cache_dir() / f"tapmp_stepper_{key.hexdigest()[:16]}.so"
 
@@ -65,6 +64,7 @@ def library_path() -> Path:
 def build() -> Path:
     """Build the compiled core into the cache unless it is there; returns its path.
     A file lock makes concurrent builds (a study's workers) wait for the first one."""
+    from tapmp.toolchain import build_cached
     path = library_path()
     try:
         return build_cached(path, lambda tmp: compile_core(SOURCE, tmp))

@@ -31,7 +31,9 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..engine.ssp import SSC, SSD, ParameterAddressError, default_experiment, resolve_parameters, set_system_step
+from ..engine.ssd import ParameterAddressError, resolve_parameters
+from ..engine.ssp import SSC, SSD, default_experiment, set_system_step
+from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
@@ -163,7 +165,7 @@ def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
         descriptions[element] = _model_description(members[fmu])
     models = {element: md.get("modelName") for element, md in descriptions.items()}
     try:
-        resolved = resolve_parameters(scenario.parameters(), models, source_ssp)
+        resolved = resolve_parameters(scenario.parameters(), models, source_ssp, ROLES, SCENARIO_TABLES)
     except ParameterAddressError as err:
         raise ExportError(str(err)) from None
     for element, table in resolved.items():

@@ -33,7 +33,8 @@ LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched":
               "pid-dc": "PID-DC",
               # the other runs of `tapmp compare` (orchestrator.experiments.baselines): one label each
               "apd-dc-diff-stiffness": "APD-DC diff. stiffness", "apd-dc-mode-matched": "APD-DC mode-matched",
-              "apd-dc-ms-matched": "APD-DC Ms-matched", "pid-dc-mode-matched": "PID-DC mode-matched", "sc-dc-b0": "SC-DC b = 0",
+              "apd-dc-ms-matched": "APD-DC Ms-matched", "pid-dc-mode-matched": "PID-DC mode-matched",
+              "pid-dc-full": "PID-DC full integral", "sc-dc-b0": "SC-DC b = 0",
               "sc-dc-lp0": "SC-DC Lambda_p = 0"}
 PROPOSED = "sc-dc"  # the proposed law: drawn on top of every other trace
 # The runs a comparison figure shows by default: the proposed law, the paper's baseline and the
@@ -74,7 +75,7 @@ CHATTER_WINDOW = 0.01  # [s] sliding window of the force figure's mean and RMS e
 ZOOM_SAMPLES = 60  # samples in the force figure's zoom panel (each one drawn)
 STYLES = (  # (line style, marker) per shown run, in order; the first (SC-DC) solid and on top
     ("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"), ((0, (1, 2)), "x"),
-    ((0, (8, 2)), "P"), ((0, (3, 1, 1, 1, 1, 1)), "*"), ((0, (2, 1)), "<"))
+    ((0, (8, 2)), "P"), ((0, (3, 1, 1, 1, 1, 1)), "*"), ((0, (2, 1)), "<"), ((0, (6, 1, 1, 1)), ">"))
 
 
 def decimate(x, y, columns: int = COLUMNS):

@@ -39,3 +39,17 @@ class Progress:
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
+
+
+def progress_bar(desc: str, enabled: bool):
+    """(update, close) of a run's progress: a bar on a terminal (for runs longer than a
+    second), else one line per 10 % of a run longer than two seconds; nothing if not enabled."""
+    if not enabled:
+        return None, lambda: None
+    bar = Progress(desc, "step")
+    return bar, bar.close
+
+
+def say(line: str) -> None:
+    """One line on stderr saying what a long command starts doing."""
+    print(line, file=sys.stderr, flush=True)

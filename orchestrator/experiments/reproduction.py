@@ -14,6 +14,7 @@ from pathlib import Path
 from tapmp.modal import modal_table
 
 from .baselines import scdc_modal
+from .compare import run_comparison
 from .paper_gains import paper_gains_table, run_paper_gains
 from .predictors import prediction_lines, run_extra
 from .robustness import MODES, mode_peaks
@@ -326,17 +327,24 @@ def _section(title: str, name: str, sc, runs, results, checks, command: str, fol
             comparison_tables(name.removesuffix("_calibrated"), results)]
 
 
-def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, compare, command: str,
+def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *, ssp_of,
+              changes: dict | None = None, progress: bool = False, jobs: int = 1,
               paper_gains_stop: float = PAPER_GAINS_STOP, workers: int = 2, ssp: Path | None = None,
               say=lambda line: None) -> str:
     """Run everything and write the page to ``out``; returns its text.
 
-    compare(scenario, folder) runs `tapmp compare` on a scenario into folder and returns
-    (runs, results, checks, text) as orchestrator.cli.run_comparison. paper_gains_stop [s]:
-    horizon of the paper-gain runs (PAPER_GAIN_STEPS each), run in ``workers`` processes.
-    ssp: the FMUs of the extra runs that score the calibrated prediction (predictors.run_extra;
-    None: no such section). say(line) is told each phase as it starts.
+    Each scenario is compared (compare.run_comparison, its folder replaced, ``jobs`` processes, a
+    progress bar per run if ``progress``) with ``changes`` applied (e.g. format, record_every) on
+    the SSP file ssp_of(scenario). paper_gains_stop [s]: horizon of the paper-gain runs
+    (PAPER_GAIN_STEPS each), run in ``workers`` processes. ssp: the FMUs of the extra runs that
+    score the calibrated prediction (predictors.run_extra; None: no such section). say(line) is
+    told each phase as it starts.
     """
+    def compare(scenario, folder):
+        scenario = scenario.with_changes(**changes) if changes else scenario
+        return run_comparison(scenario, ssp_of(scenario), folder, True, progress, command, jobs,
+                              written_by="reproduce")
+
     comparisons, calibrated, folders = {}, {}, {}
     for name in SCENARIOS:
         sc = load(Path(scenarios_dir) / f"{name}.toml")

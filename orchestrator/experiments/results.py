@@ -26,6 +26,7 @@ from ..engine.master import CoSimulation
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
 from .folders import FORMATS, ResultsWriteError, check_output, output_lock, prepare_output, write_json, write_result
+from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 from .stops import StopRequest, stop_scope
 from .writers import CsvBlocks, Keeping, MatBlocks
@@ -106,7 +107,8 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
             with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
                               scenario.ordering, check=envelope(scenario), clock=scenario.clock,
                               connection_start=scenario.connection_start,
-                              open_inputs=scenario.open_inputs, order=scenario.order) as sim:
+                              open_inputs=scenario.open_inputs, order=scenario.order, roles=ROLES,
+                              other_tables=SCENARIO_TABLES) as sim:
                 info["guids"] = sim.guids
                 info["columns"] = list(sim.columns)
                 if fmt == "mat":  # results.part.npy needs its column names on record (a killed run)

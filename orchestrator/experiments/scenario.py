@@ -37,13 +37,14 @@ from pydantic.dataclasses import dataclass
 
 from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
-from tapmp.interface import CONNECTION_STARTS, CONTROLLER, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
+from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
 from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..engine.families import FAMILIES
+from ..engine.schedule import CONNECTION_STARTS, ORDERINGS
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
 if sys.version_info >= (3, 11):

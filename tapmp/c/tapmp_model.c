@@ -316,6 +316,21 @@ int tapmp_plant_step(const tapmp_plant *pl, double t0, double h, const double F_
     return fabs(s[2]) < HALF_PI && isfinite(s[0] + s[1] + s[3] + s[4] + s[5]);
 }
 
+/* The right-hand side on the forces tapmp_plant_step integrates with: saturated, then the force
+ * step added from disturbance_time on (a discontinuity in time: a Model Exchange host gets it as
+ * a time event). */
+void tapmp_plant_derivatives(const tapmp_plant *pl, double t, const double s[6], const double F_in[3], double ds[6])
+{
+    double F[3] = {F_in[0], F_in[1], F_in[2]};
+    double lim = pl->c.force_limit;
+    const double *d = pl->c.disturbance_force;
+    if (lim > 0.0)
+        for (int i = 0; i < 3; i++) F[i] = saturate(F[i], lim);
+    if ((d[0] != 0.0 || d[1] != 0.0 || d[2] != 0.0) && t >= pl->c.disturbance_time)
+        for (int i = 0; i < 3; i++) F[i] += d[i];
+    tapmp_plant_rhs(pl, s, F, ds);
+}
+
 /* plant.PlantModel.measured_positions, joint_positions, joint_velocities and the state */
 void tapmp_plant_outputs(const tapmp_plant *pl, double out[15])
 {

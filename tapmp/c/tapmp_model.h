@@ -177,6 +177,11 @@ TAPMP_LINKAGE void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], con
  * step is added from disturbance_time on. The new state is written to s_new; returns 1 if it is
  * finite with |B| < pi/2, else 0 (state untouched). */
 TAPMP_LINKAGE int tapmp_plant_step(const tapmp_plant *pl, double t, double h, const double F[3], double s_new[6]);
+/* Model Exchange: d/dt (X, Z, B, dX, dZ, dB) at t [s] in the state s for the commanded forces F_in [N],
+ * saturated and with the force step from disturbance_time on, as tapmp_plant_step applies them over
+ * a step starting at t. */
+TAPMP_LINKAGE void tapmp_plant_derivatives(const tapmp_plant *pl, double t, const double s[6], const double F_in[3],
+                                           double ds[6]);
 /* Outputs in the FMU's order: q1..q3 (measured: true + noise of this sample, quantized), q_true,
  * dq, X, Z, B, dX, dZ, dB (15). */
 TAPMP_LINKAGE void tapmp_plant_outputs(const tapmp_plant *pl, double out[15]);

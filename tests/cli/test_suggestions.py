@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.engine.ssp import ROLES, SCENARIO_TABLES
+from orchestrator.experiments.roles import ROLES, SCENARIO_TABLES
 from orchestrator.experiments.scenario import TABLES
 from tapmp.errors import allowed_are, suggestion
 

@@ -18,6 +18,7 @@ import subprocess
 import zipfile
 from pathlib import Path
 
+import compatibility
 import lief
 
 lief.logging.disable()  # its notes on optional sections it skips
@@ -66,7 +67,8 @@ def linux_exports(native_built):
 # -- aarch64 Linux, under qemu ----------------------------------------------------------------
 
 @pytest.mark.parametrize("family", FAMILIES)
-def test_aarch64_linux_binaries_under_qemu_step_2000_times_like_the_x86_64_binaries(native_built, family, tmp_path):
+def test_aarch64_linux_binaries_under_qemu_step_2000_times_like_the_x86_64_binaries(native_built, family, tmp_path,
+                                                                                   request):
     steps = 2000
     x86_exe = compile_host(family, tmp_path)
     arm_exe = compile_host(family, tmp_path, platform="aarch64-linux")
@@ -91,6 +93,13 @@ def test_aarch64_linux_binaries_under_qemu_step_2000_times_like_the_x86_64_binar
         assert np.all(np.abs(arm - x86) <= 1e-12 * np.abs(x86)), (model, arm - x86)
     assert np.abs(results[PLANT][0][:3]).min() > 0.01  # the platform has moved (cm): this compares something
     assert np.all(np.abs(results[CONTROLLER][0][:3]) > 0.0)
+    qemu = subprocess.run([QEMU, "--version"], capture_output=True, text=True, timeout=60).stdout.split()
+    compatibility.record(
+        request, tool="qemu-user", version=qemu[2], fmi=f"{family[3]}.0", interface="CS",
+        platform="aarch64-linux (qemu-aarch64 on x86_64-linux)",
+        command=f"qemu-aarch64 -L SYSROOT {family}_host FMU_FOLDER MODEL 2000 0.0001 ... (tests/fmu/c_host/{family}_host.c)",
+        difference=compatibility.difference(max(compatibility.relative(a, x) for x, a in results.values()),
+                                            "relative", "the x86_64-linux binaries, after 2,000 steps"))
     # measured: bit for bit (maximum relative difference 0.0)
     print(family, "aarch64 vs x86_64 max relative difference",
           {m: float(np.max(np.abs(a - x) / np.maximum(np.abs(x), 1e-300))) for m, (x, a) in results.items()},

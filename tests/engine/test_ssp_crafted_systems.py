@@ -177,13 +177,14 @@ WARNING_STEP = """
 
 def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
     from orchestrator.engine.master import CoSimulation
+    from orchestrator.experiments.roles import ROLES
     from orchestrator.experiments.scenario import load
 
     plant = faulty_plant_fmu(tmp_path, WARNING_STEP, "The real plant, logging a warning (not an error) on every "
                                                       "step from t = 0.5 ms.")
     ssp = faulty_ssp(tmp_path / "warn.ssp", plant, built)
     sc = load(PAPER, ["stop_time=0.002"])
-    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step) as sim:
+    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, roles=ROLES) as sim:
         for _ in range(sc.n_steps):
             sim.step()
         assert sim.time == pytest.approx(0.002)

@@ -14,6 +14,7 @@ import pytest
 from orchestrator.engine import stepper
 from tapmp import native
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.envelope import envelope
 from orchestrator.experiments.reading import read_results
 from orchestrator.experiments.results import run_scenario
@@ -24,7 +25,7 @@ from conftest import PAPER, paper_scenario
 def rows_of(ssp, scenario, stepper_kind, ordering, clock="exact", blocks=(7, 300, 193)):
     """Row 0 and the rows of ``sum(blocks)`` steps, stepped in blocks of those sizes."""
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      check=envelope(scenario), clock=clock, stepper=stepper_kind) as sim:
+                      check=envelope(scenario), clock=clock, stepper=stepper_kind, roles=ROLES) as sim:
         assert (sim._core is not None) == (stepper_kind == "compiled")
         out = [np.array([sim.row()])]
         for n in blocks:

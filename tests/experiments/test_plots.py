@@ -47,7 +47,8 @@ def texts(fig) -> list[str]:
 
 
 LAWS = ["SC-DC (proposed)", "APD-DC", "APD-DC matched", "APD-DC diff. stiffness", "APD-DC mode-matched",
-        "APD-DC Ms-matched", "PID-DC mode-matched", "SC-DC b = 0", "SC-DC Lambda_p = 0"]  # one per compare run, none merged
+        "APD-DC Ms-matched", "PID-DC mode-matched", "PID-DC full integral", "SC-DC b = 0",
+        "SC-DC Lambda_p = 0"]  # one per compare run, none merged
 
 
 def test_comparison_figures_name_the_laws_in_titles_and_legends_and_use_micrometres(comparison):

@@ -185,6 +185,7 @@ def edited_ssd(ssd: str, edits) -> str:
 @given(edits=connection_edits(18))
 def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path, edits):
     from orchestrator.engine.master import CoSimulation, CoSimulationError
+    from orchestrator.experiments.roles import ROLES
     from orchestrator.experiments.scenario import load
     from conftest import PAPER
 
@@ -198,7 +199,7 @@ def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path,
             zout.writestr(name, data)
     sc = load(PAPER, ["stop_time=0.002"])
     try:
-        with CoSimulation(dst, sc.parameters(), 0.0, sc.step) as sim:
+        with CoSimulation(dst, sc.parameters(), 0.0, sc.step, roles=ROLES) as sim:
             for _ in range(sc.n_steps):
                 sim.step()
                 assert all(math.isfinite(x) for x in sim.row())

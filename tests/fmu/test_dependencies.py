@@ -5,8 +5,10 @@ do: perturbing each known in Initialization Mode changes exactly the declared in
 and no output follows an input set in Step Mode before doStep.
 """
 
+import re
 import subprocess
 import zipfile
+from collections import Counter
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -14,6 +16,8 @@ import pytest
 from fmpy import read_model_description
 
 from fmu_host import Host
+from fmil_gaps import fmil_messages, terminal_messages
+from orchestrator.engine.build_native import ME_STATES, state_derivative_dependencies
 from orchestrator.engine.container import CONTAINER, container_dependencies
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, dependencies
 from tapmp.kinematics import inverse
@@ -53,11 +57,17 @@ def test_model_description_declares_the_interface(fmus, family, model):
     path = fmus[family][model]
     md = read_model_description(str(path))
     fmi3 = family == "fmi3"
-    assert _declared(md, fmi3) == _expected(model, fmi3)
+    expected = _expected(model, fmi3)
+    # the FMI 2.0 plant's Model Exchange state derivatives: <Derivatives> and <InitialUnknowns>
+    derivatives = state_derivative_dependencies(model) if family == "fmi2" and model in ME_STATES else {}
+    expected[1].update({name: initial for name, (_, initial) in derivatives.items()})
+    assert _declared(md, fmi3) == expected
+    assert {d.variable.name: tuple(k.name for k in d.dependencies) for d in md.derivatives} == {
+        name: step for name, (step, _) in derivatives.items()}
     root = ET.fromstring(zipfile.ZipFile(path).read("modelDescription.xml"))
     unknowns = root.find("ModelStructure").iter()
     listed = [u for u in unknowns if u.tag in ("Unknown", "Output", "InitialUnknown")]
-    assert len(listed) == 2 * sum(v.causality == "output" for v in VARIABLES[model])
+    assert len(listed) == 2 * sum(v.causality == "output" for v in VARIABLES[model]) + 2 * len(derivatives)
     for u in listed:  # every unknown says what it depends on; every listed known is "dependent"
         deps, kinds = u.get("dependencies"), u.get("dependenciesKind")
         assert deps is not None, ET.tostring(u)
@@ -94,11 +104,19 @@ def test_fmil_parses_every_model_structure(fmus, built):
     dependencies without a warning. (What FMIL reads back: the test below.)"""
     paths = [str(fmus[f][m]) for f in FAMILIES for m in FMU_NAMES] + [str(built[CONTAINER])]
     proc = subprocess.run([str(FMIL), "parse", *paths], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stdout.count("FMIL parse: 0 warnings, 0 errors") == len(paths), proc.stdout
+    # FMI 3.0: FMIL's messages on the valid terminalsAndIcons.xml only (tests/interop/test_fmil.py), exit 1
+    fmi3 = [p for p in paths if p in {str(fmus["fmi3"][m]) for m in FMU_NAMES}]
+    assert fmil_messages(proc.stderr) == sum((terminal_messages(p) for p in fmi3), Counter()), proc.stderr
+    assert proc.returncode == (1 if fmi3 else 0), proc.stdout + proc.stderr
+    assert proc.stdout.count("FMIL parse: 0 warnings, 0 errors") == len(paths) - len(fmi3), proc.stdout
 
 
 FMIL_READER = Path(__file__).resolve().parent / "c_host" / "fmil_dependencies.c"
+# The FMIL log lines of fmil_dependencies.c on a valid FMI 3.0 terminalsAndIcons.xml
+FMIL_ON_TERMINALS_LOG = re.compile(
+    r"\[FMIL FMI3XML\] (?:\[Line:\d+\] )?(?:Unknown element 'GraphicalRepresentation' in XML, skipping"
+    r"|Skipping nested XML element '(?:CoordinateSystem|Icon)'|Attribute 'description' not processed by element "
+    r"'Terminal' handle|Unknown attribute '(?:matchingRule|variableName|memberName|variableKind)=[^']*' in XML)")
 
 
 @pytest.mark.needs_shared("tools/fmil/fmil_check")
@@ -118,7 +136,9 @@ def test_fmil_reads_the_declared_dependencies(fmus, built, tmp_path):
     work = tmp_path / "unpacked"
     work.mkdir()
     proc = subprocess.run([str(exe), str(work), *(str(p) for _, _, p in cases)], capture_output=True, text=True)
-    assert proc.returncode == 0 and not proc.stderr, proc.stderr
+    assert proc.returncode == 0, proc.stderr
+    # FMIL's messages on the FMI 3.0 terminalsAndIcons.xml only (tests/interop/test_fmil.py)
+    assert all(FMIL_ON_TERMINALS_LOG.fullmatch(line) for line in proc.stderr.splitlines()), proc.stderr
     read = {}
     for line in proc.stdout.splitlines():
         head, _, deps = line.partition(":")
@@ -132,6 +152,8 @@ def test_fmil_reads_the_declared_dependencies(fmus, built, tmp_path):
             got = {k: {o: tuple(sorted(v)) for o, v in read[str(path)][k].items()} for k in "OI"}
         else:
             step, initial = _expected(model, family == "fmi3")
+            if family == "fmi2" and model in ME_STATES:  # the Model Exchange state derivatives
+                initial = {**initial, **{n: i for n, (_, i) in state_derivative_dependencies(model).items()}}
             got = read[str(path)]
         for kind, expected in (("O", step), ("I", initial)):
             if family in ("python", "fmi2") and not any(expected.values()):

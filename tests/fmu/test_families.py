@@ -89,13 +89,14 @@ def test_native_fmus_wired_with_their_defaults_run_the_paper_scenario_bit_for_bi
     """The master on the native SSP with no parameter set gives the same doubles as the paper
     scenario with its parameters, in both orderings."""
     from orchestrator.engine.master import CoSimulation
+    from orchestrator.experiments.roles import ROLES
 
     scenario = paper_scenario(0.05)
     names = MOTOR_POSITIONS + COMMANDS
     for ordering in ("gauss-seidel", "jacobi"):
         ours = orchestrator_rows(native_built[family]["ssp"], scenario, names, ordering)
         rows = []
-        with CoSimulation(native_built[family]["ssp"], {}, 0.0, scenario.step, ordering) as sim:
+        with CoSimulation(native_built[family]["ssp"], {}, 0.0, scenario.step, ordering, roles=ROLES) as sim:
             index = [sim.columns.index(n) for n in names]
             rows.append([sim.row()[i] for i in index])
             for _ in range(scenario.n_steps):

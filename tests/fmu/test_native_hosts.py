@@ -22,6 +22,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+import compatibility
 import fmpy
 import lief
 import numpy as np
@@ -179,7 +180,7 @@ def windows_path(path: Path) -> str:
 
 @pytest.mark.windows
 @pytest.mark.parametrize("family", FAMILIES)
-def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_built, family, tmp_path):
+def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_built, family, tmp_path, request):
     steps = 2000
     linux_exe = compile_host(family, tmp_path)
     windows_exe = compile_host(family, tmp_path, windows=True)
@@ -206,6 +207,13 @@ def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_
         assert np.all(np.abs(win - linux) <= 1e-12 * np.abs(linux)), (model, win - linux)
     assert np.abs(results[PLANT][0][:3]).min() > 0.01  # the platform has moved (cm), so this compares something
     assert np.all(np.abs(results[CONTROLLER][0][:3]) > 0.0)
+    wine = subprocess.run([wine_binary(), "--version"], env=env, capture_output=True, text=True, timeout=60)
+    compatibility.record(
+        request, tool="wine", version=wine.stdout.split()[0].removeprefix("wine-"), fmi=f"{family[3]}.0",
+        interface="CS", platform="x86_64-windows (wine on x86_64-linux)",
+        command=f"wine {family}_host.exe FMU_FOLDER MODEL 2000 0.0001 ... (tests/fmu/c_host/{family}_host.c)",
+        difference=compatibility.difference(max(compatibility.relative(w, lx) for lx, w in results.values()),
+                                            "relative", "the x86_64-linux binaries, after 2,000 steps"))
     # measured: identical bit for bit (0.0); first wine start ~10 s, then < 1 s per run
     print(family, "wine seconds", seconds,
           "max relative difference", {m: float(np.max(np.abs(w - lx) / np.maximum(np.abs(lx), 1e-300)))
@@ -301,7 +309,8 @@ def run_fmu_check(fmu: Path, tmp_path: Path) -> tuple[subprocess.CompletedProces
     unpack = tmp_path / "unpack"
     unpack.mkdir()
     csv, log = tmp_path / "out.csv", tmp_path / "log.txt"
-    proc = subprocess.run([str(FMU_CHECK), "-h", "1e-4", "-s", "0.01", "-t", str(unpack), "-o", str(csv),
+    # -k cs: the Co-Simulation interface (the plant offers Model Exchange too, which fmuCheck takes first)
+    proc = subprocess.run([str(FMU_CHECK), "-k", "cs", "-h", "1e-4", "-s", "0.01", "-t", str(unpack), "-o", str(csv),
                            "-e", str(log), str(fmu)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     return proc, log.read_text(), csv
 
@@ -310,7 +319,7 @@ def run_fmu_check(fmu: Path, tmp_path: Path) -> tuple[subprocess.CompletedProces
 @pytest.mark.parametrize("kind", ["native", "pythonfmu"])
 @pytest.mark.parametrize("model", FMU_NAMES)
 def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(
-        native_built, built, kind, model, tmp_path):
+        native_built, built, kind, model, tmp_path, request):
     fmu = native_built["fmi2"][model] if kind == "native" else built[model]
     proc, log, csv = run_fmu_check(fmu, tmp_path)
     summary = log[log.find("FMU check summary:"):]
@@ -323,3 +332,10 @@ def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(
     data = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
     assert header == ["time", *outputs(model)]
     assert data.shape == (101, 1 + len(outputs(model))) and np.all(np.isfinite(data))  # t = 0, 1e-4 ... 0.01
+    ours = fmpy.simulate_fmu(str(fmu), stop_time=0.01, output_interval=STEP)
+    fmpy_rows = np.array([ours[n] for n in outputs(model)]).T
+    compatibility.record(
+        request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0", interface="CS",
+        command=f"fmuCheck.linux64 -k cs -h 1e-4 -s 0.01 {'native/fmi2/' if kind == 'native' else 'build/'}{model}.fmu",
+        difference=compatibility.difference(compatibility.relative(data[:, 1:], fmpy_rows), "relative",
+                                            "FMPy simulate_fmu (fmuCheck accumulates t += h)"))

@@ -11,6 +11,7 @@ ordering = "jacobi" and clock = "accumulated" (connections propagated, the defau
 import os
 from pathlib import Path
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
@@ -53,12 +54,17 @@ def ecos_run(built):
     return (scenario, *run_ecos(built["ssp"], scenario, NAMES))
 
 
-def test_ecos_is_bit_identical_with_the_orchestrator_jacobi_ordering_on_its_clock(built, ecos_run):
+def test_ecos_is_bit_identical_with_the_orchestrator_jacobi_ordering_on_its_clock(built, ecos_run, request):
     scenario, ec, times = ecos_run
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi", clock="accumulated")
     assert ec.shape == ours.shape == (2001, 9)
     assert np.array_equal(ec, ours), dict(zip(NAMES, np.abs(ec - ours).max(axis=0)))
     assert np.abs(ec[-1, :3]).min() > 1e-3  # the platform has moved (mm), so this compares something
+    compatibility.record(
+        request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="EcosSimulation(ssp_path='build/TAPMP.ssp', step_size=1e-4)",
+        difference=compatibility.difference(compatibility.largest(ec, ours), "",
+                                            "tapmp run, ordering=jacobi, clock=accumulated"))
 
 
 def test_ecos_time_accumulates(ecos_run):
@@ -89,7 +95,7 @@ def test_ecos_differs_from_gauss_seidel_by_the_extra_sample_of_delay(built, ecos
 def test_ecos_executable_runs_the_ssp_in_a_process_without_python(built, tmp_path):
     """Ecos's own `ecos simulate` (C++, no Python in the process): the FMUs start the
     interpreter named in their python-env.txt. Its CSV has 6 decimals, so the commands
-    (hundreds of N) are compared to 5e-7 N, which tells the orderings apart (GS: 20 N)."""
+    (tens of N) are compared to 5e-7 N, which tells the orderings apart (GS: 20 N)."""
     import shutil
     import stat
     import subprocess
@@ -115,6 +121,6 @@ def test_ecos_executable_runs_the_ssp_in_a_process_without_python(built, tmp_pat
                                             controller={})
     ours = orchestrator_rows(built["ssp"], default, names, "jacobi", clock="accumulated")
     assert np.abs(got - ours).max() <= 5.1e-7, np.abs(got - ours).max()
-    assert np.abs(ours).max() > 100.0
+    assert np.abs(ours).max() > 10.0  # N: the commands of the paper's run (measured 28 N), so this compares something
     gs = orchestrator_rows(built["ssp"], default, names, "gauss-seidel", clock="accumulated")
     assert np.abs(got - gs).max() > 1.0

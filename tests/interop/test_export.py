@@ -18,6 +18,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
@@ -103,7 +104,7 @@ def test_the_parameter_sets_hold_every_value_the_scenario_sets_bound_to_each_ele
         assert all(types[n] == ("Integer" if isinstance(v, int) else "Real")
                    for n, v in expected[component.name].items()), types
     assert got == expected
-    assert set(INITIAL_STATE) <= set(got["plant"]) and got["plant"]["dX0"] == pytest.approx(0.0251327, rel=1e-5)
+    assert set(INITIAL_STATE) <= set(got["plant"]) and got["plant"]["dX0"] == pytest.approx(2 * DEFAULT_DX0, rel=1e-12)
     assert got["controller"]["law"] == 0 and len([n for n in got["controller"] if n[-1] in "123"]) == 15
     assert experiment(ssp) == (0.0, 0.2, 1e-4)
 
@@ -114,7 +115,7 @@ def test_start_values_are_written_next_to_the_ssp_and_printed(exported):
     names, texts = pairs[0::2], pairs[1::2]
     expected = {f"{e}.{n}": v for e, t in scenario.parameters().items() for n, v in t.items()}
     assert dict(zip(names, map(float, texts))) == expected and len(names) == len(expected)
-    assert "plant.dX0 0.025132741228718346" in values.read_text()
+    assert f"plant.dX0 {2 * DEFAULT_DX0!r}" in values.read_text()  # the reference at twice the frequency
     assert " ".join(pairs) in printed and str(ssp) in printed and str(values) in printed
 
 
@@ -173,7 +174,7 @@ def run_libcosim_exported(ssp, names):
 
 
 def test_libcosim_runs_the_exported_ssp_alone_bit_identical_on_its_nanosecond_clock(built, exported,
-                                                                                  without_initial_state):
+                                                                                  without_initial_state, request):
     """libcosim applies each component's first parameter set from the SSD (its default set) and
     takes the step size from the DefaultExperiment's OSP annotation: nothing is set by hand."""
     scenario, ssp, _, _ = exported
@@ -182,6 +183,10 @@ def test_libcosim_runs_the_exported_ssp_alone_bit_identical_on_its_nanosecond_cl
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi", clock="nanoseconds")[1:]
     assert np.array_equal(rows, ours), dict(zip(NAMES, np.abs(rows - ours).max(axis=0)))
     assert_initial_state_matters(rows, without_initial_state, first=1)
+    compatibility.record(
+        request, tool="libcosim", version=compatibility.python_version("libcosimpy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="CosimExecution.from_ssp_file('paper.ssp') (tapmp export --fmus python)",
+        difference=compatibility.difference(compatibility.largest(rows, ours), "", "tapmp run, ordering=jacobi, clock=nanoseconds"))
 
 
 # ---------------------------------------------------------------- Ecos
@@ -204,7 +209,7 @@ def run_ecos_exported(ssp, names, parameter_set):
 
 
 def test_ecos_runs_the_exported_ssp_with_its_named_parameter_set_bit_identical(built, exported,
-                                                                              without_initial_state):
+                                                                              without_initial_state, request):
     """Ecos applies an SSP parameter set when it is named at init (``parameter_set=`` in
     ecospy, ``--parameterSet`` of `ecos simulate`): the scenario's name."""
     scenario, ssp, _, _ = exported
@@ -213,6 +218,10 @@ def test_ecos_runs_the_exported_ssp_with_its_named_parameter_set_bit_identical(b
     assert rows.shape == ours.shape == (2001, 9)
     assert np.array_equal(rows, ours), dict(zip(NAMES, np.abs(rows - ours).max(axis=0)))
     assert_initial_state_matters(rows, without_initial_state)
+    compatibility.record(
+        request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="EcosSimulation(ssp_path='paper.ssp', step_size=1e-4).init(0.0, parameter_set='paper_simulation') (tapmp export --fmus python)",
+        difference=compatibility.difference(compatibility.largest(rows, ours), "", "tapmp run, ordering=jacobi, clock=accumulated"))
 
 
 def test_ecos_without_the_parameter_set_name_keeps_the_fmus_start_values(exported):
@@ -258,7 +267,7 @@ def run_ecos_executable(ssp, parameter_set, folder, names):
     return data[:, [header.index(n) for n in names]]
 
 
-def test_the_ecos_executable_runs_the_exported_ssp_writing_where_it_is_started(built, exported, tmp_path):
+def test_the_ecos_executable_runs_the_exported_ssp_writing_where_it_is_started(built, exported, tmp_path, request):
     """`ecos simulate --parameterSet NAME` in a folder of the user's choice; its CSV has 6
     decimals, so the commands (hundreds of N) are compared to 5e-7 N."""
     scenario, ssp, _, _ = exported
@@ -270,6 +279,12 @@ def test_the_ecos_executable_runs_the_exported_ssp_writing_where_it_is_started(b
     rest = orchestrator_rows(built["ssp"], scenario.with_changes(start_on_trajectory=False), COMMANDS,
                              "jacobi", clock="accumulated")
     assert np.abs(got - rest).max() > 1.0  # N: without the initial state the commands differ
+    compatibility.record(
+        request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="ecos simulate --path paper.ssp --stepSize 0.0001 --stopTime 0.2 --parameterSet paper_simulation "
+                "(tapmp export --fmus python)",
+        difference=compatibility.difference(compatibility.largest(got, ours), "N",
+                                            "tapmp run, ordering=jacobi, clock=accumulated (6-decimal CSV)"))
 
 
 # ---------------------------------------------------------------- FMPy simulate_ssp
@@ -294,7 +309,8 @@ def run_fmpy_ssp_exported(ssp, names):
     return np.array([result[n] for n in names]).T
 
 
-def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, exported, without_initial_state):
+def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, exported, without_initial_state,
+                                                                         request):
     scenario, ssp, _, _ = exported
     rows = run_fmpy_ssp_exported(ssp, NAMES)
     sc = scenario.with_changes(stop_time=scenario.stop_time + scenario.step)  # it runs 2,001 steps
@@ -302,6 +318,10 @@ def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, 
     assert rows.shape == (2001, 9)
     assert np.array_equal(rows, ours[1:]), dict(zip(NAMES, np.abs(rows - ours[1:]).max(axis=0)))
     assert_initial_state_matters(rows, without_initial_state, first=1)
+    compatibility.record(
+        request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="fmpy.ssp.simulate_ssp('paper.ssp', stop_time=0.2, step_size=1e-4, parameter_set=<its bindings>) (tapmp export --fmus python)",
+        difference=compatibility.difference(compatibility.largest(rows, ours[1:]), "", "tapmp run, ordering=jacobi, clock=accumulated, connection_start=zero"))
 
 
 def test_fmpy_simulate_ssp_ignores_the_bindings_by_itself(exported):
@@ -334,13 +354,17 @@ def run_container(container, ssp, values, names, out):
 
 
 def test_fmpy_simulate_on_the_container_with_the_exported_start_values_is_bit_identical(
-        built, exported, tmp_path, without_initial_state):
+        built, exported, tmp_path, without_initial_state, request):
     scenario, ssp, values, _ = exported
     rows = run_container(built[CONTAINER], ssp, values, NAMES, tmp_path / "closed_loop.csv")
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi")
     assert rows.shape == ours.shape == (2001, 9)
     assert np.array_equal(rows, ours), dict(zip(NAMES, np.abs(rows - ours).max(axis=0)))
     assert_initial_state_matters(rows, without_initial_state)
+    compatibility.record(
+        request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="CS (container FMU)",
+        command="fmpy simulate build/TAPMP_ClosedLoop.fmu --stop-time 0.2 --output-interval 0.0001 --start-values $(cat paper.start-values.txt)",
+        difference=compatibility.difference(compatibility.largest(rows, ours), "", "tapmp run, ordering=jacobi"))
 
 
 # ---------------------------------------------------------------- bad input

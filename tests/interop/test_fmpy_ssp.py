@@ -11,6 +11,7 @@ The orchestrator with connection_start = "zero" and clock = "accumulated" reprod
 bit for bit; with its defaults the zero start moves the motors by up to ~0.1 um.
 """
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
@@ -44,7 +45,7 @@ def test_fmpy_ssp_runs_one_step_more_with_accumulated_time_labels(fmpy_run):
     assert result["time"][-1] < 0.2
 
 
-def test_fmpy_ssp_is_bit_identical_with_the_orchestrator_on_its_conventions(built, fmpy_run):
+def test_fmpy_ssp_is_bit_identical_with_the_orchestrator_on_its_conventions(built, fmpy_run, request):
     scenario, _, fm = fmpy_run
     sc = scenario.with_changes(stop_time=scenario.stop_time + scenario.step)  # 2,001 steps
     ours = orchestrator_rows(built["ssp"], sc, NAMES, "jacobi", clock="accumulated",
@@ -52,6 +53,11 @@ def test_fmpy_ssp_is_bit_identical_with_the_orchestrator_on_its_conventions(buil
     assert np.all(ours[0] == 0.0)  # no output is read before the first step
     assert np.array_equal(fm, ours[1:]), dict(zip(NAMES, np.abs(fm - ours[1:]).max(axis=0)))
     assert np.abs(fm[-1, :3]).min() > 1e-3  # the platform has moved (mm), so this compares something
+    compatibility.record(
+        request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="fmpy.ssp.simulate_ssp('build/TAPMP.ssp', stop_time=0.2, step_size=1e-4, parameter_set=...)",
+        difference=compatibility.difference(compatibility.largest(fm, ours[1:]), "",
+                                            "tapmp run, ordering=jacobi, clock=accumulated, connection_start=zero"))
 
 
 def test_fmpy_ssp_zero_start_is_the_difference_to_the_orchestrator(built, fmpy_run):

@@ -3,6 +3,7 @@ TAPMP_ClosedLoop.fmu (the three pythonfmu FMUs inside fmpy's container runtime; 
 themselves are checked in tests/fmu/test_native_hosts.py): no warning or error, and the values it
 records are fmpy's (fmuCheck writes 17 significant digits)."""
 
+import compatibility
 import numpy as np
 import pytest
 from fmpy import simulate_fmu
@@ -13,7 +14,7 @@ from orchestrator.engine.container import CONTAINER
 pytestmark = pytest.mark.needs_shared("tools/fmuCheck/fmuCheck.linux64")
 
 
-def test_fmu_compliance_checker_passes_the_container_fmu_with_fmpys_results(built, tmp_path):
+def test_fmu_compliance_checker_passes_the_container_fmu_with_fmpys_results(built, tmp_path, request):
     proc, log, csv = run_fmu_check(built[CONTAINER], tmp_path)
     summary = log[log.find("FMU check summary:"):]
     assert proc.returncode == 0, summary or log
@@ -29,3 +30,6 @@ def test_fmu_compliance_checker_passes_the_container_fmu_with_fmpys_results(buil
     for i, name in enumerate(header[1:], start=1):
         assert np.array_equal(data[:, i], ours[name]), name
     assert np.abs(ours["controller.F1"]).max() > 1.0
+    compatibility.record(request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0",
+                         interface="CS", command=f"fmuCheck.linux64 -k cs -h 1e-4 -s 0.01 build/{CONTAINER}.fmu",
+                         difference=compatibility.difference(0.0, "", "FMPy simulate_fmu"))  # array_equal above

@@ -9,6 +9,7 @@ significant digits, so its results equal fmpy's simulate_fmu to the last printed
 import subprocess
 from pathlib import Path
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import shared
@@ -37,7 +38,7 @@ def run_fmusim(fmu: Path, folder: Path, start: dict, interval: float = 1e-4) -> 
 
 @pytest.mark.parametrize("model", FMU_NAMES)
 @pytest.mark.parametrize("version", ["fmi2", "fmi3"])
-def test_fmusim_runs_each_native_fmu_with_no_warning_as_fmpy_does(native_built, version, model, tmp_path):
+def test_fmusim_runs_each_native_fmu_with_no_warning_as_fmpy_does(native_built, version, model, tmp_path, request):
     fmu = native_built[version][model]
     start = START.get(model, {})
     log, result = run_fmusim(fmu, tmp_path, start)
@@ -48,6 +49,14 @@ def test_fmusim_runs_each_native_fmu_with_no_warning_as_fmpy_does(native_built, 
         assert np.allclose(result[name], ours[name], rtol=1e-15, atol=0), name
     outputs = [n for n in ours.dtype.names if n != "time"]
     assert max(abs(ours[n][-1]) for n in outputs) > 1e-3  # it computed something
+    got, expected = (np.array([r[n] for n in outputs]).T for r in (result, ours))
+    starts = "".join(f" --start-value {n} {v!r}" for n, v in start.items())
+    compatibility.record(
+        request, tool="fmusim", version=compatibility.fmusim_version(shared(FMUSIM)), fmi=version[3] + ".0",
+        interface="CS", command=f"fmusim --interface-type cs --stop-time 0.2 --output-interval 1e-4{starts} "
+                                f"{compatibility.family_path(version, model)}",
+        difference=compatibility.difference(compatibility.relative(got, expected), "relative",
+                                            "FMPy simulate_fmu (16 printed digits)"))
 
 
 @pytest.mark.parametrize("version", ["fmi2", "fmi3"])

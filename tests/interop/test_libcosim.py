@@ -11,6 +11,7 @@ h_k = t_{k+1} - t_k, which differ from k * 1e-4 in the last bit for ~30 % of k; 
 orchestrator's clock = "nanoseconds" reproduces that.
 """
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
@@ -74,7 +75,7 @@ def test_libcosim_equals_the_orchestrator_jacobi_ordering_on_every_motor_positio
     assert np.abs(lc[-1, :3]).min() > 1e-3  # the platform has moved (mm), so this compares something
 
 
-def test_libcosim_is_bit_identical_with_its_nanosecond_clock(built, libcosim_run):
+def test_libcosim_is_bit_identical_with_its_nanosecond_clock(built, libcosim_run, request):
     scenario, lc = libcosim_run
     ours = orchestrator_rows(built["ssp"], scenario, NAMES, "jacobi", clock="nanoseconds")[1:]
     assert np.array_equal(lc, ours)
@@ -82,6 +83,11 @@ def test_libcosim_is_bit_identical_with_its_nanosecond_clock(built, libcosim_run
     # commands: the controller's backward difference amplifies the time rounding.
     exact = orchestrator_rows(built["ssp"], scenario, COMMANDS, "jacobi")[1:]
     assert 0.0 < np.abs(lc[:, 6:] - exact).max() < 1e-9  # N (measured 7e-11 N of ~20 N)
+    compatibility.record(
+        request, tool="libcosim", version=compatibility.python_version("libcosimpy"), fmi="2.0",
+        interface="SSP 1.0, CS", command="CosimExecution.from_ssp_file('build/TAPMP.ssp', step_size=100000)",
+        difference=compatibility.difference(compatibility.largest(lc, ours), "",
+                                            "tapmp run, ordering=jacobi, clock=nanoseconds"))
 
 
 def test_gauss_seidel_differs_from_libcosim_by_the_extra_sample_of_delay(built, libcosim_run):

@@ -7,6 +7,7 @@
 * FMPy's simulate_fmu simulates each native FMI 3.0 FMU on its own.
 """
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
@@ -19,7 +20,7 @@ from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 NAMES = MOTOR_POSITIONS + COMMANDS
 
 
-def test_libcosim_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_nanosecond_clock(native_built):
+def test_libcosim_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_nanosecond_clock(native_built, request):
     ssp = native_built["fmi2"]["ssp"]
     scenario = paper_scenario()
     lc = run_libcosim(ssp, scenario, NAMES)
@@ -31,9 +32,14 @@ def test_libcosim_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_n
     exact = orchestrator_rows(ssp, scenario, NAMES, "jacobi")[1:]
     diff = np.abs(lc - exact).max(axis=0)
     assert np.all(diff[:6] <= 1e-12) and np.all(diff[3:6] == 0.0), dict(zip(NAMES, diff))
+    compatibility.record(
+        request, tool="libcosim", version=compatibility.python_version("libcosimpy"), fmi="2.0",
+        interface="SSP 1.0, CS", command="CosimExecution.from_ssp_file('native/fmi2/TAPMP.ssp', step_size=100000)",
+        difference=compatibility.difference(compatibility.largest(lc, ours), "",
+                                            "tapmp run, ordering=jacobi, clock=nanoseconds"))
 
 
-def test_ecos_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_accumulated_clock(native_built):
+def test_ecos_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_accumulated_clock(native_built, request):
     ssp = native_built["fmi2"]["ssp"]
     scenario = paper_scenario()
     ec, times = run_ecos(ssp, scenario, NAMES)
@@ -42,6 +48,11 @@ def test_ecos_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_accum
     assert np.array_equal(ec, ours), dict(zip(NAMES, np.abs(ec - ours).max(axis=0)))
     assert np.array_equal(times, np.cumsum([0.0] + [scenario.step] * scenario.n_steps))
     assert np.abs(ec[-1, :3]).min() > 1e-3
+    compatibility.record(
+        request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
+        command="EcosSimulation(ssp_path='native/fmi2/TAPMP.ssp', step_size=1e-4)",
+        difference=compatibility.difference(compatibility.largest(ec, ours), "",
+                                            "tapmp run, ordering=jacobi, clock=accumulated"))
 
 
 START_VALUES = {PLANT: {"F1": 20.0, "F2": 10.0, "F3": 60.0},

@@ -20,6 +20,7 @@ import subprocess
 import types
 from pathlib import Path
 
+import compatibility
 import numpy as np
 import pytest
 import scipy.io
@@ -125,7 +126,8 @@ def assert_the_clock_of_omsimulator(times):
 
 @pytest.mark.parametrize("model", FMU_NAMES)
 @pytest.mark.parametrize("version", ["fmi2", "fmi3"])
-def test_omsimulator_runs_each_native_fmu_alone_as_fmpy_does(omsimulator, native_built, version, model, tmp_path):
+def test_omsimulator_runs_each_native_fmu_alone_as_fmpy_does(omsimulator, native_built, version, model, tmp_path,
+                                                           request):
     fmu = native_built[version][model]
     run_omsimulator(omsimulator, ["--tempDir=.", "--resultFile=alone.mat", "--mode=cs", "--stopTime=0.2",
                                   f"--stepSize={STEP}", fmu], tmp_path)
@@ -147,6 +149,12 @@ def test_omsimulator_runs_each_native_fmu_alone_as_fmpy_does(omsimulator, native
         assert np.array_equal(final, after), dict(zip(outputs, final - after))
     else:                    # the plant and the reference move by 5.7e-15 s
         assert np.allclose(final, rows[-1], rtol=1e-12, atol=1e-15)
+    compatibility.record(
+        request, tool="OMSimulator", version=compatibility.omsimulator_version(omsimulator), fmi=version[3] + ".0",
+        interface="CS", command=f"OMSimulator --mode=cs --stopTime=0.2 --stepSize=0.0001 "
+                                f"{compatibility.family_path(version, model)}",
+        difference=compatibility.difference(compatibility.relative(rows, expected), "relative",
+                                            "FMPy simulate_fmu (OMSimulator's accumulated clock)"))
 
 
 # -- the built SSPs, as shipped ---------------------------------------------------------------------
@@ -160,7 +168,7 @@ FMU_DEFAULTS = types.SimpleNamespace(parameters=lambda: {}, start_time=0.0, step
 
 @pytest.mark.parametrize("family", ["python", "fmi2", "fmi3"])
 def test_omsimulator_runs_the_built_ssp_as_shipped_writing_the_result_file_it_names(
-        omsimulator, built, native_built, family, tmp_path):
+        omsimulator, built, native_built, family, tmp_path, request):
     ssp = built_ssp(family, built, native_built)
     extra = FIXED_POINT if family == "fmi3" else []
     # OMSimulator's stop time defaults to 1 s whatever the SSP says; the step comes from the SSP
@@ -176,6 +184,12 @@ def test_omsimulator_runs_the_built_ssp_as_shipped_writing_the_result_file_it_na
     ours = orchestrator_rows(ssp, FMU_DEFAULTS, NAMES, "jacobi", clock="accumulated")[:2000]
     assert np.allclose(rows, ours, rtol=1e-11, atol=1e-18), dict(zip(NAMES, np.abs(rows - ours).max(axis=0)))
     assert np.abs(ours[-1, :3]).min() > 1e-3
+    compatibility.record(
+        request, tool="OMSimulator", version=compatibility.omsimulator_version(omsimulator),
+        fmi="3.0" if family == "fmi3" else "2.0", interface="SSP 1.0, CS",
+        command=f"OMSimulator {' '.join(extra + [''])}--stopTime=0.2 {compatibility.family_path(family)}TAPMP.ssp",
+        difference=compatibility.difference(compatibility.relative(rows, ours), "relative",
+                                            "tapmp run, ordering=jacobi, clock=accumulated (12-digit CSV)"))
 
 
 # -- the exported SSPs: the scenario's parameter sets applied -----------------------------------------
@@ -206,7 +220,7 @@ def run_exported(omsimulator, ssp, family, folder) -> tuple[np.ndarray, np.ndarr
 
 @pytest.mark.parametrize("family", ["python", "fmi2", "fmi3"])
 def test_omsimulator_applies_the_exported_parameter_sets_and_matches_the_orchestrator(
-        omsimulator, exported, family, tmp_path):
+        omsimulator, exported, family, tmp_path, request):
     times, rows, final = run_exported(omsimulator, exported[family], family, tmp_path)
     assert_the_clock_of_omsimulator(times)
     scenario = paper_scenario(0.2, *FASTER)
@@ -224,6 +238,15 @@ def test_omsimulator_applies_the_exported_parameter_sets_and_matches_the_orchest
     # the 5.7e-15 s step takes the sample k = 2000: the command a further 1e-4 s step computes
     assert np.array_equal(final[6:], after[2001, 6:]), (final, after[2001])
     assert np.abs(final[:3] - rows[-1, :3]).max() < 1e-15 and np.all(np.abs(final[6:]) < 600)
+    extra = FIXED_POINT if family == "fmi3" else []
+    compatibility.record(
+        request, tool="OMSimulator", version=compatibility.omsimulator_version(omsimulator),
+        fmi="3.0" if family == "fmi3" else "2.0", interface="SSP 1.0, CS",
+        command=f"OMSimulator {' '.join(extra + [''])}--stopTime=0.2 --resultFile=paper.mat paper.ssp "
+                f"(tapmp export --fmus {'native' if family == 'fmi2' else family})",
+        difference=compatibility.difference(compatibility.largest(rows[:, :3], ours[:, :3]), "m",
+                                            "tapmp run, ordering=jacobi, clock=accumulated (encoder and "
+                                            "commands bit for bit)"))
 
 
 def test_omsimulator_differs_from_tapmp_run_with_its_defaults_by_the_jacobi_delay(omsimulator, exported, tmp_path):

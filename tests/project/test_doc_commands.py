@@ -179,9 +179,16 @@ def test_every_package_the_docs_import_is_installed_by_the_quick_start():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     quick = re.search(r"pip install -e '\.\[(\w+)\]'", (ROOT / "README.md").read_text()).group(1)
     installed = {re.split(r"[<>=\[ ]", d)[0] for d in project["dependencies"] + project["optional-dependencies"][quick]}
-    modules = {"libcosimpy": "libcosimpy", "ecospy": "ecospy", "lief": "lief", "hypothesis": "hypothesis"}
+    modules = {"libcosimpy": "libcosimpy", "ecospy": "ecospy", "lief": "lief", "hypothesis": "hypothesis",
+               "fmu_manipulation_toolbox": "fmu-manipulation-toolbox"}
+    programs = {"fmucontainer": "fmu-manipulation-toolbox", "pytest": "pytest"}  # .venv/bin/PROGRAM in a command
     for doc in DOCS:
         text = (ROOT / doc).read_text()
         for module, package in modules.items():
             if re.search(rf"^\s*(from|import) {module}\b|import {module}\b", text, re.M):
                 assert package in installed, f"{doc} imports {module}, which the quick start does not install"
+        for block in commands(text):
+            for cmd in block:
+                for program, package in programs.items():
+                    if re.search(rf"\.venv/bin/{program}\b", cmd) and not any(re.search(x, cmd) for x in NOT_RUN):
+                        assert package in installed, f"{doc} runs {program}, which the quick start does not install"

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.results import run_scenario
 from orchestrator.experiments.scenario import load
 from tapmp.closed_loop import simulate
@@ -31,7 +32,7 @@ def test_fmu_closed_loop_equals_the_plain_python_loop(built, ordering):
     scenario = load(PAPER, [f'ordering="{ordering}"', "stop_time=0.1"])
     expected = plain_loop(scenario)
     got = []
-    with CoSimulation(built["ssp"], scenario.parameters(), 0.0, scenario.step, ordering) as sim:
+    with CoSimulation(built["ssp"], scenario.parameters(), 0.0, scenario.step, ordering, roles=ROLES) as sim:
         names = ["time", "controller.F1", "controller.F2", "controller.F3", "plant.q1", "plant.q2", "plant.q3",
                  "plant.q1_true", "plant.q2_true", "plant.q3_true"]
         idx = [sim.columns.index(n) for n in names]
@@ -82,7 +83,7 @@ def test_failing_step_stops_keeps_results_and_leaves_nothing_behind(built, tmp_p
 
 def test_unknown_parameter_is_named_with_what_is_allowed(built):
     with pytest.raises(CoSimulationError, match=r"plant.mass is not a parameter of TAPMP_Plant: allowed are .*m_p"):
-        with CoSimulation(built["ssp"], {"plant": {"mass": 1.0}}):
+        with CoSimulation(built["ssp"], {"plant": {"mass": 1.0}}, roles=ROLES):
             pass
 
 

@@ -12,6 +12,7 @@ from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.engine.schedule import (Connection, ScheduleError, check_algebraic_loops, gauss_seidel_order,
                                           initialization_order)
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.scenario import load
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -134,7 +135,7 @@ def rewrite_ssp(ssp: Path, out: Path, rename=None, add=(), rewire=None) -> Path:
 
 def record(ssp, parameters, n, ordering="gauss-seidel", order=None):
     """(columns, rows as an array, step order, initialization order) of n steps."""
-    with CoSimulation(ssp, parameters, 0.0, 1e-4, ordering, order=order) as sim:
+    with CoSimulation(ssp, parameters, 0.0, 1e-4, ordering, order=order, roles=ROLES) as sim:
         rows = [sim.row()]
         for _ in range(n):
             sim.step()
@@ -152,6 +153,17 @@ def test_renamed_elements_give_bit_identical_results(built, tmp_path, ordering):
     assert np.array_equal(rows1, rows0)
     assert order1 == [RENAME[e] for e in order0] and init1 == [RENAME[e] for e in init0]
     assert np.abs(rows0[-1, 1:]).max() > 0.0  # the loop moved: the comparison compares something
+
+
+def test_without_roles_the_master_names_columns_and_tables_by_element(built, tmp_path):
+    renamed = rewrite_ssp(built["ssp"], tmp_path / "renamed.ssp", rename=RENAME)
+    with CoSimulation(renamed, {"axis": {"k_pull": 0.0}}) as sim:  # no roles: the engine knows no TAPMP
+        assert {c.split(".")[0] for c in sim.columns} == {"time", "ref", "ctl", "axis"}
+        assert {"axis.q1", "ctl.F1"} <= set(sim.columns)
+    with pytest.raises(CoSimulationError, match=r"parameters given for unknown element\(s\) plant: allowed are "
+                                                r"ref, ctl, axis$"):
+        with CoSimulation(renamed, {"plant": {"k_pull": 0.0}}):
+            pass
 
 
 @pytest.mark.slow
@@ -272,7 +284,7 @@ def test_a_bad_order_through_the_cli_is_one_line_and_exit_2(built, tmp_path, cap
 
 
 def _orders(ssp):
-    with CoSimulation(ssp, {}) as sim:
+    with CoSimulation(ssp, {}, roles=ROLES) as sim:
         return sim.step_order, sim.init_order
 
 

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.scenario import load
 from pathlib import Path
 
@@ -29,7 +30,7 @@ def run(ssp, step, n, ordering="gauss-seidel", **kw):
     column names and the controller's events handled; the controller samples every T_s = 0.1 ms."""
     scenario = load(PAPER, ["stop_time=0.05"])
     rows = []
-    with CoSimulation(ssp, scenario.parameters(), 0.0, step, ordering, **kw) as sim:
+    with CoSimulation(ssp, scenario.parameters(), 0.0, step, ordering, **kw, roles=ROLES) as sim:
         rows.append(sim.row())
         for _ in range(n):
             sim.step()

@@ -12,6 +12,7 @@ chain from) naming the element, the call and the time."""
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.experiments.roles import ROLES
 from conftest import PAPER
 
 
@@ -19,7 +20,7 @@ def run(ssp, ordering, steps=20):
     """Step the paper scenario's system ``steps`` times; returns the closed CoSimulation."""
     from orchestrator.experiments.scenario import load
     sc = load(PAPER)
-    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering) as sim:
+    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, roles=ROLES) as sim:
         for _ in range(steps):
             sim.step()
     return sim

@@ -8,6 +8,7 @@ import pytest
 from conftest import paper_scenario
 
 from orchestrator.engine.master import CoSimulation
+from orchestrator.experiments.roles import ROLES
 
 FORCES = [f"controller.F{i}" for i in (1, 2, 3)]
 
@@ -17,7 +18,7 @@ def plant_inputs_and_commands(ssp, ordering, steps=300):
     controller's published commands at t_k and at t_{k+1} [N]."""
     sc = paper_scenario(steps * 1e-4)
     applied, before, after = [], [], []
-    with CoSimulation(ssp, sc.parameters(), sc.start_time, sc.step, ordering) as sim:
+    with CoSimulation(ssp, sc.parameters(), sc.start_time, sc.step, ordering, roles=ROLES) as sim:
         plant = sim.units["plant"]
         vrs = [v.valueReference for v in plant.md.modelVariables if v.name in ("F1", "F2", "F3")]
         cols = [sim.columns.index(f) for f in FORCES]
@@ -39,3 +40,9 @@ def test_the_plant_steps_on_the_command_of_this_or_the_previous_sample(built, or
     assert np.array_equal(applied, expected)             # exactly, every step, every motor
     assert not np.allclose(applied, other, atol=1e-3)
 
+
+
+def test_the_plain_python_loop_offers_the_masters_orderings():
+    from orchestrator.engine.schedule import ORDERINGS
+    from tapmp.interface import ORDERINGS as PLAIN_LOOP_ORDERINGS  # tapmp.closed_loop's
+    assert PLAIN_LOOP_ORDERINGS == ORDERINGS

@@ -15,6 +15,7 @@ import pytest
 from conftest import PAPER
 from faults import faulty_plant_fmu, faulty_ssp
 from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.experiments.roles import ROLES
 
 ORDERINGS = {"gauss-seidel": ["plant", "controller", "trajectory"], "jacobi": None}  # the plant steps first
 
@@ -28,7 +29,7 @@ def run_with_nan_force(ssp, ordering, steps_before=3):
     """Step ``steps_before`` times, then once with NaN as the controller's F1 output;
     returns (the CoSimulationError, the plant's doStep times, the step's start time)."""
     sc = scenario()
-    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, order=ORDERINGS[ordering]) as sim:
+    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, order=ORDERINGS[ordering], roles=ROLES) as sim:
         plant, controller = sim.units["plant"], sim.units["controller"]
         calls = []
         do_step = plant.do_step

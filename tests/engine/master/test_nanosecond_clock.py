@@ -9,6 +9,7 @@ import pytest
 
 from orchestrator.engine.clocks import Clock
 from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments.scenario import load
 
 from conftest import PAPER
@@ -30,10 +31,10 @@ def test_the_clock_knows_its_last_representable_step():
 def test_steps_beyond_the_int64_clock_are_refused_before_any_step(built, stepper):
     parameters = load(PAPER).parameters()
     with pytest.raises(CoSimulationError) as start:
-        CoSimulation(built["ssp"], parameters, 9.3e9, 1.0, clock="nanoseconds", stepper=stepper)
+        CoSimulation(built["ssp"], parameters, 9.3e9, 1.0, clock="nanoseconds", stepper=stepper, roles=ROLES)
     assert str(start.value) == ("start_time = 9300000000.0 s is invalid for clock = 'nanoseconds': allowed are times "
                                 "within +-9223372037 s (an int64 count of nanoseconds), or another clock")
-    with CoSimulation(built["ssp"], parameters, 9223372036.84, 1e-4, clock="nanoseconds", stepper=stepper) as sim:
+    with CoSimulation(built["ssp"], parameters, 9223372036.84, 1e-4, clock="nanoseconds", stepper=stepper, roles=ROLES) as sim:
         last = sim.clock.last_k  # t_last <= 2^63 - 1 ns < t_(last + 1)
         assert 100 < last < 200
         rows = np.zeros((last + 1, len(sim.columns)))

@@ -15,6 +15,7 @@ from scipy.io import loadmat
 
 from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation
+from orchestrator.experiments.roles import ROLES
 from orchestrator.experiments import metrics
 from orchestrator.experiments.reading import read_results
 from orchestrator.experiments.results import run_scenario
@@ -27,7 +28,7 @@ PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 def alone(ssp, scenario, steps):
     """Rows of the co-simulation stepped by hand, no writer: the reference values."""
-    with CoSimulation(ssp, scenario.parameters(), 0.0, scenario.step, scenario.ordering) as sim:
+    with CoSimulation(ssp, scenario.parameters(), 0.0, scenario.step, scenario.ordering, roles=ROLES) as sim:
         return sim.columns, np.array([sim.row()] + [sim.step() or sim.row() for _ in range(steps)])
 
 

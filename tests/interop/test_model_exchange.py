@@ -1,0 +1,174 @@
+"""The native FMI 2.0 plant for Model Exchange, beside its Co-Simulation interface under one model
+identifier: FMPy (CVode), fmusim (CVODE) and OMSimulator (CVODE, which it picks by default when an
+FMU offers both) integrate its states X, Z, B, dX, dZ, dB from its derivatives and agree with
+the Co-Simulation plant's RK4 at 0.1 ms on open-loop forces; the FMI Compliance Checker and
+FMIL pass the Model Exchange interface.
+
+The tolerance. RK4's own error at 0.1 ms, estimated by Richardson extrapolation from the plant at
+one and at two RK4 substeps per 0.1 ms (error(h) ~ 16/15 |y_h - y_h/2|), is ~1e-14 of each state's
+range over 0.2 s: the Co-Simulation plant is exact to round-off here, so what the comparison
+sees is the host's integrator. Its global error, a tolerance rtol per step relative to the
+state's magnitude or its nominal (1, as the FMU declares), accumulated over the run, is bounded
+by ERROR_GROWTH x rtol x max(max |y|, 1) (measured at rtol = 1e-10: FMPy's CVode and fmusim's
+CVODE 16 x, OMSimulator's CVODE 127 x, on dB). A state agrees if
+|ME - CS| <= RK4's estimated error + ERROR_GROWTH x rtol x max(max |y|, 1).
+"""
+
+import subprocess
+from pathlib import Path
+
+import compatibility
+import numpy as np
+import pytest
+from conftest import shared
+from fmpy import simulate_fmu
+from test_omsimulator import omsimulator, read_mat, run_omsimulator  # noqa: F401 (omsimulator: its fixture)
+
+from tapmp.interface import PLANT
+
+FMUSIM = "tools/fmusim/bin/fmusim"
+OMS = "tools/OMSimulator/bin/OMSimulator"
+FMU_CHECK = "tools/fmuCheck/fmuCheck.linux64"
+FMIL_CHECK = "tools/fmil/fmil_check"
+STATES = ("X", "Z", "B", "dX", "dZ", "dB")
+FORCES = {"F1": 20.0, "F2": 10.0, "F3": 60.0}  # N, held: the platform moves ~0.1 m and ~0.9 rad in 0.2 s
+STOP, STEP = 0.2, 1e-4
+RTOL = 1e-10
+ERROR_GROWTH = 1000.0  # global error over rtol x max(|y|, nominal): measured at most 127 (module docstring)
+
+
+@pytest.fixture(scope="module")
+def plant(native_built):
+    return native_built["fmi2"][PLANT]
+
+
+def run_cs(fmu: Path, start: dict, substeps: int = 1) -> np.ndarray:
+    """The Co-Simulation plant (RK4, ``substeps`` per 0.1 ms) in FMPy: rows of STATES at t_0 ... t_n."""
+    result = simulate_fmu(str(fmu), fmi_type="CoSimulation", stop_time=STOP, output_interval=STEP,
+                          start_values={**start, "substeps": substeps}, output=list(STATES))
+    return np.array([result[n] for n in STATES]).T
+
+
+@pytest.fixture(scope="module")
+def rk4(plant):
+    """(the Co-Simulation rows, RK4's estimated error per state [m, m, rad, m/s, m/s, rad/s])."""
+    one, two = run_cs(plant, FORCES), run_cs(plant, FORCES, substeps=2)
+    return one, 16.0 / 15.0 * np.abs(one - two).max(axis=0)
+
+
+def assert_agrees(me: np.ndarray, cs: np.ndarray, rk4_error: np.ndarray, rtol: float) -> np.ndarray:
+    """|ME - CS| within RK4's error and the integrator's bound, state by state; the differences."""
+    diff = np.abs(me - cs).max(axis=0)
+    bound = rk4_error + ERROR_GROWTH * rtol * np.maximum(np.abs(cs).max(axis=0), 1.0)
+    assert np.all(diff <= bound), dict(zip(STATES, zip(diff, bound)))
+    return diff
+
+
+def test_rk4_at_the_servo_step_is_exact_to_round_off_here(rk4):
+    cs, error = rk4
+    assert np.all(error <= 1e-12 * np.abs(cs).max(axis=0)), dict(zip(STATES, error))  # measured <= 1e-14
+    assert np.abs(cs[-1, :3]).min() > 0.05  # m, rad: it moved
+
+
+def test_fmpy_cvode_on_the_model_exchange_plant_agrees_with_rk4(plant, rk4, request):
+    cs, error = rk4
+    result = simulate_fmu(str(plant), fmi_type="ModelExchange", solver="CVode", relative_tolerance=RTOL,
+                          stop_time=STOP, output_interval=STEP, start_values=FORCES, output=list(STATES))
+    me = np.array([result[n] for n in STATES]).T
+    assert me.shape == cs.shape
+    diff = assert_agrees(me, cs, error, RTOL)
+    assert diff.max() > 0.0  # another integrator: not the same doubles
+    compatibility.record(
+        request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="ME",
+        command="fmpy.simulate_fmu('native/fmi2/TAPMP_Plant.fmu', fmi_type='ModelExchange', solver='CVode', "
+                "relative_tolerance=1e-10, stop_time=0.2, output_interval=1e-4, start_values={F1, F2, F3})",
+        difference=compatibility.difference(compatibility.relative(me, cs), "relative",
+                                            "the Co-Simulation plant (RK4 at 0.1 ms)"))
+
+
+def test_fmusim_cvode_on_the_model_exchange_plant_agrees_with_rk4(plant, rk4, tmp_path, request):
+    cs, error = rk4
+    args = [str(shared(FMUSIM)), "--interface-type", "me", "--solver", "cvode", "--tolerance", repr(RTOL),
+            "--stop-time", repr(STOP), "--output-interval", repr(STEP), "--logging-on", "--log-level", "warning",
+            "--log-file", "log.txt", "--output-file", "me.csv"]
+    for name, value in FORCES.items():
+        args += ["--start-value", name, repr(value)]
+    proc = subprocess.run([*args, str(plant)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (tmp_path / "log.txt").read_text() == ""  # no warning, no error
+    result = np.genfromtxt(tmp_path / "me.csv", delimiter=",", names=True)
+    me = np.array([result[n] for n in STATES]).T
+    assert me.shape == cs.shape
+    assert_agrees(me, cs, error, RTOL)
+    compatibility.record(
+        request, tool="fmusim", version=compatibility.fmusim_version(shared(FMUSIM)), fmi="2.0", interface="ME",
+        command="fmusim --interface-type me --solver cvode --tolerance 1e-10 --stop-time 0.2 --output-interval "
+                "1e-4 --start-value F1 20.0 --start-value F2 10.0 --start-value F3 60.0 native/fmi2/TAPMP_Plant.fmu",
+        difference=compatibility.difference(compatibility.relative(me, cs), "relative",
+                                            "the Co-Simulation plant (RK4 at 0.1 ms)"))
+
+
+@pytest.mark.needs_shared(OMS)
+def test_omsimulator_picks_model_exchange_by_default_and_agrees_with_rk4(omsimulator, plant, tmp_path, request):
+    """OMSimulator's --mode defaults to "me" when an FMU offers both: its CVODE (tolerance 1e-4 unless
+    --tolerance) integrates the plant. Here with no input set (F = 0: the platform falls)."""
+    program = omsimulator
+    log = run_omsimulator(program, ["--tempDir=.", "--resultFile=me.mat", f"--stopTime={STOP!r}",
+                                    f"--stepSize={STEP!r}", f"--tolerance={RTOL!r}", plant], tmp_path)
+    assert "NumRhsEvals" in log  # CVODE's statistics: Model Exchange
+    result = read_mat(tmp_path / "me.mat")
+    times = result["time"]
+    keep = np.r_[np.diff(times) > 0, True]  # each time once (OMSimulator records event points twice)
+    me = np.array([result[n][keep] for n in STATES]).T
+    cs_result = simulate_fmu(str(plant), fmi_type="CoSimulation", stop_time=STOP, output_interval=STEP,
+                             output=list(STATES))
+    cs = np.array([np.interp(times[keep], cs_result["time"], cs_result[n]) for n in STATES]).T
+    on_grid = np.isclose(times[keep] / STEP, np.round(times[keep] / STEP), rtol=0, atol=1e-6)
+    assert on_grid.sum() >= 2000
+    diff = np.abs(me[on_grid] - cs[on_grid]).max(axis=0)
+    bound = ERROR_GROWTH * RTOL * np.maximum(np.abs(cs).max(axis=0), 1.0)  # RK4's error: ~1e-14, left out
+    assert np.all(diff <= bound), dict(zip(STATES, zip(diff, bound)))
+    cs_log = run_omsimulator(program, ["--tempDir=.", "--resultFile=cs.mat", "--mode=cs", f"--stopTime={STOP!r}",
+                                       f"--stepSize={STEP!r}", plant], tmp_path)
+    assert "NumRhsEvals" not in cs_log  # --mode=cs: the FMU's own RK4
+    compatibility.record(
+        request, tool="OMSimulator", version=compatibility.omsimulator_version(program), fmi="2.0", interface="ME",
+        command="OMSimulator --stopTime=0.2 --stepSize=0.0001 --tolerance=1e-10 native/fmi2/TAPMP_Plant.fmu "
+                "(Model Exchange: its default when an FMU offers both)",
+        difference=compatibility.difference(compatibility.relative(me[on_grid], cs[on_grid]), "relative",
+                                            "the Co-Simulation plant (RK4 at 0.1 ms)"))
+
+
+@pytest.mark.needs_shared(FMU_CHECK)
+def test_fmu_compliance_checker_passes_the_model_exchange_interface(plant, tmp_path, request):
+    (tmp_path / "unpack").mkdir()
+    proc = subprocess.run([str(shared(FMU_CHECK)), "-k", "me", "-h", "1e-4", "-s", "0.01", "-t", "unpack", "-o",
+                           "out.csv", "-e", "log.txt", str(plant)], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    log = (tmp_path / "log.txt").read_text()
+    summary = log[log.find("FMU check summary:"):]
+    assert proc.returncode == 0, summary or log
+    assert "FMU reported:\n\t0 warning(s) and error(s)" in summary, log
+    assert "Checker reported:\n\t0 Warning(s)\n\t0 Error(s)" in summary, log
+    data = np.genfromtxt(tmp_path / "out.csv", delimiter=",", names=True)
+    # t = 0 (twice: before and after its initial event iteration), 1e-4 ... 0.01
+    assert len(data) >= 101 and data["time"][-1] == pytest.approx(0.01)
+    assert np.all(np.isfinite(data["B"])) and data["B"][-1] != 0.0  # the plant falls
+    compatibility.record(
+        request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0", interface="ME",
+        command="fmuCheck.linux64 -k me -h 1e-4 -s 0.01 native/fmi2/TAPMP_Plant.fmu",
+        difference="none checked (its explicit Euler at 0.1 ms): 0 warnings, 0 errors")
+
+
+@pytest.mark.needs_shared(FMIL_CHECK)
+def test_fmil_reads_both_interfaces_under_one_model_identifier(plant, tmp_path, request):
+    proc = subprocess.run([str(shared(FMIL_CHECK)), "parse", str(plant)], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stdout + proc.stderr
+    assert "kind ModelExchange and CoSimulation, model TAPMP_Plant" in proc.stdout, proc.stdout
+    assert "outputs 15, initial unknowns 21" in proc.stdout  # the 15 outputs and the 6 state derivatives
+    assert "FMIL parse: 0 warnings, 0 errors" in proc.stdout
+    compatibility.record(
+        request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi="2.0", interface="ME",
+        command="fmil_check parse native/fmi2/TAPMP_Plant.fmu",
+        difference="none (reads the FMU's XML only): no warning or error, both interfaces")
