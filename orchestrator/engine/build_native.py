@@ -587,14 +587,16 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     if platforms is None:
         platforms = ALL_PLATFORMS if windows is not False else (toolchain.HOST,)
     platforms = check_platforms(platforms)
-    from .fmu_extras import closed_loop_stimulus
-    stimulus = closed_loop_stimulus()  # the reference experiments' inputs, the same for every family
     units = {(model, family): staged_sources(source_files(model, family), model, family)
              for family in families for model in FMU_NAMES}
     log(f"native: compiling {len(units)} FMUs ({', '.join(families)}) for {len(platforms)} platform(s): "
         f"{', '.join(platforms)}")
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
         built = compile_every_binary(units, platforms, Path(tmp), log)
+    # the reference experiments' inputs, the same for every family (after the FMUs' own sources
+    # compiled: it runs the C model's library, so a compiler error names an FMU first)
+    from .fmu_extras import closed_loop_stimulus
+    stimulus = closed_loop_stimulus()
     out = {}
     for family in families:
         folder = Path(out_dir) / family
@@ -616,6 +618,8 @@ def main(argv=None) -> int:
     import argparse
     import sys
 
+    from tapmp.native import NativeModelError
+
     p = argparse.ArgumentParser(prog="python -m orchestrator.engine.build_native",
                                 description="Build the native FMI 2.0 and 3.0 FMUs and their TAPMP.ssp "
                                 "into DIR/fmi2 and DIR/fmi3, with binaries for every platform (zig cc "
@@ -632,7 +636,7 @@ def main(argv=None) -> int:
     try:
         platforms = args.platform or (None if not args.no_windows else (toolchain.HOST,))
         build_native(Path(args.out), platforms=platforms)
-    except (NativeBuildError, ValueError) as err:
+    except (NativeBuildError, NativeModelError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     return 0
