@@ -97,8 +97,9 @@ def build_native_systems(tmp: Path, log) -> dict[str, Path]:
         systems[f"full-{name}"] = paths["ssp"]
         out = tmp / f"floor-{name}"
         out.mkdir()
-        fmus = {m: build_native_fmu(m, family, out, windows=False, model_source=ROOT / "benchmarks" / "floor_model.c")
-                for m in FMU_NAMES}
+        # the floor model is no TAPMP model: its FMUs carry no reference experiment
+        fmus = {m: build_native_fmu(m, family, out, windows=False, model_source=ROOT / "benchmarks" / "floor_model.c",
+                                    extras=False) for m in FMU_NAMES}
         systems[f"floor-{name}"] = write_ssp(out / "TAPMP.ssp", fmus)
         log(f"built the native {family} systems")
     return systems

@@ -35,7 +35,7 @@ class _HighPassRms:
     with its state carried over; the step from the first two time stamps)."""
 
     def __init__(self):
-        self.sos = self.zi = None
+        self.sos = self.zi = self.x0 = None
         self.sq = np.zeros(3)
         self.n = 0
         self.pending = None
@@ -55,10 +55,14 @@ class _HighPassRms:
                 self.sos = False  # the sample rate cannot resolve the band
                 return
             self.sos = signal.butter(4, EFFORT_HZ, "highpass", fs=1.0 / self.step, output="sos")
-            self.zi = signal.sosfilt_zi(self.sos)[:, :, None] * forces[0][None, None, :]
+            # Started at rest on the first sample: the filter sees the forces less their first value,
+            # from a zero state. For a high-pass (zero gain at 0 Hz) that is the steady state on the
+            # first sample, without sosfilt_zi's linear solve, whose last bits differ between processes.
+            self.x0 = np.array(forces[0], dtype=float)
+            self.zi = np.zeros((self.sos.shape[0], 2, forces.shape[1]))
         if self.sos is False:
             return
-        y, self.zi = signal.sosfilt(self.sos, forces, axis=0, zi=self.zi)
+        y, self.zi = signal.sosfilt(self.sos, forces - self.x0, axis=0, zi=self.zi)
         self.sq += (y ** 2).sum(0)
         self.n += y.shape[0]
 

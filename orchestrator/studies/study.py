@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..experiments.config import require
-from ..experiments.scenario import Scenario, create
+from ..experiments.scenario import Scenario
 from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, this_plugin,
                      unpack_folder)
 from .study_file import Study, StudyError, apply_changes, base_value, load_study
@@ -374,6 +374,9 @@ class StudyTable:
 
 STOP_WAIT_S = 60.0  # how long a stopped study waits for its running cases to end [s]
 POLL_S = 0.05  # how often the client looks for finished cases when none is ready [s]
+# How long the client waits for a finished case's row: longer means the worker holding it died,
+# and Dask runs the case again (the client watches for workers meanwhile instead of blocking) [s]
+GATHER_S = 10.0
 WATCH_S = 2.0  # how often it asks the scheduler whether any worker is left while it waits [s]
 
 
@@ -436,8 +439,12 @@ class CaseRunner:
                     time.sleep(POLL_S)
                     continue
                 for fut in batch:
+                    try:
+                        row = self._row(fut)
+                    except TimeoutError:  # its worker died before the row came back: Dask runs the case again
+                        done.add(fut)
+                        continue
                     c = futures.pop(fut)
-                    row = self._row(fut)
                     fut.release()
                     if row.get("status") not in STATUSES:  # interrupted: no row, --resume runs it
                         continue
@@ -455,10 +462,11 @@ class CaseRunner:
 
     def _row(self, fut) -> dict:
         """The row of a finished future; a future that could not run (its worker died too often,
-        the task could not be sent) is a failed row naming what happened."""
+        the task could not be sent) is a failed row naming what happened. TimeoutError if the row
+        does not come within GATHER_S (the worker that held it is gone)."""
         if fut.status == "finished":
-            return fut.result()
-        exc = fut.exception()
+            return fut.result(timeout=GATHER_S)
+        exc = fut.exception(timeout=GATHER_S)
         return {"status": "failed", "error": reason(exc)}
 
     def _record(self, case: dict, row: dict) -> None:
@@ -492,7 +500,10 @@ class CaseRunner:
             pass  # a worker that does not answer is ended with the cluster
         for fut, c in futures.items():
             if fut.status == "finished" and c["case"] not in self.table.rows:
-                row = fut.result()
+                try:
+                    row = fut.result(timeout=GATHER_S)
+                except TimeoutError:
+                    continue  # its worker is gone: --resume runs the case
                 if row.get("status") in STATUSES:
                     self._record(c, row)
 
