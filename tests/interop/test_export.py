@@ -378,7 +378,8 @@ def _one_error_line(capsys):
 def test_an_unknown_scenario_is_one_line_exit_2(built, tmp_path, capsys):
     assert main(["export", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "x.ssp"),
                  "--ssp", str(built["ssp"])]) == 2
-    assert "nope.toml does not exist" in _one_error_line(capsys)
+    line = _one_error_line(capsys)
+    assert "nope.toml' is neither a file nor a shipped scenario" in line, line
     assert not (tmp_path / "x.ssp").exists()
 
 

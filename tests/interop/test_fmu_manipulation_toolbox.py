@@ -174,14 +174,21 @@ def test_the_fmi2_container_is_the_fmus_wired_by_hand_on_its_conventions_bit_for
             f"(positions < {math.ceil(diff[:3].max() * 1e6)} um); on that initialization bit for bit"))
 
 
-def test_the_fmi3_container_gives_the_fmi2_containers_results(containers, tmp_path, request):
+def test_the_fmi3_container_starts_the_event_mode_controller_on_the_plants_outputs(
+        containers, tapmp_run, tmp_path, request):
+    """The FMI 3.0 controller has Event Mode: the FMI 3.0 container lets it sample the plant's
+    outputs at the start, so its first command is `tapmp run`'s (15.3 N), not the FMI 2.0
+    container's (about 336 N from zeroed links); later it steps its own way (within 100 N)."""
     fmi2, fmi3 = run_container(containers["fmi2"][0], tmp_path), run_container(containers["fmi3"][0], tmp_path)
-    assert np.array_equal(fmi2, fmi3), np.abs(fmi2 - fmi3).max(axis=0)
+    assert fmi3.shape == fmi2.shape == tapmp_run.shape and np.all(np.isfinite(fmi3))
+    assert np.array_equal(fmi3[0], tapmp_run[0]) and not np.array_equal(fmi2[0], tapmp_run[0])
+    largest = float(np.abs(fmi3 - tapmp_run).max())
+    assert largest < 100.0, largest
     compatibility.record(
         request, tool="FMU Manipulation Toolbox", version=FMT_VERSION, fmi="3.0", interface="CS (container FMU)",
         command="fmucontainer -container TAPMP.ssp:0.0001 -fmi 3 (native/fmi3/TAPMP.ssp), then "
                 "fmpy simulate TAPMP.fmu --stop-time 0.2 --output-interval 0.0001",
-        difference=compatibility.difference(0.0, "", "the FMI 2.0 container"))
+        difference=compatibility.difference(largest, "N", "tapmp run (Jacobi), the first command equal"))
 
 
 def test_the_fmus_wired_by_hand_with_their_defaults_are_tapmp_run_of_the_paper_scenario(
