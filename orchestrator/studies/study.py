@@ -380,6 +380,19 @@ GATHER_S = 10.0
 WATCH_S = 2.0  # how often it asks the scheduler whether any worker is left while it waits [s]
 
 
+def row_of(fut) -> dict:
+    """The row of a future as_completed gave back. A future whose result was lost with its
+    worker is run again by Dask: this waits for that run. A future that could not run (its
+    worker died too often, the task could not be sent) is a failed row naming what happened.
+    TimeoutError if the row does not come within GATHER_S (the worker that held it is gone)."""
+    try:
+        return fut.result(timeout=GATHER_S)
+    except TimeoutError:
+        raise
+    except Exception as err:  # run_case never raises: this is Dask's (KilledWorker, cancelled, ...)
+        return {"status": "failed", "error": reason(err)}
+
+
 class CaseRunner:
     """Runs cases on a Dask client and records their rows in a StudyTable.
 
@@ -440,7 +453,7 @@ class CaseRunner:
                     continue
                 for fut in batch:
                     try:
-                        row = self._row(fut)
+                        row = row_of(fut)
                     except TimeoutError:  # its worker died before the row came back: Dask runs the case again
                         done.add(fut)
                         continue
@@ -460,14 +473,6 @@ class CaseRunner:
             bar.close()
         return [rows.get(c["case"], {"case": c["case"], "status": "interrupted"}) for c in cases]
 
-    def _row(self, fut) -> dict:
-        """The row of a finished future; a future that could not run (its worker died too often,
-        the task could not be sent) is a failed row naming what happened. TimeoutError if the row
-        does not come within GATHER_S (the worker that held it is gone)."""
-        if fut.status == "finished":
-            return fut.result(timeout=GATHER_S)
-        exc = fut.exception(timeout=GATHER_S)
-        return {"status": "failed", "error": reason(exc)}
 
     def _record(self, case: dict, row: dict) -> None:
         """The case's files into its folder (data mode), then its row into study.csv."""

@@ -294,13 +294,39 @@ def test_a_worker_killed_mid_study_reruns_no_recorded_case(cluster_factory, ssp,
         os.kill(pid, signal.SIGKILL)
     recorded = rows_in(tmp_path / "o")
     out, _ = client.communicate(timeout=300)
-    assert client.returncode == 0, (tmp_path / "stderr.txt").read_text()
+    assert client.returncode == 0, out + (tmp_path / "stderr.txt").read_text()
     assert "10 completed, 0 diverged, 0 failed" in out
     assert sorted(rows_in(tmp_path / "o")) == [f"c{i:04d}" for i in range(10)]
     runs = [key.split("-")[1] for key in c.runs()]
     assert len(c.worker_pids()) == 2  # the worker was killed and another took its place
     for case in recorded:
         assert runs.count(case) == 1, (case, runs)
+
+
+def test_a_row_lost_with_its_worker_is_the_row_of_the_run_dask_makes_again(cluster_factory):
+    """A case finished and its row held by a worker that is killed before the client fetched it:
+    the future turns 'lost', Dask runs the task again on the restarted worker, and the row is
+    that run's (not a failed row without an error)."""
+    from dask.distributed import Client
+
+    from orchestrator.studies.study import row_of
+    c = cluster_factory()
+    worker = c.worker(1)
+    with Client(c.address, timeout=WAIT_S) as client:
+        fut = client.submit(dict, status="completed", pure=False, key="case-lost")
+        wait_until(lambda: fut.status == "finished", worker, "the task", lambda: fut.status)
+        (pid,) = c.worker_pids()
+        os.kill(pid, signal.SIGKILL)
+        wait_until(lambda: fut.status != "finished", worker, "the lost result", lambda: fut.status)
+        deadline = time.monotonic() + WAIT_S
+        while True:  # as the study does: a row that does not come within GATHER_S is awaited again
+            try:
+                row = row_of(fut)
+                break
+            except TimeoutError:
+                assert time.monotonic() < deadline, "the rerun's row did not come"
+        assert row == {"status": "completed"}
+        assert c.runs() == ["case-lost", "case-lost"]  # run once, lost, run again
 
 
 def test_with_every_worker_gone_the_study_waits_with_one_line_and_ends_on_sigterm(cluster_factory, ssp, tmp_path):
