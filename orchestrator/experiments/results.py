@@ -94,7 +94,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
     info = {"kind": "run", "format": fmt, "results_file": FORMATS[fmt],
             "scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
             "ordering": scenario.ordering, "record_every": scenario.record_every,
-            "clock": scenario.clock, "connection_start": scenario.connection_start,
+            "clock": scenario.clock, "connection_start": scenario.connection_start, "plant_interface": scenario.plant_interface,
             "versions": versions(), "status": "running"}
     write_result(out / "run.json", info)
     start = time.perf_counter()
@@ -108,7 +108,8 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
                               scenario.ordering, check=envelope(scenario), clock=scenario.clock,
                               connection_start=scenario.connection_start,
                               open_inputs=scenario.open_inputs, order=scenario.order, roles=ROLES,
-                              other_tables=SCENARIO_TABLES) as sim:
+                              other_tables=SCENARIO_TABLES,
+                              model_exchange=("plant",) if scenario.plant_interface == "me" else ()) as sim:
                 info["guids"] = sim.guids
                 info["columns"] = list(sim.columns)
                 if fmt == "mat":  # results.part.npy needs its column names on record (a killed run)

@@ -12,7 +12,9 @@ undriven input, and an entry that is no input of the system or that a connection
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
 see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
 format (the result file: "csv" (default) or "mat", see orchestrator.experiments.results;
-`--format` overrides it), settling_bands (the bands of the move metrics of a point-to-point
+`--format` overrides it), plant_interface (the plant FMU's interface: "cs", Co-Simulation with its own
+RK4 (default), or "me", Model Exchange integrated by the master with CVODE, see
+orchestrator.engine.model_exchange; the native FMUs offer it), settling_bands (the bands of the move metrics of a point-to-point
 run, trajectory.profile 1-3, see orchestrator.experiments.metrics.MoveMetrics; default
 [1e-6, 1e-7], in m, rad for B). output is the scenario's result folder (default
 results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
@@ -61,8 +63,11 @@ MISMATCH_RANGE = (0.01, 100.0)
 TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
        "start_time": float, "step": float, "ordering": str, "output": str,
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list}
+       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "plant_interface": str}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
+# The plant's FMI interface in a run: "cs" (Co-Simulation, its own RK4) or "me" (Model Exchange,
+# integrated by the master with CVODE: orchestrator.engine.model_exchange)
+PLANT_INTERFACES = ("cs", "me")
 TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
@@ -258,6 +263,7 @@ class Scenario:
     # [ELEMENT] tables: FMU parameters by SSP element name
     elements: Annotated[dict, BeforeValidator(_elements)] = field(default_factory=dict)
     fmus: Annotated[str, one_of(FAMILIES)] = "native"  # FMU family: python, native or fmi3 (engine.families)
+    plant_interface: Annotated[str, one_of(PLANT_INTERFACES)] = "cs"  # the plant as Co-Simulation or Model Exchange
     format: Annotated[str, one_of(RESULT_FORMATS)] = "csv"   # result file: csv or mat (RESULT_FORMATS)
     # point-to-point runs: settling bands [m for X, Z and the motors, rad for B] of the move metrics
     settling_bands: Annotated[list, BeforeValidator(_settling_bands)] = field(default_factory=lambda: [1e-6, 1e-7])
