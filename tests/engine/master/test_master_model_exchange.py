@@ -8,9 +8,9 @@ estimated from the runs themselves: RK4's by Richardson extrapolation from the C
 one and at two RK4 substeps per step (error(h) ~ 16/15 |y_h - y_h/2|, ~1e-14 of dB's range: RK4
 at 0.1 ms is exact to round-off here), CVODE's from the same closed loop at its tolerance TOL and
 at TOL / 10 (error(TOL) ~ 10/9 |y_TOL - y_TOL/10|, CVODE's global error being about proportional to
-its tolerance; ~1e-8 of dB's range at TOL = 1e-12, restarting at each of the 500 input jumps). A
-state agrees if |ME - CS| <= 2 x (RK4's error + CVODE's error) (2: the proportionality is not exact;
-measured |ME - CS| / (RK4's + CVODE's) <= 0.95). The controller's commands and the encoder positions
+its tolerance; at TOL = 1e-12 up to 2e-7 of a state's range, on Z, restarting at each of the 500
+input jumps). A state agrees if |ME - CS| <= 2 x (RK4's error + CVODE's error) (2: the proportionality
+is not exact; measured |ME - CS| / (RK4's + CVODE's) <= 1.14). The controller's commands and the encoder positions
 are then the same doubles: the plants' true positions differ by ~4e-12 m, far below one encoder
 count (0.1 um), so no count flips within the 0.05 s (at TOL = 1e-10 one does, after 43 ms).
 """
