@@ -152,6 +152,48 @@ def test_omsimulator_picks_model_exchange_by_default_and_agrees_with_rk4(omsimul
                                             "the Co-Simulation plant (RK4 at 0.1 ms)"))
 
 
+# A system of the FMI 3.0 plant alone in OMSimulator's strongly coupled system (CVODE: Model Exchange)
+ONE_PLANT_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:oms="https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd" name="me" version="1.0">
+  <ssd:System name="root">
+    <ssd:Elements>
+      <ssd:Component name="plant" type="application/x-fmu-sharedlibrary" source="resources/TAPMP_Plant.fmu">
+        <ssd:Connectors><ssd:Connector name="X" kind="output"><ssc:Real/></ssd:Connector></ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Annotations><ssc:Annotation type="org.openmodelica"><oms:Annotations><oms:SimulationInformation>
+      <oms:VariableStepSolver description="cvode" absoluteTolerance="1e-10" relativeTolerance="1e-10"
+          minimumStepSize="1e-12" maximumStepSize="1e-4" initialStepSize="1e-6"/>
+    </oms:SimulationInformation></oms:Annotations></ssc:Annotation></ssd:Annotations>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0.0" stopTime="0.2"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+@pytest.mark.needs_shared(OMS)
+def test_omsimulator_runs_the_fmi3_plant_only_as_co_simulation_inside_an_ssp(omsimulator, native_built, tmp_path):
+    """OMSimulator 3.0.0 has no FMI 3.0 Model Exchange: the FMI 3.0 plant alone is refused ("Unsupported FMI
+    version: 3"), and so is a strongly coupled (CVODE) SSP system holding it; its users get the plant's
+    Co-Simulation RK4, in an SSP's fixed-step system (tests/interop/test_omsimulator.py)."""
+    import zipfile
+    plant = native_built["fmi3"][PLANT]
+    alone = subprocess.run([str(omsimulator), "--tempDir=.", "--stopTime=0.2", str(plant)], cwd=tmp_path,
+                           capture_output=True, text=True, timeout=300)
+    assert alone.returncode != 0 and "error:   [NewComponent] Unsupported FMI version: 3" in alone.stdout, (
+        alone.stdout + alone.stderr)
+    with zipfile.ZipFile(tmp_path / "me.ssp", "w") as z:
+        z.writestr("SystemStructure.ssd", ONE_PLANT_SSD)
+        z.write(plant, "resources/TAPMP_Plant.fmu")
+    coupled = subprocess.run([str(omsimulator), "--tempDir=.", "--resultFile=me.mat", "--stopTime=0.2", "me.ssp"],
+                             cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert coupled.returncode != 0, coupled.stdout + coupled.stderr
+    assert "error:   [importFromSnapshot] wrong xml schema detected: ssd:Component" in coupled.stdout, coupled.stdout
+    assert not (tmp_path / "me.mat").exists()
+
+
 @pytest.mark.needs_shared(FMU_CHECK)
 def test_fmu_compliance_checker_passes_the_model_exchange_interface(native_built, tmp_path, request):
     plant = native_built["fmi2"][PLANT]  # the checker knows FMI 1.0 and 2.0 only
