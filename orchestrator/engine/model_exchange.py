@@ -176,9 +176,10 @@ class ModelExchangeUnit(Unit):
                 event_inside = self.next_event < end - tol
                 target = self.next_event if event_inside else end
                 self._stop_time(self.solver.cvode_mem, target)
-                state_event, _roots, reached = self.solver.step(now, target)
+                _, roots, reached = self.solver.step(now, target)
                 if self._status > 1:
                     break
+                state_event = self.nz > 0 and any(roots)  # fmpy's flag is also set at the stop time
                 now = reached if state_event else target
                 self._cb_set_time(now)
                 if self.needs_completed_step:

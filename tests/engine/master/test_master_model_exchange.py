@@ -96,3 +96,34 @@ def test_model_exchange_of_an_fmu_without_it_or_of_no_element_is_refused(native)
         closed_loop(ssp, ("motor",))
     with pytest.raises(CoSimulationError, match="stepper = 'compiled' is unavailable with a Model Exchange FMU"):
         closed_loop(ssp, ("plant",), stepper="compiled")
+
+
+def test_a_time_event_inside_a_macro_step_ends_the_integration_there(native):
+    """The plant's external force step at disturbance_time = 12.345 ms, inside the step from 12.3 to
+    12.4 ms, is a time event: CVODE stops at it, the event is handled (the start event and this one)
+    and CVODE restarts there. So at 12.4 ms the force has acted for 0.055 ms: the velocity change it
+    made is 0.55 of the one the Co-Simulation plant makes when the step starts on the grid at
+    12.3 ms (it acts from the first communication step that starts at or after disturbance_time),
+    to the change of the accelerations over 0.1 ms (measured 1.6e-5)."""
+    ssp = native["fmi2"]["ssp"]
+
+    def run(model_exchange, force, time):
+        scenario = load(PAPER, ["stop_time=0.02", f"plant.disturbance_force1={force}",
+                                f"plant.disturbance_time={time}"])
+        with CoSimulation(ssp, scenario.parameters(), 0.0, scenario.step, scenario.ordering, roles=ROLES,
+                          model_exchange=model_exchange) as sim:
+            rows = np.zeros((scenario.n_steps, len(sim.columns)))
+            sim.advance(rows)
+            return sim.columns, rows, sim.units["plant"]
+
+    columns, me, plant = run(("plant",), 30.0, 0.012345)
+    assert plant.n_events == 2 and plant.n_reinit == 200 + 1  # a restart per step and one at the event
+    _, me_without, _ = run(("plant",), 0.0, 0.012345)
+    _, cs, _ = run((), 30.0, 0.0123)
+    _, cs_without, _ = run((), 0.0, 0.0123)
+    k = 123  # the row at 12.4 ms
+    assert me[k, 0] == pytest.approx(0.0124) and np.array_equal(me[:k], me_without[:k])  # nothing before
+    for name in ("plant.dX", "plant.dZ", "plant.dB", "plant.dq1"):
+        j = columns.index(name)
+        ratio = (me[k, j] - me_without[k, j]) / (cs[k, j] - cs_without[k, j])
+        assert ratio == pytest.approx(0.55, abs=1e-3), (name, ratio)
