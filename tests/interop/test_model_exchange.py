@@ -33,6 +33,7 @@ FMUSIM = "tools/fmusim/bin/fmusim"
 OMS = "tools/OMSimulator/bin/OMSimulator"
 FMU_CHECK = "tools/fmuCheck/fmuCheck.linux64"
 FMIL_CHECK = "tools/fmil/fmil_check"
+FMIL_LIB = "tools/fmil/lib/libfmilib_shared.so"
 STATES = ("X", "Z", "B", "dX", "dZ", "dB")
 FORCES = {"F1": 20.0, "F2": 10.0, "F3": 60.0}  # N, held: the platform moves ~0.1 m and ~0.9 rad in 0.2 s
 STOP, STEP = 0.2, 1e-4
@@ -240,3 +241,38 @@ def test_fmil_reads_both_interfaces_under_one_model_identifier(family, plant, tm
     compatibility.record(
         request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi=FMI[family], interface="ME",
         command=f"fmil_check parse native/{family}/TAPMP_Plant.fmu", difference=difference)
+
+
+@pytest.mark.needs_shared(FMIL_LIB)
+def test_an_fmil_host_runs_the_fmi3_model_exchange_interface_as_the_co_simulation_plant_steps(native_built, tmp_path,
+                                                                                             request):
+    """FMI Library loads the FMI 3.0 plant for Model Exchange (tests/interop/fmil_me3.c, compiled here against
+    ../shared/tools/fmil) and the host integrates it with the Co-Simulation plant's own method, RK4 at
+    0.1 ms: the same states to round-off (the C model's operations in another order: measured 6e-15
+    of each state's range). FMIL's only messages are its known gaps on the terminals."""
+    from ctools import compile_c
+    plant = native_built["fmi3"][PLANT]
+    fmil = shared("tools/fmil")
+    host = tmp_path / "fmil_me3"
+    built = compile_c(["-O2", f"-I{fmil / 'include'}", "-o", host, Path(__file__).with_name("fmil_me3.c"),
+                       f"-L{fmil / 'lib'}", "-lfmilib_shared", f"-Wl,-rpath,{fmil / 'lib'}", "-lm"])
+    assert built.returncode == 0, built.stderr
+    (tmp_path / "unpack").mkdir()
+    proc = subprocess.run([str(host), str(plant), str(tmp_path / "unpack"), "me.csv", repr(STOP), repr(STEP)],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.splitlines() == [
+        "kind ModelExchange and CoSimulation: yes, model identifiers ME TAPMP_Plant CS TAPMP_Plant, state "
+        "derivatives 6", "continuous states 6", "FMIL Model Exchange run: 2000 RK4 steps"]
+    assert fmil_messages(proc.stderr.replace("[FMIL me3]", "[FMIL alone]")) == terminal_messages(plant), proc.stderr
+    me = np.loadtxt(tmp_path / "me.csv", delimiter=",")
+    cs = run_cs(plant, {})
+    assert me.shape == (cs.shape[0], 1 + len(STATES))
+    scale = np.abs(cs).max(axis=0)
+    assert np.all(np.abs(me[:, 1:] - cs).max(axis=0) <= 1e-13 * scale)
+    compatibility.record(
+        request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi="3.0", interface="ME",
+        command="fmil_me3 native/fmi3/TAPMP_Plant.fmu DIR me.csv 0.2 0.0001 (tests/interop/fmil_me3.c: FMIL loads "
+                "it for Model Exchange, the host's RK4 at 0.1 ms)",
+        difference=compatibility.difference(compatibility.relative(me[:, 1:], cs), "relative",
+                                            "the Co-Simulation plant (RK4 at 0.1 ms)"))
