@@ -2,7 +2,8 @@
 model identifier: FMPy (CVode) and fmusim (CVODE) on both, OMSimulator (CVODE, which it picks by
 default when an FMU offers both) on FMI 2.0, integrate the states X, Z, B, dX, dZ, dB from their
 derivatives and agree with the Co-Simulation plant's RK4 at 0.1 ms on open-loop forces; the FMI
-Compliance Checker (FMI 2.0 only: it knows no FMI 3.0) and FMIL pass the Model Exchange interface.
+Compliance Checker (FMI 2.0 only: it knows no FMI 3.0) and FMIL pass the Model Exchange interface, and
+a host on FMIL (fmil_me3.c) integrates the FMI 3.0 plant with RK4 as the Co-Simulation plant does.
 OMSimulator 3.0.0 runs an FMI 3.0 FMU only inside an SSP ("Unsupported FMI version: 3" for the FMU
 alone), so its Model Exchange default is checked on FMI 2.0.
 
