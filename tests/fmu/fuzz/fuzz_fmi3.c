@@ -4,7 +4,7 @@
  * and counts (value arrays of exactly the count given, so a read or write past them is
  * caught), doStep with any t and h, FMU states got, set, freed, serialized and deserialized
  * from fuzzed bytes, also after their instance was freed, reset, terminate and free twice;
- * Model Exchange instances (the plant; refused by the others) and every Model Exchange call with
+ * Model Exchange instances (the plant's; the others refuse them) and every Model Exchange call with
  * counts and pointers of any kind.
  * Built by tests/fmu/test_fuzz.py with clang -fsanitize=fuzzer,address,undefined. */
 #include "all.c"
@@ -32,7 +32,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char name[64], token[128];
     int ops = 0;
     while (in.n && ops++ < 200) {
-        unsigned op = fuzz_byte(&in) % 23, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
+        /* 255 is the Model Exchange calls: every other byte means the operation it meant before they
+         * were added, so the kept inputs (regressions/) replay as they were found */
+        unsigned code = fuzz_byte(&in), op = code == 255 ? 22 : code % 22, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
         fmi3Instance c = slot[s];
         switch (op) {
         case 0: {  /* instantiate, odd arguments included */
@@ -40,13 +42,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             const char *tok = fuzz_string(&in, token, sizeof token, INSTANTIATION_TOKEN);
             unsigned flags = fuzz_byte(&in);
             if (live[s]) { fmi3FreeInstance(slot[s]); live[s] = 0; }
-            if ((flags >> 5) & 1)
-                slot[s] = fmi3InstantiateModelExchange(nm, tok, NULL, flags & 1, (flags >> 1) & 1, NULL,
-                                                       (flags >> 4) & 1 ? NULL : fuzz_logger);
-            else
-                slot[s] = fmi3InstantiateCoSimulation(nm, tok, NULL, flags & 1, (flags >> 1) & 1, (flags >> 2) & 1,
-                                                      (flags >> 3) & 1, NULL, 0, NULL,
-                                                      (flags >> 4) & 1 ? NULL : fuzz_logger, NULL);
+            slot[s] = fmi3InstantiateCoSimulation(nm, tok, NULL, flags & 1, (flags >> 1) & 1, (flags >> 2) & 1,
+                                                  (flags >> 3) & 1, NULL, 0, NULL,
+                                                  (flags >> 4) & 1 ? NULL : fuzz_logger, NULL);
             live[s] = slot[s] != NULL;
             t[s] = 0.0;
             break;
@@ -128,12 +126,19 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fmi3GetClock(c, &vr, n, &b);
             break;
         }
-        case 19: {  /* the other instantiation functions */
+        case 19: {  /* the other instantiation functions; a Model Exchange instance (the plant's) stays */
             const char *tok = fuzz_string(&in, token, sizeof token, INSTANTIATION_TOKEN);
-            fmi3Instance other = fuzz_byte(&in) & 1
+            int me = fuzz_byte(&in) & 1;
+            fmi3Instance other = me
                 ? fmi3InstantiateModelExchange("me", tok, NULL, 0, 0, NULL, fuzz_logger)
                 : fmi3InstantiateScheduledExecution("se", tok, NULL, 0, 0, NULL, fuzz_logger, NULL, NULL, NULL);
-            fmi3FreeInstance(other);
+            if (me && other) {
+                if (live[s]) fmi3FreeInstance(slot[s]);
+                slot[s] = other;
+                live[s] = 1;
+                t[s] = 0.0;
+            } else
+                fmi3FreeInstance(other);
             break;
         }
         case 20: {  /* a state of one instance handed to another */
