@@ -33,10 +33,10 @@ def user_errors() -> tuple:
     from .engine.master import CoSimulationError
     from .engine.schedule import ScheduleError
     from .engine.ssd import ParameterAddressError
-    from .experiments.export import ExportError
-    from .experiments.folders import OutputExistsError, OutputInUseError, ResultsWriteError
-    from .experiments.reading import ResultFolderError
-    from .experiments.scenario import ScenarioError
+    from .tool.export import ExportError
+    from .tool.folders import OutputExistsError, OutputInUseError, ResultsWriteError
+    from .tool.reading import ResultFolderError
+    from .tool.scenario import ScenarioError
     from .studies.study import StudyError
     return (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
             ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
@@ -58,7 +58,7 @@ def _family(value: str) -> str:
     return value
 
 
-# The result file formats (experiments.scenario.RESULT_FORMATS, which loads pydantic and numpy;
+# The result file formats (tool.scenario.RESULT_FORMATS, which loads pydantic and numpy;
 # tests/cli/test_cli_parser.py checks the two agree).
 RESULT_FORMATS = ("csv", "mat")
 
@@ -112,8 +112,8 @@ def study_file(name: str) -> str:
 
 
 def _run_one(scenario, ssp, out, overwrite, progress, label):
-    from .experiments.progress import progress_bar
-    from .experiments.results import run_scenario
+    from .tool.progress import progress_bar
+    from .tool.results import run_scenario
     update, close = progress_bar(label, progress)
     try:
         return run_scenario(scenario, ssp, out, overwrite, update)
@@ -139,13 +139,13 @@ def _recording(args, scenario):
 
 def _load(args):
     """The scenario of a run/compare command: the file, its --set overrides, --format and --record-every."""
-    from .experiments.scenario import load
+    from .tool.scenario import load
     return _recording(args, load(scenario_file(args.scenario), args.set))
 
 
 def record_every(value) -> int:
     """--record-every checked: an integer from 1 to MAX_INT (the scenario key's bound)."""
-    from .experiments.scenario import MAX_INT
+    from .tool.scenario import MAX_INT
     try:
         n = int(value)
     except ValueError:
@@ -164,7 +164,7 @@ def result_base(scenario) -> Path:
 
 def warn_if_implausible(scenario) -> None:
     """One warning line on stderr per parameter far outside this machine's usual range."""
-    from .experiments.plausibility import implausible
+    from .tool.plausibility import implausible
     for line in implausible(scenario):
         print(f"warning: {line}", file=sys.stderr, flush=True)
 
@@ -209,7 +209,7 @@ def cache_sources() -> list[Path]:
 
 def warn_if_unstable(scenario) -> None:
     """One line on stderr if the stability pre-check finds the scenario's loop unstable."""
-    from .experiments.stability import check, radius_text
+    from .tool.stability import check, radius_text
     report = check(scenario)
     if not report.stable:
         print(f"warning: {scenario.name}: the sampled closed loop is {report.verdict} (spectral radius "
@@ -218,8 +218,8 @@ def warn_if_unstable(scenario) -> None:
 
 
 def cmd_check(args) -> int:
-    from .experiments.scenario import load
-    from .experiments.stability import check
+    from .tool.scenario import load
+    from .tool.stability import check
     if args.fmus is not None:
         raise UsageError(f"--fmus = {args.fmus!r} is not an option of check: the check linearizes the FMI-free model, "
                          "which every FMU family reproduces bit for bit, so its verdict is the same for all "
@@ -234,12 +234,12 @@ def cmd_check(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    from .experiments.analysis import analyze, pole_table, robustness_table, table
-    from .experiments.scenario import load
-    from .experiments.stability import verdict_for
+    from .tool.analysis import analyze, pole_table, robustness_table, table
+    from .tool.scenario import load
+    from .tool.stability import verdict_for
     scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
-    from .experiments.baselines import compare_runs
+    from .tool.baselines import compare_runs
     for key, v in (("--delay", args.delay), ("--actuator-bandwidth", args.actuator_bandwidth)):
         if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
             raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
@@ -253,7 +253,7 @@ def cmd_analyze(args) -> int:
           "a delay in one loop, a first-order actuator on every motor")
     print(robustness_table(result))
     if args.delay or args.actuator_bandwidth is not None:
-        from .experiments.analysis import inserted_radius
+        from .tool.analysis import inserted_radius
         what = " and ".join(x for x in (f"a delay of {args.delay:g} s on every motor's force" if args.delay else "",
                                         f"a first-order actuator of {args.actuator_bandwidth:g} Hz on every motor"
                                         if args.actuator_bandwidth is not None else "") if x)
@@ -271,7 +271,7 @@ def cmd_run(args) -> int:
     warn_if_implausible(scenario)
     warn_if_unstable(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / scenario.law
-    from .experiments.estimate import check_output_size
+    from .tool.estimate import check_output_size
     check_output_size([scenario], out, scenario.name)
     m = _run_one(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
@@ -301,7 +301,7 @@ def mode_means(m: dict) -> list[float]:
 
 def move_lines(results: dict, channels=("X", "Z", "B", "q1", "q2", "q3")) -> list[str]:
     """A point-to-point run's move metrics ({run: metrics} with a "move" entry, see
-    experiments.metrics.MoveMetrics), one line per run and moving channel of ``channels``: rise
+    tool.metrics.MoveMetrics), one line per run and moving channel of ``channels``: rise
     time [ms], overshoot [um, urad for B], settling time into each band [ms after the reference
     stops]; [] if no run has them."""
     lines = []
@@ -327,15 +327,15 @@ def move_lines(results: dict, channels=("X", "Z", "B", "q1", "q2", "q3")) -> lis
 
 def compare_runs(scenario):
     """The runs of `tapmp compare` ({folder name: Scenario}): SC-DC, APD-DC (Eq. 41) and the fair
-    baselines and ablations of orchestrator.experiments.baselines."""
-    from .experiments.baselines import compare_runs as runs
+    baselines and ablations of orchestrator.tool.baselines."""
+    from .tool.baselines import compare_runs as runs
     return runs(scenario)
 
 
 def summary_rows(results: dict) -> list[tuple]:
     """(run, mean tracking MAE [um], mean sync MAE [um], tracking and sync reduction [%] against
     APD-DC) per run of a comparison ({run: metrics}); the means over the three motors."""
-    from .experiments.report import reduction
+    from .tool.metrics import reduction
 
     def mean(v):
         return sum(v) / len(v)
@@ -380,7 +380,7 @@ def _check_workers(workers: int) -> None:
 
 def _jobs(args) -> int:
     """--jobs checked: a positive integer up to the cores (default: one per core)."""
-    from .experiments.pool import parse_jobs
+    from .tool.pool import parse_jobs
     return parse_jobs(args.jobs)
 
 
@@ -394,11 +394,13 @@ def cmd_compare(args) -> int:
     if show and args.no_figures:
         raise UsageError("--runs chooses the runs the figures show: it cannot go with --no-figures")
     if show:  # before any run starts
-        from .experiments.plots import select_runs
+        from .tool.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
-    from .experiments.compare import run_comparison
+    from .paper.paper_tables import reference_rows
+    from .tool.compare import run_comparison
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show, not args.no_figures)
+                                      command, jobs, show, not args.no_figures,
+                                      reference=reference_rows(scenario.name))
     print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
     print("mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B (1,-2,1)")
     print(summary_table(results))
@@ -410,12 +412,12 @@ def cmd_compare(args) -> int:
 
 @contextmanager
 def heartbeat(tell=None, every: float = 10.0):
-    """A ``tell(line)`` (default: experiments.progress.say, a line on stderr) for the duration that
+    """A ``tell(line)`` (default: tool.progress.say, a line on stderr) for the duration that
     also repeats the last line with the seconds since it whenever ``every`` seconds pass without
     one, so a long phase is never silent."""
     import time
     if tell is None:
-        from .experiments.progress import say as tell
+        from .tool.progress import say as tell
     last = {"line": None, "since": time.monotonic(), "beat": time.monotonic()}
     lock, done = threading.Lock(), threading.Event()
 
@@ -446,7 +448,7 @@ def check_reproduce_may_replace(folder: Path, overwrite: bool) -> None:
     """OutputExistsError (one line) if ``folder`` holds a completed comparison that `tapmp reproduce`
     did not write (comparison.json's written_by), unless ``overwrite``; reproduce replaces its own."""
     import json
-    from .experiments.folders import COMPARISON_JSON, OutputExistsError, folder_completed, marked_kind
+    from .tool.folders import COMPARISON_JSON, OutputExistsError, folder_completed, marked_kind
     if overwrite or marked_kind(folder) != "comparison" or not folder_completed(folder):
         return
     try:
@@ -460,9 +462,9 @@ def check_reproduce_may_replace(folder: Path, overwrite: bool) -> None:
 
 
 def cmd_reproduce(args) -> int:
-    from .experiments.estimate import check_output_size
-    from .experiments.reproduction import reproduce
-    from .experiments.scenario import load
+    from .tool.estimate import check_output_size
+    from .paper.reproduction import reproduce
+    from .tool.scenario import load
     command = args.command_line
     jobs = _jobs(args)
 
@@ -476,7 +478,7 @@ def cmd_reproduce(args) -> int:
         raise UsageError(f"--out = {str(page)!r} is invalid: allowed is a Markdown file ending in .md")
     if args.record_every is not None:
         record_every(args.record_every)
-    from .experiments.reproduction import SCENARIOS
+    from .paper.reproduction import SCENARIOS
     files = [Path(args.scenarios) / f"{name}{suffix}.toml" for suffix in ("", "_calibrated") for name in SCENARIOS]
     for f in files[:len(SCENARIOS)]:
         if not f.is_file():
@@ -509,9 +511,9 @@ def cmd_study(args) -> int:
     """`tapmp study`: 0 if every case ran (completed, diverged or rejected), 1 if any failed (an error)."""
     from .studies.run import run_study
     from .engine.tempdirs import remove_stale_folders
-    from .experiments.estimate import check_output_size
-    from .experiments.folders import output_lock
-    from .experiments.progress import say
+    from .tool.estimate import check_output_size
+    from .tool.folders import output_lock
+    from .tool.progress import say
     from .studies.study import MAX_CASES, StudyError, check_case_count, close_client, load_study, open_client
     study = load_study(study_file(args.study))
     every = record_every(args.record_every) if args.record_every is not None else None
@@ -579,8 +581,8 @@ def cmd_study(args) -> int:
 
 def cmd_export(args) -> int:
     """`tapmp export`: the scenario's SSP with its parameter set, and the container's start values."""
-    from .experiments.export import export
-    from .experiments.scenario import load
+    from .tool.export import export
+    from .tool.scenario import load
     scenario = load(scenario_file(args.scenario), args.set)
     source = _ssp(args, scenario)
     ssp, values = export(scenario, source, Path(args.out), args.overwrite)
@@ -599,7 +601,7 @@ def _names(text) -> list | None:
 
 
 def cmd_plot(args) -> int:
-    from .experiments.plots import parse_window, plot_runs
+    from .tool.plots import parse_window, plot_runs
     window = parse_window(args.window)
     written = plot_runs(args.result_dir, args.label, _names(args.signals), window,
                         Path(args.out) if args.out else None, args.svg, args.allow_different_horizons,
@@ -753,7 +755,7 @@ def parser() -> argparse.ArgumentParser:
     c = sub.add_parser("compare", help="run a scenario with SC-DC, APD-DC and fair baselines",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "
                        "and differential-mode stiffness, the mode-matched PD and PID (PID-DC) and the SC-DC "
-                       "ablations b = 0 and Lambda_p = 0 (orchestrator/experiments/baselines.py); write "
+                       "ablations b = 0 and Lambda_p = 0 (orchestrator/tool/baselines.py); write "
                        "comparison.md (the full tables) and figures and print one summary row per run. Output folder by default "
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
@@ -865,7 +867,7 @@ def _signals_interrupt():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
+    from .tool.stops import STOP_SIGNALS, Interrupted, deliver_signal
     command = os.getpid()
 
     def interrupt(signum, frame):
@@ -891,7 +893,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     args.command_line = "tapmp " + shlex.join(argv)  # what was typed, as comparison.md and study.json record it
     errors = user_errors()
-    from .experiments.results import one_line
+    from .tool.results import one_line
     try:
         with _signals_interrupt():
             return args.func(args)

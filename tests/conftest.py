@@ -243,7 +243,7 @@ COMMANDS = tuple(f"controller.F{i}" for i in (1, 2, 3))
 
 def paper_scenario(stop_time=0.2, *overrides):
     """The paper's simulation scenario, shortened (0.2 s = 2,000 steps of 0.1 ms)."""
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     return load(PAPER, [f"stop_time={stop_time}", *overrides])
 
 
@@ -253,7 +253,7 @@ def orchestrator_rows(ssp, scenario, names, ordering="jacobi", **conventions):
     import numpy as np
 
     from orchestrator.engine.master import CoSimulation
-    from orchestrator.experiments.roles import ROLES
+    from orchestrator.tool.roles import ROLES
     rows = []
     with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
                       **conventions, roles=ROLES) as sim:

@@ -12,20 +12,24 @@ ROOT = Path(__file__).resolve().parent.parent
 TESTS = ROOT / "tests"
 PKG = ROOT / "orchestrator"
 PACKAGES = ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator")
-# A layer may import from itself and from the layers before it, never from a later one.
-LAYERS = ("engine", "experiments", "studies")
+# A layer may import from itself and from the layers before it, never from a later one: the engine
+# (FMUs, SSP, the master), the tool (scenarios, runs, results, reports, for any controller), the
+# paper study (its tables, reproduction, calibration), the studies on Dask.
+LAYERS = ("engine", "tool", "paper", "studies")
 
 # {package: what it must not import}: the model knows no FMU and no master; the FMI runtime knows
 # only the model; the FMU adapters know the model and the runtime; the orchestrator's engine knows
-# no experiment, study or command line, experiments know no study or command line, studies no
-# command line. Standard library and third-party imports are free.
+# no scenario, paper, study or command line; the tool knows no paper, study or command line; the
+# paper study knows no study or command line; studies no command line. Standard library and
+# third-party imports are free.
 FORBIDDEN = {
     "tapmp": ("fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
     "fmu_common": ("fmu_plant", "fmu_controller", "orchestrator"),
     "fmu_plant": ("fmu_controller", "orchestrator"),
     "fmu_controller": ("fmu_plant", "orchestrator"),
-    "orchestrator.engine": ("orchestrator.experiments", "orchestrator.studies", "orchestrator.cli"),
-    "orchestrator.experiments": ("orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.engine": ("orchestrator.tool", "orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.tool": ("orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.paper": ("orchestrator.studies", "orchestrator.cli"),
     "orchestrator.studies": ("orchestrator.cli",),
 }
 
@@ -92,6 +96,11 @@ def test_each_layer_imports_only_the_layers_below_it(package):
 def test_the_orchestrator_has_one_folder_per_concern():
     for layer in LAYERS:
         assert (PKG / layer / "__init__.py").is_file()
+    # exactly the layers: no second home of the tool or the paper study under an older name
+    folders = sorted(p.name for p in PKG.iterdir() if p.is_dir() and p.name != "__pycache__")
+    assert folders == sorted(LAYERS)
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    assert sorted(p for p in setuptools if p.startswith("orchestrator.")) == sorted(f"orchestrator.{x}" for x in LAYERS)
     loose = sorted(p.name for p in PKG.glob("*.py"))
     # errors.py: the user-error type every layer raises, below all of them (it imports nothing)
     assert loose == ["__init__.py", "__main__.py", "cli.py", "errors.py"]
@@ -185,13 +194,32 @@ def test_no_layer_below_the_command_line_names_it_in_code():
     assert not named, f"below the command line, code names orchestrator.cli: {named}"
 
 
-def test_the_compare_workflow_lives_in_the_experiments_layer():
+def _imported_by(package: str) -> set:
+    """Every project module imported anywhere in ``package`` (module- and function-level)."""
+    return {dep for module, deps in _imports().items() if _in(module, package) for dep in deps}
+
+
+def test_the_tool_never_imports_the_paper_study():
+    # a user who runs the tool for another controller needs none of the paper's modules: the
+    # paper's printed rows reach comparison.md as data its callers pass in (reference_rows)
+    tool_modules = [m for m in _imports() if _in(m, "orchestrator.tool")]
+    assert len(tool_modules) > 20  # the walk sees the tool's modules
+    assert not {d for d in _imported_by("orchestrator.tool") if _in(d, "orchestrator.paper")}
+    assert {d for d in _imported_by("orchestrator.paper") if _in(d, "orchestrator.tool")}  # the paper builds on it
+    paper = {p.stem for p in (PKG / "paper").glob("*.py")} - {"__init__"}
+    assert {"reproduction", "paper_tables", "paper_gains", "calibration", "null_models", "predictors",
+            "theorem1"} <= paper
+    assert not paper & {p.stem for p in (PKG / "tool").glob("*.py")}
+
+
+def test_the_compare_workflow_lives_in_the_tool():
     import inspect
     from orchestrator import cli
-    from orchestrator.experiments import compare, reproduction
+    from orchestrator.tool import compare
+    from orchestrator.paper import reproduction
     # the CLI and the reproduction call it downward; the reproduction is handed no compare function
     # (the CLI imports it where the command runs, so that --help loads no numerical package)
-    assert "from .experiments.compare import run_comparison" in inspect.getsource(cli)
+    assert "from .tool.compare import run_comparison" in inspect.getsource(cli)
     assert "def run_comparison" not in inspect.getsource(cli)
     assert reproduction.run_comparison is compare.run_comparison
     assert "compare" not in inspect.signature(reproduction.reproduce).parameters

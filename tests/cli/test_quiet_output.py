@@ -10,8 +10,8 @@ import sys
 import pytest
 
 from conftest import PAPER
-from orchestrator.experiments.baselines import BASELINES
-from orchestrator.experiments.progress import Progress
+from orchestrator.tool.baselines import BASELINES
+from orchestrator.tool.progress import Progress
 
 pytestmark = pytest.mark.slow  # tapmp compare in a child process
 

@@ -14,11 +14,11 @@ import pytest
 from orchestrator.engine import stepper
 from tapmp import native
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.envelope import envelope
-from orchestrator.experiments.reading import read_results
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.stops import request_stop
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.envelope import envelope
+from orchestrator.tool.reading import read_results
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.stops import request_stop
 from conftest import PAPER, paper_scenario
 
 
@@ -171,7 +171,7 @@ def test_a_bad_stepper_is_refused_naming_the_allowed_values(built, monkeypatch):
 def test_csv_rows_read_back_to_the_same_doubles_at_every_magnitude():
     """Shortest round-trip text for every magnitude and sign, subnormals and the extremes
     included; a block with a non-finite value is written with Python's repr."""
-    from orchestrator.experiments.writers import format_csv_rows
+    from orchestrator.tool.writers import format_csv_rows
     rng = np.random.default_rng(7)
     block = rng.standard_normal((300, 12)) * np.logspace(-310, 300, 12)
     block[0, :6] = [0.0, -0.0, 5e-324, 1.7976931348623157e308, 1e-05, 0.1]

@@ -13,10 +13,10 @@ from scipy import linalg
 from scipy.optimize import brentq
 
 from orchestrator.cli import main
-from orchestrator.experiments.analysis import (BREAK_POINTS, SplitLoop, analyze, break_directions, frequency_grid,
+from orchestrator.tool.analysis import (BREAK_POINTS, SplitLoop, analyze, break_directions, frequency_grid,
                                                margins)
-from orchestrator.experiments.scenario import ScenarioError, load
-from orchestrator.experiments.stability import OneStepMap, invariant_basis, check
+from orchestrator.tool.scenario import ScenarioError, load
+from orchestrator.tool.stability import OneStepMap, invariant_basis, check
 
 from conftest import PAPER
 

@@ -1,4 +1,4 @@
-"""Calibration on APD-DC, prediction of SC-DC (orchestrator/experiments/calibration.py).
+"""Calibration on APD-DC, prediction of SC-DC (orchestrator/paper/calibration.py).
 
 The objective is computed from real co-simulations (checked by hand against the runs'
 metrics.json); the calibrated scenario files load, pass the stability pre-check for both
@@ -10,10 +10,10 @@ import math
 
 import pytest
 
-from orchestrator.experiments import calibration as cal
-from orchestrator.experiments import stability
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.scenario import load
+from orchestrator.paper import calibration as cal
+from orchestrator.tool import stability
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.scenario import load
 
 THETA = [2.5, 4.0, -300.0, 0.9]  # F_c_outer, F_c_middle [N], k_pull [N/m], m_p factor
 

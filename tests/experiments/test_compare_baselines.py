@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.baselines import BASELINES, compare_runs, differential_stiffness, scdc_modal
-from orchestrator.experiments.scenario import load
-from orchestrator.experiments.stability import check
+from orchestrator.tool.baselines import BASELINES, compare_runs, differential_stiffness, scdc_modal
+from orchestrator.tool.scenario import load
+from orchestrator.tool.stability import check
 
 pytestmark = pytest.mark.slow  # tapmp compare through the real CLI
 

@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from orchestrator.experiments.baselines import BASELINES
-from orchestrator.experiments.plots import COLUMNS, decimate
-from orchestrator.experiments.pool import cores, parse_jobs
+from orchestrator.tool.baselines import BASELINES
+from orchestrator.tool.plots import COLUMNS, decimate
+from orchestrator.tool.pool import cores, parse_jobs
 from conftest import PAPER
 
 pytestmark = pytest.mark.slow  # tapmp compare on a process pool

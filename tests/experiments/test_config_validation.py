@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.experiments.config import build
-from orchestrator.experiments.scenario import Scenario, ScenarioError, create, from_dict, read_gains_file
+from orchestrator.tool.config import build
+from orchestrator.tool.scenario import Scenario, ScenarioError, create, from_dict, read_gains_file
 from orchestrator.studies.study import StudyError, load_study
 
 ROOT = Path(__file__).resolve().parents[2]

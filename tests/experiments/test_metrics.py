@@ -1,9 +1,9 @@
-"""Streaming metrics (orchestrator/experiments/metrics.py) equal numpy over the whole table."""
+"""Streaming metrics (orchestrator/tool/metrics.py) equal numpy over the whole table."""
 
 import numpy as np
 import pytest
 
-from orchestrator.experiments.metrics import ErrorStatistics, compute
+from orchestrator.tool.metrics import ErrorStatistics, compute
 
 COLUMNS = ["time"] + [f"trajectory.q{i}_d" for i in (1, 2, 3)] + [f"plant.q{i}_true" for i in (1, 2, 3)] \
     + ["trajectory.X_d", "trajectory.Z_d", "trajectory.B_d", "plant.X", "plant.Z", "plant.B"]
@@ -32,7 +32,7 @@ def test_blockwise_statistics_equal_whole_table_statistics():
 
 
 def test_a_system_without_the_tapmp_plant_gets_metrics_that_name_the_missing_columns():
-    from orchestrator.experiments.metrics import ErrorStatistics
+    from orchestrator.tool.metrics import ErrorStatistics
     columns = ["time", "trajectory.q1_d", "trajectory.q2_d", "trajectory.q3_d", "myplant.x"]
     stats = ErrorStatistics(columns)
     stats.add(np.zeros((7, len(columns))))

@@ -7,8 +7,8 @@ family, and by the feedforward the controller computes with them."""
 import pytest
 
 from orchestrator.engine.master import CoSimulation
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.scenario import ScenarioError, load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.scenario import ScenarioError, load
 from tapmp.params import PAPER_MODEL
 from conftest import PAPER
 

@@ -2,7 +2,7 @@
 
 import math
 
-from orchestrator.experiments import null_models as nm
+from orchestrator.paper import null_models as nm
 
 
 def test_the_36_printed_reductions_are_read_cell_by_cell():

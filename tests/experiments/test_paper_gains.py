@@ -1,4 +1,4 @@
-"""The paper's gains at fine steps (orchestrator.experiments.paper_gains), short horizons."""
+"""The paper's gains at fine steps (orchestrator.paper.paper_gains), short horizons."""
 
 import math
 import random
@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.experiments import stability
-from orchestrator.experiments.paper_gains import (paper_gains_table, paper_scenario, reading_b, run_paper_gains,
+from orchestrator.tool import stability
+from orchestrator.paper.paper_gains import (paper_gains_table, paper_scenario, reading_b, run_paper_gains,
                                                   run_scenario)
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.scenario import load
 from tapmp.closed_loop import simulate
 from tapmp.control import Gains
 from tapmp.kinematics import S3, forward, rotation_column

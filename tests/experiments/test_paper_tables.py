@@ -1,9 +1,10 @@
-"""The paper's Tables 1-6 are read from one data file (orchestrator/experiments/paper_tables.toml)
+"""The paper's Tables 1-6 are read from one data file (orchestrator/paper/paper_tables.toml)
 and every reduction of ours is computed by one formula."""
 
 import math
 
-from orchestrator.experiments import paper_tables as pt
+from orchestrator.paper import paper_tables as pt
+from orchestrator.tool import metrics
 
 
 def test_each_printed_reduction_row_is_its_apd_and_scdc_rows_to_the_papers_rounding():
@@ -14,7 +15,7 @@ def test_each_printed_reduction_row_is_its_apd_and_scdc_rows_to_the_papers_round
         apd, scdc, red = (pt.values(name, row) for row in pt.ROWS)
         assert len(apd) == len(scdc) == len(red) == 6
         for a, s, r in zip(apd, scdc, red):
-            assert abs(pt.reduction(a, s) - r) < 0.05, (name, a, s, r)
+            assert abs(metrics.reduction(a, s) - r) < 0.05, (name, a, s, r)
 
 
 def test_the_tables_are_grouped_by_target_and_read_as_metrics():
@@ -25,12 +26,12 @@ def test_the_tables_are_grouped_by_target_and_read_as_metrics():
     assert pt.printed("Table 4", 0)[4] == "5.00" and pt.printed("Table 2", "reduction")[2] == "82.7"
     apd = pt.by_metric("simulation", "apd_dc")
     assert apd["sync_mae_um"] == (6.98, 7.26, 4.92) and apd["axis_std"] == (14.21, 4.75, 75.95)
-    assert set(apd) == {k for pair in pt.METRIC_KEYS.values() for k in pair}
+    assert set(apd) == {k for pair in metrics.METRIC_KEYS.values() for k in pair}
 
 
 def test_one_reduction_formula_for_every_metric():
-    assert pt.reduction(4.0, 1.0) == 75.0 and pt.reduction(2.0, 3.0) == -50.0
-    assert math.isnan(pt.reduction(0.0, 1.0))
-    base = {k: [2.0, 4.0, 8.0] for pair in pt.METRIC_KEYS.values() for k in pair}
+    assert metrics.reduction(4.0, 1.0) == 75.0 and metrics.reduction(2.0, 3.0) == -50.0
+    assert math.isnan(metrics.reduction(0.0, 1.0))
+    base = {k: [2.0, 4.0, 8.0] for pair in metrics.METRIC_KEYS.values() for k in pair}
     new = {k: [1.0, 1.0, 1.0] for k in base}
-    assert pt.reductions(base, new) == {k: [50.0, 75.0, 87.5] for k in base}
+    assert metrics.reductions(base, new) == {k: [50.0, 75.0, 87.5] for k in base}

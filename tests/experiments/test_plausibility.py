@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.experiments.plausibility import USUAL, implausible
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.plausibility import USUAL, implausible
+from orchestrator.tool.scenario import load
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.plots import (COLUMNS, _load_run, decimate, error_figure, parse_window,
+from orchestrator.tool.plots import (COLUMNS, _load_run, decimate, error_figure, parse_window,
                                             resolve_signal, signals_figure)
-from orchestrator.experiments.reading import read_results
+from orchestrator.tool.reading import read_results
 
 pytestmark = pytest.mark.slow  # tapmp plot over real run folders
 

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt
 from matplotlib.transforms import Bbox
 
 from orchestrator.cli import main
-from orchestrator.experiments.plots import (CHATTER_WINDOW, ZOOM_SAMPLES, figures, force_figure, load_folder,
+from orchestrator.tool.plots import (CHATTER_WINDOW, ZOOM_SAMPLES, figures, force_figure, load_folder,
                                             select_runs, sliding_mean_rms)
 
 pytestmark = pytest.mark.slow  # compare runs and figures drawn with matplotlib

@@ -7,8 +7,8 @@ import re
 
 import pytest
 
-from orchestrator.experiments import null_models as nm
-from orchestrator.experiments import predictors as pr
+from orchestrator.paper import null_models as nm
+from orchestrator.paper import predictors as pr
 from tapmp.params import GAIN_PRESETS
 
 from conftest import ROOT

@@ -56,7 +56,7 @@ def scenario_texts(draw):
 @SETTINGS
 @given(text=scenario_texts())
 def test_any_scenario_file_is_a_scenario_or_one_clear_error(tmp_path, text):
-    from orchestrator.experiments.scenario import ScenarioError, load
+    from orchestrator.tool.scenario import ScenarioError, load
     lines = text.splitlines()
     end = next((i for i, line in enumerate(lines) if line.startswith("[")), len(lines))
     top = [line.split(" = ")[0] for line in lines[:end]]
@@ -185,8 +185,8 @@ def edited_ssd(ssd: str, edits) -> str:
 @given(edits=connection_edits(18))
 def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path, edits):
     from orchestrator.engine.master import CoSimulation, CoSimulationError
-    from orchestrator.experiments.roles import ROLES
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.roles import ROLES
+    from orchestrator.tool.scenario import load
     from conftest import PAPER
 
     src = built["ssp"]

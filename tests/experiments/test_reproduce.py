@@ -14,12 +14,12 @@ from pathlib import Path
 import pytest
 from conftest import shared
 
-from orchestrator.experiments.baselines import BASELINES
-from orchestrator.experiments.paper_gains import run_paper_gains
-from orchestrator.experiments.report import reduction
-from orchestrator.experiments.reproduction import PREDICT_PP, SAME
-from orchestrator.experiments.robustness import MODES, mode_peaks
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.baselines import BASELINES
+from orchestrator.paper.paper_gains import run_paper_gains
+from orchestrator.tool.metrics import reduction
+from orchestrator.paper.reproduction import PREDICT_PP, SAME
+from orchestrator.tool.robustness import MODES, mode_peaks
+from orchestrator.tool.scenario import load
 
 pytestmark = pytest.mark.slow  # tapmp reproduce through the real command line
 

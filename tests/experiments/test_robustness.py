@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from orchestrator.experiments import analysis
-from orchestrator.experiments.baselines import compare_runs, robustness_matched
-from orchestrator.experiments.robustness import MODES, mode_peaks
-from orchestrator.experiments.scenario import load
+from orchestrator.tool import analysis
+from orchestrator.tool.baselines import compare_runs, robustness_matched
+from orchestrator.tool.robustness import MODES, mode_peaks
+from orchestrator.tool.scenario import load
 
 
 @pytest.mark.parametrize("name", ["paper_simulation", "paper_simulation_calibrated", "paper_experiment_calibrated"])
@@ -161,7 +161,7 @@ class _Inserted:
 
 
 from scipy import linalg  # noqa: E402
-from orchestrator.experiments.stability import OneStepMap, check, invariant_basis  # noqa: E402
+from orchestrator.tool.stability import OneStepMap, check, invariant_basis  # noqa: E402
 
 
 def _delayed(sc, v, delay):

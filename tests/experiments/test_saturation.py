@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from orchestrator.experiments.metrics import ErrorStatistics, compute, saturation_limit
+from orchestrator.tool.metrics import ErrorStatistics, compute, saturation_limit
 
 COLUMNS = (["time"] + [f"trajectory.q{i}_d" for i in (1, 2, 3)] + [f"plant.q{i}_true" for i in (1, 2, 3)]
            + ["trajectory.X_d", "trajectory.Z_d", "trajectory.B_d", "plant.X", "plant.Z", "plant.B"]
@@ -66,7 +66,7 @@ def test_a_run_with_the_eq40_gains_chatters_at_the_limit_and_the_default_gains_d
     """Through the real FMUs: the Eq. 40 gains (unstable at 0.1 ms) hold the 600 N limit most of
     the time; the default gains never reach it. The fraction equals a count over results.csv."""
     from conftest import paper_scenario
-    from orchestrator.experiments.results import run_scenario
+    from orchestrator.tool.results import run_scenario
 
     for name, gains in (("eq40", "paper_simulation"), ("default", "default")):
         sc = paper_scenario(0.05, f'gains="{gains}"')

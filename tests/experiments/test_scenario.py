@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.experiments.scenario import ScenarioError, load
+from orchestrator.tool.scenario import ScenarioError, load
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"

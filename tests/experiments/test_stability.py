@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.scenario import load
-from orchestrator.experiments.stability import MARGIN, OneStepMap, check, loop_models
+from orchestrator.tool.scenario import load
+from orchestrator.tool.stability import MARGIN, OneStepMap, check, loop_models
 from tapmp.closed_loop import simulate
 from tapmp.errors import KinematicDomainError
 from tapmp.kinematics import inverse

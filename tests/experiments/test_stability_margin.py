@@ -3,7 +3,7 @@ unstable above 1 + 1e-6, marginal between, pinned at 1 - 2e-6, 1 and 1 + 2e-6 an
 
 import pytest
 
-from orchestrator.experiments.stability import MARGIN, verdict_for
+from orchestrator.tool.stability import MARGIN, verdict_for
 
 
 def test_the_margin_is_one_in_a_million():

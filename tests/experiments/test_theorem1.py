@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from orchestrator.experiments import theorem1 as t1
+from orchestrator.paper import theorem1 as t1
 from tapmp.params import GAIN_PRESETS
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,7 +87,7 @@ def test_tapmp_check_at_a_fine_step_agrees_with_the_continuous_eigenvalues(tmp_p
 
 @pytest.mark.parametrize("gain, holds", [("b", True), ("D", False), ("Lambda_p", False)])
 def test_eq31_survives_a_per_motor_b_but_not_a_per_motor_d_or_lambda_p(gain, holds):
-    from orchestrator.experiments.theorem1 import COUNTEREXAMPLE, eq31_sides
+    from orchestrator.paper.theorem1 import COUNTEREXAMPLE, eq31_sides
     rng = np.random.default_rng(7)
     state = [rng.normal(size=3) for _ in range(3)]
     gains = {k: list(v) for k, v in COUNTEREXAMPLE.items()}

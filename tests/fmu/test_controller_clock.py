@@ -254,7 +254,7 @@ def test_scenario_step_is_the_sample_period(native_built):
     (tapmp.closed_loop.simulate, same parameters) within 1e-12 N, and T_s in [controller] is
     refused."""
     from conftest import COMMANDS, orchestrator_rows
-    from orchestrator.experiments.scenario import ScenarioError
+    from orchestrator.tool.scenario import ScenarioError
     from tapmp.closed_loop import simulate
 
     sc = paper_scenario(0.02, "step=5e-5")

@@ -27,7 +27,7 @@ from orchestrator.cli import main
 from orchestrator.engine import families
 from orchestrator.engine.container import CONTAINER
 from orchestrator.engine.ssp import OSP
-from orchestrator.experiments.export import SSD_MEMBER
+from orchestrator.tool.export import SSD_MEMBER
 from tapmp.interface import INITIAL_STATE as DEFAULT_STATE
 
 DEFAULT_DX0 = DEFAULT_STATE[3]  # m/s: the plant's default, the paper reference's start (25 mm/s)

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.scenario import load
 from tapmp import dynamics, kinematics, native as native_model
 from tapmp.closed_loop import simulate
 from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, Gains

@@ -46,7 +46,7 @@ def test_the_wheel_builds_runs_and_exports_from_an_empty_folder(tmp_path):
     assert {"tapmp/c/tapmp_model.c", "fmu_plant/plant.c", "fmu_controller/TAPMP_Controller.py",
             "fmu_common/native/fmi2_front.c", "tapmp_data/scenarios/paper_simulation.toml",
             "tapmp_data/studies/tune.toml", "tapmp_data/docs/tuning/sc-dc.toml",
-            "orchestrator/experiments/paper_tables.toml"} <= names
+            "orchestrator/paper/paper_tables.toml"} <= names
     print("wheel size", wheel.stat().st_size, "bytes")
 
     venv = tmp_path / "venv"

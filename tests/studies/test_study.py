@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.scenario import ScenarioError, load, load_gain_file
+from orchestrator.tool.scenario import ScenarioError, load, load_gain_file
 from orchestrator.studies.run import run_study
 from orchestrator.studies.study import (StudyError, cases, close_client, load_study, open_client,
                                         read_study_csv)

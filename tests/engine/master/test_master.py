@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.scenario import load
 from tapmp.closed_loop import simulate
 from faults import faulty_plant_fmu, faulty_ssp
 

@@ -12,13 +12,13 @@ chain from) naming the element, the call and the time."""
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from orchestrator.experiments.roles import ROLES
+from orchestrator.tool.roles import ROLES
 from conftest import PAPER
 
 
 def run(ssp, ordering, steps=20):
     """Step the paper scenario's system ``steps`` times; returns the closed CoSimulation."""
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     sc = load(PAPER)
     with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, roles=ROLES) as sim:
         for _ in range(steps):

@@ -8,7 +8,7 @@ import pytest
 from conftest import paper_scenario
 
 from orchestrator.engine.master import CoSimulation
-from orchestrator.experiments.roles import ROLES
+from orchestrator.tool.roles import ROLES
 
 FORCES = [f"controller.F{i}" for i in (1, 2, 3)]
 

@@ -14,10 +14,10 @@ import sys
 import pytest
 
 from conftest import PAPER
-from orchestrator.experiments.estimate import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_STEP, DiskSpaceError,
+from orchestrator.tool.estimate import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_STEP, DiskSpaceError,
                                                check_output_size, output_estimate, recorded_rows)
-from orchestrator.experiments.reading import read_results
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.reading import read_results
+from orchestrator.tool.scenario import load
 
 pytestmark = pytest.mark.slow  # run, compare, study and reproduce in child processes
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments import folders, plots
+from orchestrator.tool import folders, plots
 
 pytestmark = pytest.mark.slow  # real runs and comparisons through the FMUs
 

@@ -9,9 +9,9 @@ import threading
 
 import pytest
 
-from orchestrator.experiments.folders import LOCK_FILE, OutputInUseError, output_lock
+from orchestrator.tool.folders import LOCK_FILE, OutputInUseError, output_lock
 
-HOLD = ("import sys; from orchestrator.experiments.folders import output_lock\n"
+HOLD = ("import sys; from orchestrator.tool.folders import output_lock\n"
         "with output_lock(sys.argv[1]):\n    print('held', flush=True); sys.stdin.read()\n")
 
 

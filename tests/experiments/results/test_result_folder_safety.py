@@ -111,7 +111,7 @@ def test_overwrite_does_not_take_a_folder_another_run_is_writing(built, tmp_path
     assert json.loads((out / "run.json").read_text())["status"] == "completed"
 
 
-HOLD = ("import sys; from orchestrator.experiments.folders import output_lock\n"
+HOLD = ("import sys; from orchestrator.tool.folders import output_lock\n"
         "with output_lock(sys.argv[1]):\n    print('held', flush=True); sys.stdin.read()\n")
 
 
@@ -156,7 +156,7 @@ def test_a_run_into_the_folder_or_a_subfolder_of_a_running_compare_is_refused(bu
 
 
 def test_json_files_are_written_under_unique_temporary_names(tmp_path):
-    from orchestrator.experiments.folders import write_json
+    from orchestrator.tool.folders import write_json
     for i in range(3):
         write_json(tmp_path / "run.json", {"i": i})
     assert [p.name for p in tmp_path.iterdir()] == ["run.json"]

@@ -15,12 +15,12 @@ from scipy.io import loadmat
 
 from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments import metrics
-from orchestrator.experiments.reading import read_results
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.writers import mat_names
-from orchestrator.experiments.scenario import ScenarioError, load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool import metrics
+from orchestrator.tool.reading import read_results
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.writers import mat_names
+from orchestrator.tool.scenario import ScenarioError, load
 
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
@@ -73,8 +73,8 @@ def test_a_write_that_fails_in_the_writing_thread_is_raised_in_the_run_once(tmp_
     """results.csv on a device that is always full (/dev/full): the block handed to the writing
     thread fails there; the run gets its ResultsWriteError (one line naming the file, errno and the
     rows kept) from finish(), once; blocks after it are dropped, not written."""
-    from orchestrator.experiments.folders import ResultsWriteError
-    from orchestrator.experiments.writers import CsvBlocks
+    from orchestrator.tool.folders import ResultsWriteError
+    from orchestrator.tool.writers import CsvBlocks
     (tmp_path / "results.csv").symlink_to("/dev/full")
     writer = CsvBlocks(tmp_path, ["time", "x"])
     try:

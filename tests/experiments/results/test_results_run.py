@@ -1,4 +1,4 @@
-"""Result folders (orchestrator/experiments/results.py): nothing lost on Ctrl-C, decimation that leaves
+"""Result folders (orchestrator/tool/results.py): nothing lost on Ctrl-C, decimation that leaves
 the dynamics alone, determinism and isolation of closed loops in one process."""
 
 import csv
@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from orchestrator.engine.master import CoSimulation
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.scenario import load
 
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"

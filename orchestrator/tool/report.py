@@ -1,9 +1,10 @@
-"""comparison.md and the paper-reproduction page: our Tables 1-6 beside the paper's."""
+"""comparison.md: the compare runs' metrics laid out like the paper's Tables 1-3, beside reference
+rows a caller passes in (the paper study passes the paper's printed rows for its scenarios)."""
 
 from pathlib import Path
 
 from .baselines import BASELINES, BY_NAME, robustness_matched, run_gains_text, scdc_modal
-from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, TABLES, printed, reduction, tables_of
+from .metrics import METRIC_KEYS, QUANTITIES, reduction
 
 _TITLE = {"tracking": "tracking error of each motor", "sync": "synchronization error of each motor",
           "axis": "tracking error of each drive axis"}
@@ -15,21 +16,21 @@ def _label(run: str) -> str:
     return BY_NAME[run].label if run in BY_NAME else run
 
 
-def comparison_tables(scenario_name: str, results: dict) -> str:
-    """Markdown tables laid out like the paper's Tables 1-3 (or 4-6) for metrics by run name.
+def comparison_tables(results: dict, reference: dict | None = None) -> str:
+    """Markdown tables laid out like the paper's Tables 1-3 for metrics by run name.
 
     One row per run (in the order of baselines.BASELINES, other names after), the reduction
-    of SC-DC against each run of REDUCTION_AGAINST present, and for the paper scenarios the
-    paper's three rows as printed (its reduction row copied, not recomputed). Values in um
-    (B in urad), three decimals.
+    of SC-DC against each run of REDUCTION_AGAINST present, then the rows of ``reference``
+    ({quantity of metrics.QUANTITIES: (source, [(label, six cells as text)])}, e.g. the
+    paper's rows as printed for its scenarios; the source is named in the table's title).
+    Values in um (B in urad), three decimals.
     """
-    paper = SCENARIO_TABLES.get(scenario_name)
     order = [b.name for b in BASELINES if b.name in results] + [r for r in results if r not in BY_NAME]
     lines = []
-    for n, table in enumerate(tables_of("simulation")):  # the layout of Tables 1-3, the same for every scenario
-        kind, labels, units = TABLES[table].quantity, TABLES[table].columns, TABLES[table].units
+    for kind, (labels, units) in QUANTITIES.items():
         unit = units[0] if len(set(units)) == 1 else ", ".join(units)
-        ref = f" (paper: {paper[n]})" if paper else ""
+        source, rows = (reference or {}).get(kind, (None, ()))
+        ref = f" ({source})" if source else ""
         lines += [f"### Comparison of the {_TITLE[kind]} [{unit}]{ref}", "",
                   "| Control strategy | " + " | ".join(f"STD {x}" for x in labels) + " | "
                   + " | ".join(f"MAE {x}" for x in labels) + " |",
@@ -48,10 +49,8 @@ def comparison_tables(scenario_name: str, results: dict) -> str:
                 lines.append(row(f"ours: reduction of SC-DC vs {_label(run).split(' (')[0]} (%)",
                                  [reduction(b, s) for b, s in zip(base[std_key], sc[std_key])],
                                  [reduction(b, s) for b, s in zip(base[mae_key], sc[mae_key])]))
-        if paper:
-            for r, label in enumerate(("paper: APD-DC", "paper: SC-DC (proposed)",
-                                       "paper: reduction (%), as printed")):
-                lines.append(f"| {label} | " + " | ".join(printed(paper[n], r)) + " |")
+        for label, cells in rows:
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
         lines.append("")
     lines += force_step_table(results, order)
     return "\n".join(lines)
@@ -91,7 +90,7 @@ def modal_note(scenario) -> str:
 
 def robustness_section(runs: dict) -> list[str]:
     """Markdown lines: each run's robustness on the sampled loop of `tapmp check` (tapmp analyze's
-    measures, orchestrator.experiments.analysis): Ms per mode, disk margins per loop and for all
+    measures, orchestrator.tool.analysis): Ms per mode, disk margins per loop and for all
     motors at once, the all-loops gain margin with the K_T error it covers, the smallest delay margin
     and the lowest actuator bandwidth. runs: {name: Scenario}."""
     from . import analysis
@@ -200,11 +199,12 @@ def move_tables(results: dict) -> str:
 
 
 def write_comparison(path: Path, scenario, results: dict, command: str, runs: dict | None = None,
-                     checks: dict | None = None) -> str:
+                     checks: dict | None = None, reference: dict | None = None) -> str:
     """Write comparison.md for a `tapmp compare` run and return its text.
 
     results: {run name: metrics}; runs: {run name: Scenario} and checks: {run name:
-    StabilityReport} for the table of runs (left out if runs is None).
+    StabilityReport} for the table of runs (left out if runs is None); reference: the rows shown
+    beside ours (see comparison_tables).
     """
     g = scenario.gain_values()
     parts = [
@@ -220,7 +220,7 @@ def write_comparison(path: Path, scenario, results: dict, command: str, runs: di
         parts += ["## Runs", "", runs_table(runs, results, checks or {}), "", modal_note(scenario), "",
                   "## Robustness of each run", "", *robustness_section(runs), ""]
     parts += ["## SC-DC against each run (mean over the three motors)", "", summary_table(results), "",
-              comparison_tables(scenario.name, results)]
+              comparison_tables(results, reference)]
     moves = move_tables(results)
     if moves:
         parts += [moves]

@@ -28,13 +28,13 @@ Objective: the residuals r_j = ln(ours_j / paper_j) over APD-DC's tracking MAE a
 synchronization MAE of the three motors (six residuals); J = sum r_j^2, minimized by
 scipy.optimize.least_squares (trust region reflective, within the bounds, forward
 differences of 2 % of each range). Each evaluation is a co-simulation through the FMUs
-(orchestrator.experiments.results.run_scenario), over the fit horizon: one period of the
+(orchestrator.tool.results.run_scenario), over the fit horizon: one period of the
 slowest reference component (2.5 s for the simulation, 1 / 0.18 Hz for the experiment),
 capped at the scenario's stop_time. The result is verified on the full horizon of the
 base scenario, for APD-DC (the fit) and SC-DC (the prediction), with the stability
 pre-check of both.
 
-Run: ``.venv/bin/python -m orchestrator.experiments.calibration --target simulation``
+Run: ``.venv/bin/python -m orchestrator.paper.calibration --target simulation``
 (or ``experiment``); it writes <work>/paper_<target>_calibrated.toml (or the file of
 --write-to, e.g. scenarios/paper_<target>_calibrated.toml) and <work>/calibration.json.
 """
@@ -54,12 +54,13 @@ from tapmp.params import GAIN_PRESETS
 
 from ..engine.families import SCENARIOS_DIR
 from . import paper_tables
-from . import scenario as scenario_mod
-from . import stability
-from .folders import write_json
-from .paper_tables import METRIC_KEYS, TABLES, by_metric, tables_of, values
-from .results import run_scenario
-from .scenario import Scenario, ScenarioError
+from ..tool import scenario as scenario_mod
+from ..tool import stability
+from ..tool.folders import write_json
+from .paper_tables import TABLES, by_metric, tables_of, values
+from ..tool.metrics import METRIC_KEYS, reductions
+from ..tool.results import run_scenario
+from ..tool.scenario import Scenario, ScenarioError
 
 ROOT = SCENARIOS_DIR  # the shipped scenario files (the repository's scenarios/ in a checkout)
 GAIN_SCALE = 0.36 / 150.0  # Eq. 40's Lambda_v of motor 1 (150) -> the default preset's 0.36
@@ -252,7 +253,7 @@ def predict(target: str, theta, ssp: Path, work: Path) -> dict:
         m = run_metrics(sc, ssp, Path(work) / "full" / law)
         out[law] = {"metrics": m, "verdict": rep.verdict, "spectral_radius": rep.spectral_radius,
                     "stop_time_s": sc.stop_time, "wall_s": time.perf_counter() - t0}
-    out["reduction"] = paper_tables.reductions(out["apd-dc"]["metrics"], out["sc-dc"]["metrics"])
+    out["reduction"] = reductions(out["apd-dc"]["metrics"], out["sc-dc"]["metrics"])
     out["objective_full"] = objective(out["apd-dc"]["metrics"], target)
     out["residuals_full"] = residuals(out["apd-dc"]["metrics"], target).tolist()
     return out
@@ -285,7 +286,7 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
     lines = [
         f"# Calibrated plant for the paper's {target}: APD-DC fitted to Tables {fitted[0]}-{fitted[1]}, "
         "SC-DC predicted.",
-        f"# Written by: .venv/bin/python -m orchestrator.experiments.calibration --target {target}",
+        f"# Written by: .venv/bin/python -m orchestrator.paper.calibration --target {target}",
         f"# Base: scenarios/{base_file(target).name} (trajectory, step, horizon); see docs/calibration.md.",
         f"# Gains: Eq. 40 with Lambda_p, Lambda_v x {GAIN_SCALE:g} (= 0.36 / 150); APD-DC reads them by Eq. 41.",
         f"# Fit: least squares on ln(ours/paper) of APD-DC tracking and sync MAE (6 residuals), "
@@ -298,7 +299,7 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
         f"#   SC-DC (predicted, same plant and preset) tracking MAE [um]: {_fmt(scdc['tracking_mae_um'])}, "
         f"sync MAE: {_fmt(scdc['sync_mae_um'])}",
         f"# SC-DC: tapmp run scenarios/{calibrated_file(target).name} --set law='\"sc-dc\"'",
-        "# Fit record (read by orchestrator.experiments.calibration.read_fit_record):",
+        "# Fit record (read by orchestrator.paper.calibration.read_fit_record):",
     ]
     record = {"fit_horizon_s": fit["horizon_s"], "objective_fit": fit["objective"],
               "objective_full": pred["objective_full"], "residuals_full": pred["residuals_full"],
@@ -357,7 +358,7 @@ def prediction_table(target: str, pred: dict) -> str:
 
 def main(argv=None) -> int:
     """Command line: fit, verify on the full horizon, predict SC-DC, write the scenario file."""
-    ap = argparse.ArgumentParser(prog="python -m orchestrator.experiments.calibration",
+    ap = argparse.ArgumentParser(prog="python -m orchestrator.paper.calibration",
                                  description="Calibrate the plant on APD-DC (paper Tables 1-2 or 4-5), predict SC-DC.")
     ap.add_argument("--target", required=True, choices=TARGETS)
     ap.add_argument("--ssp", default=None, help="SSP of the FMUs (default: the built native family)")

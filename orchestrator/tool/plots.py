@@ -31,7 +31,7 @@ from .reading import ResultFolderError, json_object, read_results  # noqa: E402
 
 LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
               "pid-dc": "PID-DC",
-              # the other runs of `tapmp compare` (orchestrator.experiments.baselines): one label each
+              # the other runs of `tapmp compare` (orchestrator.tool.baselines): one label each
               "apd-dc-diff-stiffness": "APD-DC diff. stiffness", "apd-dc-mode-matched": "APD-DC mode-matched",
               "apd-dc-ms-matched": "APD-DC Ms-matched", "pid-dc-mode-matched": "PID-DC mode-matched",
               "pid-dc-full": "PID-DC full integral", "sc-dc-b0": "SC-DC b = 0",

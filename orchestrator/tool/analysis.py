@@ -1,6 +1,6 @@
 """Frequency response, margins and closed-loop poles of the sampled loop (`tapmp analyze`).
 
-The loop is the one ``tapmp check`` linearizes (orchestrator.experiments.stability): the
+The loop is the one ``tapmp check`` linearizes (orchestrator.tool.stability): the
 one-step map of the sampled loop from communication point t to t + h, built from the
 model functions the FMUs run, linearized by central differences about the scenario's
 start with the nonlinear parts left out (quantization, Coulomb friction, saturation).

@@ -15,7 +15,7 @@ The baselines here take the structure apart, one change per run:
                                    differential-mode P on every mode
     apd-dc-mode-matched    PID-DC  SC-DC's P and D per mode, no integral (ki_c = ki_d = 0)
     apd-dc-ms-matched      PID-DC  SC-DC's D per mode, no integral, P per mode tuned to SC-DC's
-                                   peak sensitivity Ms (orchestrator.experiments.robustness)
+                                   peak sensitivity Ms (orchestrator.tool.robustness)
     pid-dc-mode-matched    PID-DC  SC-DC's P, D and I per mode (equals SC-DC for uniform gains)
     pid-dc-full            PID-DC  SC-DC's P, D and differential I per mode, plus the same integral
                                    gain on the common mode (ki_c = ki_d, not tuned): the ordinary
@@ -142,7 +142,7 @@ def compare_runs(scenario) -> dict:
 
 
 def robustness_matched(scenario):
-    """orchestrator.experiments.robustness.Matched for the scenario's SC-DC and its mode-matched PD."""
+    """orchestrator.tool.robustness.Matched for the scenario's SC-DC and its mode-matched PD."""
     mg, _ = scdc_modal(scenario.gain_values())
     pd = scenario.with_changes(law="pid-dc", controller={**scenario.controller,
                                                          **mg._replace(ki_c=0.0, ki_d=0.0)._asdict()})

@@ -2,7 +2,7 @@
 beside the same co-simulation without calibration, and the experiment tables run with the
 experiment's own gains.
 
-Runs (each a co-simulation through the FMUs, orchestrator.experiments.calibration.run_metrics):
+Runs (each a co-simulation through the FMUs, orchestrator.paper.calibration.run_metrics):
 
 * uncalibrated: the base scenarios (paper_simulation, paper_experiment) with the gains the
   calibrated scenarios use (Eq. 40 with Lambda_p, Lambda_v x 0.36/150), the base plant;
@@ -18,10 +18,12 @@ from pathlib import Path
 
 from tapmp.params import GAIN_PRESETS
 
-from . import calibration, stability
-from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, TABLES, reductions
+from . import calibration
+from ..tool import stability
+from .paper_tables import SCENARIO_TABLES, TABLES
+from ..tool.metrics import METRIC_KEYS, reductions
 from .null_models import Cell, paper_cells, score, TOLERANCES, EXPERIMENT_TABLES, null_model_table
-from .scenario import load
+from ..tool.scenario import load
 
 DEFAULT_FORCE_DAMPING = GAIN_PRESETS["default"]["Lambda_v"][0] / GAIN_PRESETS["default"]["K_T"][0]  # 8780 N s/m
 EXPERIMENT_PRESET = "paper_experiment"  # Eq. 42-43
@@ -122,7 +124,7 @@ def prediction_lines(calibrated: dict, extra: dict) -> list[str]:
         "that scores best, both chosen knowing the answers) and the gain ratio of Eq. 40-41 (what a stiffer "
         "P gain alone gives per mode). The 36 cells are about 16 independent numbers: the X axis repeats "
         "q2 and the STD and MAE reductions of one quantity differ by a few points; the last column keeps "
-        "one MAE cell per quantity. Computed by `python -m orchestrator.experiments.null_models` for the "
+        "one MAE cell per quantity. Computed by `python -m orchestrator.paper.null_models` for the "
         "null models alone.", "",
         table, "",
         f"* The calibrated prediction gets {pred_all.hits[0]} of 36 within {TOLERANCES[0]:g} points; the best "

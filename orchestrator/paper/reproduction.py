@@ -1,8 +1,8 @@
 """docs/paper-reproduction.md, written by `tapmp reproduce` from the runs it makes.
 
 The page holds the paper's Tables 1-6 as printed beside ours (every compare run of
-orchestrator.experiments.baselines), the modal table (tapmp.modal), the paper's gains run
-at fine steps (orchestrator.experiments.paper_gains), the calibrated scenarios if present
+orchestrator.tool.baselines), the modal table (tapmp.modal), the paper's gains run
+at fine steps (orchestrator.paper.paper_gains), the calibrated scenarios if present
 (scenarios/<name>_calibrated.toml: the same compare runs, SC-DC being the prediction) and
 a section of generated sentences on which of the paper's claims hold. Every number on the
 page is computed in this run, next to the command that gives it; the judgements use the
@@ -13,14 +13,15 @@ from pathlib import Path
 
 from tapmp.modal import modal_table
 
-from .baselines import scdc_modal
-from .compare import run_comparison
+from ..tool.baselines import scdc_modal
+from ..tool.compare import run_comparison
 from .paper_gains import paper_gains_table, run_paper_gains
 from .predictors import prediction_lines, run_extra
-from .robustness import MODES, mode_peaks
-from .paper_tables import METRIC_KEYS, SCENARIO_TABLES, printed, reduction
-from .report import comparison_tables, modal_note, robustness_section, runs_table, summary_table
-from .scenario import load
+from ..tool.robustness import MODES, mode_peaks
+from .paper_tables import SCENARIO_TABLES, printed, reference_rows
+from ..tool.metrics import METRIC_KEYS, reduction
+from ..tool.report import comparison_tables, modal_note, robustness_section, runs_table, summary_table
+from ..tool.scenario import load
 
 SCENARIOS = ("paper_simulation", "paper_experiment")
 PAPER_GAIN_STEPS = (1e-6, 1e-5, 1e-4)   # [s]: continuous-time stand-ins (1 us, 10 us) and the servo cycle
@@ -324,7 +325,7 @@ def _section(title: str, name: str, sc, runs, results, checks, command: str, fol
             "### Runs and stability pre-check", "", runs_table(runs, results, checks), "", modal_note(sc), "",
             "### Robustness of each run", "", *robustness_section(runs), "",
             "### SC-DC against each run (mean over the motors)", "", summary_table(results), "",
-            comparison_tables(name.removesuffix("_calibrated"), results)]
+            comparison_tables(results, reference_rows(name.removesuffix("_calibrated")))]
 
 
 def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *, ssp_of,
@@ -343,7 +344,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
     def compare(scenario, folder):
         scenario = scenario.with_changes(**changes) if changes else scenario
         return run_comparison(scenario, ssp_of(scenario), folder, True, progress, command, jobs,
-                              written_by="reproduce")
+                              written_by="reproduce", reference=reference_rows(scenario.name))
 
     comparisons, calibrated, folders = {}, {}, {}
     for name in SCENARIOS:
@@ -362,7 +363,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
     gain_rows = run_paper_gains(steps=PAPER_GAIN_STEPS, stop_time=paper_gains_stop, workers=workers,
                                 progress=lambda done, total, row: say(f"the paper's gains: {done} of {total} runs "
                                                                       "done"))
-    pg_cmd = (f"python -m orchestrator.experiments.paper_gains --stop-time {paper_gains_stop:g} --steps "
+    pg_cmd = (f"python -m orchestrator.paper.paper_gains --stop-time {paper_gains_stop:g} --steps "
               + " ".join(f"{h:g}" for h in PAPER_GAIN_STEPS) + f" --workers {workers}")
 
     parts = ["# Reproducing the paper's Tables 1-6", "",
@@ -397,7 +398,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
               "* **The baselines.** Written in e, SC-DC is a PID with Laplacian coupling (docs/modal-view.md): "
               "its stiffness differs between the common and the differential modes and it integrates the "
               "differential modes. The paper's APD-DC has other gains on every mode, so the compare runs add "
-              "baselines that match SC-DC mode by mode and ablations of SC-DC (orchestrator/experiments/"
+              "baselines that match SC-DC mode by mode and ablations of SC-DC (orchestrator/tool/"
               "baselines.py), each row saying what it isolates.", "",
               "Plant parameters of each scenario (FMU parameter values; from the scenario files, "
               "`tapmp run SCENARIO` writes them to run.json):", "",

@@ -214,7 +214,7 @@ class OneStepMap:
 
         y is the force the loop hands the plant (the command of this sample, or with Jacobi the
         one held from the previous sample); the plant steps under ``w`` [N] if given (the loop
-        opened at the plant input, orchestrator.experiments.analysis), else under y."""
+        opened at the plant input, orchestrator.tool.analysis), else under y."""
         plant, ctrl = self.plant, self.ctrl
         plant.state = [float(v) for v in x[:6]]
         k = 6

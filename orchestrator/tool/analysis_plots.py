@@ -1,6 +1,6 @@
 """Figures of `tapmp analyze` (matplotlib, PNG): Bode plots of the loop gain with the margins
 marked, |S| and |T|, and the disturbance sensitivity (force to error), with SC-DC and the
-baselines of `tapmp compare` on one figure (orchestrator.experiments.analysis)."""
+baselines of `tapmp compare` on one figure (orchestrator.tool.analysis)."""
 
 from pathlib import Path
 

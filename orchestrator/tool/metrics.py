@@ -28,6 +28,24 @@ _FORCES = tuple(f"controller.F{i}" for i in (1, 2, 3))
 AT_LIMIT = 1e-9  # |F| >= (1 - AT_LIMIT) force_limit counts as at the limit (a clipped value, to rounding)
 RESPONSE_WINDOW = 0.1  # [s] the windows before a force step and at the end of the run
 EFFORT_HZ = 100.0  # [Hz] the force RMS above this frequency is the effort metric (module doc)
+# The metrics.json keys of each error quantity: (STD, MAE), each a list over the columns.
+METRIC_KEYS = {"tracking": ("tracking_std_um", "tracking_mae_um"), "sync": ("sync_std_um", "sync_mae_um"),
+               "axis": ("axis_std", "axis_mae")}
+# The columns and units of each quantity, as the paper's tables lay them out (um, urad for B).
+QUANTITIES = {"tracking": (("q1", "q2", "q3"), ("um", "um", "um")), "sync": (("q1", "q2", "q3"), ("um", "um", "um")),
+              "axis": (("X", "Z", "B"), ("um", "um", "urad"))}
+
+
+def reduction(base: float, new: float) -> float:
+    """Reduction of ``new`` relative to ``base`` in percent, 100 (base - new) / base (NaN if
+    ``base`` is 0): the formula of the paper's "Reduction (%)" rows with base APD-DC."""
+    return 100.0 * (base - new) / base if base else float("nan")
+
+
+def reductions(base: dict, new: dict) -> dict[str, list[float]]:
+    """{metrics.json key: [reduction per motor or axis, %]} of the metrics ``new`` against
+    ``base`` (two metrics.json dicts) for every key of METRIC_KEYS."""
+    return {k: [reduction(b, n) for b, n in zip(base[k], new[k])] for pair in METRIC_KEYS.values() for k in pair}
 
 
 class _HighPassRms:

@@ -1,8 +1,9 @@
-"""The paper's Tables 1-6 (paper_tables.toml beside this module) and the one reduction formula.
+"""The paper's Tables 1-6 (paper_tables.toml beside this module).
 
 Every module that shows, scores or fits against the paper's numbers reads them here: the
-comparison and reproduction pages (report, reproduction), the null models, the calibration and
-the predictors. Our reductions of SC-DC against APD-DC are all computed by ``reduction``.
+reproduction page and the rows beside ours in comparison.md (``reference_rows``), the null
+models, the calibration and the predictors. Our reductions of SC-DC against APD-DC are all
+computed by orchestrator.tool.metrics.reduction.
 """
 
 from importlib import resources
@@ -13,10 +14,9 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from ..tool.metrics import METRIC_KEYS
+
 ROWS = ("apd_dc", "sc_dc", "reduction")  # the printed rows: APD-DC, proposed (SC-DC), "Reduction (%)"
-# The metrics.json keys of each table's quantity: (STD, MAE), each a list over the columns.
-METRIC_KEYS = {"tracking": ("tracking_std_um", "tracking_mae_um"), "sync": ("sync_std_um", "sync_mae_um"),
-               "axis": ("axis_std", "axis_mae")}
 
 
 class Table(NamedTuple):
@@ -75,13 +75,13 @@ def by_metric(target: str, row: str) -> dict[str, tuple]:
     return out
 
 
-def reduction(base: float, new: float) -> float:
-    """Reduction of ``new`` relative to ``base`` in percent, 100 (base - new) / base (NaN if
-    ``base`` is 0): the formula of the paper's "Reduction (%)" rows with base APD-DC."""
-    return 100.0 * (base - new) / base if base else float("nan")
-
-
-def reductions(base: dict, new: dict) -> dict[str, list[float]]:
-    """{metrics.json key: [reduction per motor or axis, %]} of the metrics ``new`` against
-    ``base`` (two metrics.json dicts) for every key of METRIC_KEYS."""
-    return {k: [reduction(b, n) for b, n in zip(base[k], new[k])] for pair in METRIC_KEYS.values() for k in pair}
+def reference_rows(scenario_name: str) -> dict | None:
+    """The paper's rows as printed for comparison.md of a paper scenario (None for any other
+    scenario): {quantity: ("paper: Table N", [(label, six cells)])}, see
+    orchestrator.tool.report.comparison_tables."""
+    tables = SCENARIO_TABLES.get(scenario_name)
+    if not tables:
+        return None
+    labels = ("paper: APD-DC", "paper: SC-DC (proposed)", "paper: reduction (%), as printed")
+    return {TABLES[t].quantity: (f"paper: {t}", [(label, printed(t, r)) for r, label in enumerate(labels)])
+            for t in tables}

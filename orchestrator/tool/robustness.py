@@ -7,7 +7,7 @@ stiffer, less robust loop would give. ``ms_matched`` tunes the baseline that rem
 PID-DC (law 2) without integral (ki_c = ki_d = 0), SC-DC's derivative gains per mode, and the
 proportional gains kp_c and kp_d chosen (brentq) so that Ms of the common mode and the mean Ms
 of the two differential modes equal SC-DC's, on the same frequency grid, loop broken at the plant
-input force as ``tapmp analyze`` does (orchestrator.experiments.analysis).
+input force as ``tapmp analyze`` does (orchestrator.tool.analysis).
 """
 
 from typing import NamedTuple

@@ -1,5 +1,5 @@
 """The compare workflow (`tapmp compare`, and every comparison of `tapmp reproduce`): run a
-scenario with SC-DC, APD-DC and the fair baselines (orchestrator.experiments.baselines) into one
+scenario with SC-DC, APD-DC and the fair baselines (orchestrator.tool.baselines) into one
 comparison folder, each run in its subfolder, then write comparison.md and the figures.
 """
 
@@ -60,12 +60,14 @@ def run_columns(folder: Path) -> list:
 
 
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
-                   show: list | None = None, figures: bool = True, written_by: str = "compare"):
+                   show: list | None = None, figures: bool = True, written_by: str = "compare",
+                   reference: dict | None = None):
     """Run every compare run of ``scenario`` on the SSP file ``ssp`` into out/<run> (on ``jobs``
     processes, a progress bar each if ``progress``), write out/comparison.md (naming ``command``)
     and, if ``figures``, the figures (of the runs ``show``, default see plots.select_runs);
     returns (runs, results, checks, comparison.md text). ``written_by``: the command, recorded in
-    comparison.json (`tapmp reproduce` replaces only the comparisons it wrote)."""
+    comparison.json (`tapmp reproduce` replaces only the comparisons it wrote); ``reference``: rows
+    shown beside ours in comparison.md (report.comparison_tables)."""
     from .baselines import compare_runs  # on first use: the command line starts without the models' algebra
     from .pool import run_many
     from .report import write_comparison
@@ -83,7 +85,7 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
                            scenario.name, first=drawing.needed if drawing else (),
                            on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
         results = {name: r["metrics"] for name, r in records.items()}
-        text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
+        text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks, reference)
         if not figures:
             return runs, results, checks, text
         say(f"{scenario.name}: figures")

@@ -11,9 +11,9 @@ drives, deliberately: they keep their start values; the master refuses any other
 undriven input, and an entry that is no input of the system or that a connection drives),
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
 see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
-format (the result file: "csv" (default) or "mat", see orchestrator.experiments.results;
+format (the result file: "csv" (default) or "mat", see orchestrator.tool.results;
 `--format` overrides it), settling_bands (the bands of the move metrics of a point-to-point
-run, trajectory.profile 1-3, see orchestrator.experiments.metrics.MoveMetrics; default
+run, trajectory.profile 1-3, see orchestrator.tool.metrics.MoveMetrics; default
 [1e-6, 1e-7], in m, rad for B). output is the scenario's result folder (default
 results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
@@ -62,7 +62,7 @@ TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": 
        "start_time": float, "step": float, "ordering": str, "output": str,
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
        "open_inputs": list, "fmus": str, "format": str, "settling_bands": list}
-RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.experiments.results)
+RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.tool.results)
 TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion

@@ -1,4 +1,4 @@
-"""Checks shared by the configuration files: scenarios (orchestrator.experiments.scenario) and
+"""Checks shared by the configuration files: scenarios (orchestrator.tool.scenario) and
 studies (orchestrator.studies.study, orchestrator.studies.tuning).
 
 Scenarios and studies are pydantic models: each field carries its rule (``Annotated[str,

@@ -27,10 +27,10 @@ simulation would have. The loop is ``tapmp.closed_loop.run``: the FMI-free loop 
 ``tapmp.closed_loop.simulate``); the FMUs at 1 us would take 100 times the steps of a 0.1 ms
 run through the co-simulation master.
 
-Per run: the metrics of orchestrator.experiments.metrics (tracking and synchronization
+Per run: the metrics of orchestrator.tool.metrics (tracking and synchronization
 MAE and STD per motor [um], every communication point from the start), the share of
 samples with the command at the plant's force limit per motor, the spectral radius
-of the linearized loop (orchestrator.experiments.stability.check) and the wall time.
+of the linearized loop (orchestrator.tool.stability.check) and the wall time.
 """
 
 import math
@@ -48,9 +48,9 @@ from tapmp.params import ModelParams
 
 from ..engine.families import SCENARIOS_DIR
 from ..errors import UsageError
-from . import stability
-from .metrics import ErrorStatistics
-from .scenario import Scenario, load, model_tuple
+from ..tool import stability
+from ..tool.metrics import ErrorStatistics
+from ..tool.scenario import Scenario, load, model_tuple
 
 ROOT = SCENARIOS_DIR  # the shipped scenario files (the repository's scenarios/ in a checkout)
 # case: (scenario file, gain preset, the paper's equations)
@@ -249,12 +249,12 @@ def paper_gains_table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    """python -m orchestrator.experiments.paper_gains [--stop-time S] [--steps H ...] [--cases ...]
+    """python -m orchestrator.paper.paper_gains [--stop-time S] [--steps H ...] [--cases ...]
     [--laws ...] [--readings ...] [--plants ...] [--workers N] [--json FILE]: run_paper_gains and print paper_gains_table (rows also to FILE as JSON)."""
     import argparse
     import json
 
-    ap = argparse.ArgumentParser(prog="python -m orchestrator.experiments.paper_gains",
+    ap = argparse.ArgumentParser(prog="python -m orchestrator.paper.paper_gains",
                                  description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop.")
     ap.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s]")
     ap.add_argument("--steps", type=float, nargs="+", default=[1e-6, 1e-5, 1e-4], help="steps [s]")

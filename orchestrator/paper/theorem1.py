@@ -22,7 +22,7 @@ K_I int(e)) (the modal form of tapmp.modal, M_q the joint-space mass matrix at B
 their eigenvalues have a positive real part (about +18.9 1/s) under SC-DC while APD-DC with
 the same numbers (Eq. 41) is stable. ``tapmp check`` at a fine step agrees (docs/theorem1.md).
 
-Run ``python -m orchestrator.experiments.theorem1`` to print the eigenvalues and Eq. 31's sides.
+Run ``python -m orchestrator.paper.theorem1`` to print the eigenvalues and Eq. 31's sides.
 """
 
 import numpy as np
