@@ -33,11 +33,14 @@ FORBIDDEN = {
     "orchestrator.studies": ("orchestrator.cli",),
 }
 
-# Test folders, named like the package's parts; "project" holds the checks of the repository as
-# a whole (docs, README commands, clean checkout, wheel, tests/run.sh, benchmarks).
-TEST_FOLDERS = ("model", "fmu", "engine", "experiments", "studies", "cli", "interop", "project")
-# What may sit at tests/'s root: the shared fixtures, the fault-injection helper, this file.
-TEST_ROOT_FILES = {"conftest.py", "faults.py", "test_layout.py"}
+# Test folders, named like the package's parts (tool and paper as orchestrator's); "cli" holds the
+# end-to-end runs of the tapmp command, "project" the checks of the repository as a whole (docs,
+# README commands, clean checkout, wheel, tests/run.sh, benchmarks), "support" the helpers the
+# tests share (imported as tests.support.<module>), no test.
+TEST_FOLDERS = ("model", "fmu", "engine", "tool", "paper", "studies", "cli", "interop", "project")
+HELPERS = "support"
+# What may sit at tests/'s root: the package marker, the shared fixtures, this file.
+TEST_ROOT_FILES = {"__init__.py", "conftest.py", "test_layout.py"}
 
 
 def _in(module: str, package: str) -> bool:
@@ -144,6 +147,8 @@ def _test_files():
 def test_every_test_file_is_in_the_folder_of_what_it_tests():
     misplaced = [str(p.relative_to(TESTS)) for p in _test_files()
                  if p.parent != TESTS and p.relative_to(TESTS).parts[0] not in TEST_FOLDERS]
+    gone = sorted(p.name for p in TESTS.iterdir() if p.is_dir() and p.name not in (*TEST_FOLDERS, HELPERS, "data", "__pycache__"))
+    assert not gone, f"test folders named after no part of the package: {gone}"
     at_root = sorted(p.name for p in TESTS.glob("*.py") if p.name not in TEST_ROOT_FILES)
     assert not misplaced, f"test files outside {', '.join(TEST_FOLDERS)}: {misplaced}"
     assert not at_root, f"move into one of tests/{{{','.join(TEST_FOLDERS)}}}/: {at_root}"
@@ -151,14 +156,25 @@ def test_every_test_file_is_in_the_folder_of_what_it_tests():
         assert any((TESTS / folder).rglob("test_*.py")), f"tests/{folder} holds no test"
 
 
-def test_test_module_names_are_unique_and_every_test_folder_is_on_the_pythonpath():
-    # pytest imports test files by their name (no __init__.py), so two of one name would clash;
-    # and a helper imported by name from another folder needs that folder on the path.
-    names = [p.name for p in TESTS.rglob("*.py")]
-    assert len(names) == len(set(names)), sorted({n for n in names if names.count(n) > 1})
-    folders = {p.parent.relative_to(ROOT).as_posix() for p in TESTS.rglob("*.py")}
+def test_the_tests_are_packages_and_no_test_folder_is_on_the_pythonpath():
+    # a test imports a helper by its package path (tests.support.faults), never by a bare name
+    # that only resolves because its folder is on sys.path
+    folders = {p.parent for p in TESTS.rglob("*.py") if "__pycache__" not in p.parts}
+    assert folders >= {TESTS / f for f in (*TEST_FOLDERS, HELPERS)}
+    not_packages = sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").is_file())
+    assert not not_packages, f"test folders without __init__.py: {not_packages}"
     ini = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
-    assert set(ini["pythonpath"]) == folders
+    assert "pythonpath" not in ini
+    assert not any((TESTS / HELPERS).glob("test_*.py"))
+    bare = sorted({p.stem for p in TESTS.rglob("*.py")} - {"__init__", "conftest"})
+    flat = []
+    for path in sorted(TESTS.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = ([node.module] if isinstance(node, ast.ImportFrom) and not node.level
+                     else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            flat += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names
+                     if n and n.split(".")[0] in (*bare, "conftest")]
+    assert not flat, f"imports of a test module by its bare name: {flat}"
 
 
 def test_the_markers_are_registered_strictly():

@@ -98,7 +98,7 @@ def test_a_shipped_study_is_found_by_name_like_a_shipped_scenario(tmp_path):
 
 def test_check_prints_a_growth_factor_just_above_1_with_the_digits_that_show_it(tmp_path):
     # Theorem 1's counterexample at a 1 us step: the worst mode grows by about 2e-5 per step
-    from test_theorem1 import COUNTER
+    from tests.paper.test_theorem1 import COUNTER
     from orchestrator.tool.scenario import load
     from orchestrator.tool.stability import check
     scenario = tmp_path / "theorem1.toml"

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from conftest import PAPER
+from tests.support.runs import PAPER
 from orchestrator.tool.baselines import BASELINES
 from orchestrator.tool.progress import Progress
 

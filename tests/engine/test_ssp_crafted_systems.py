@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from faults import faulty_plant_fmu, faulty_ssp
+from tests.support.faults import faulty_plant_fmu, faulty_ssp
 
 pytestmark = pytest.mark.slow  # every case runs tapmp run in a child process
 

@@ -19,7 +19,7 @@ from orchestrator.tool.envelope import envelope
 from orchestrator.tool.reading import read_results
 from orchestrator.tool.results import run_scenario
 from orchestrator.tool.stops import request_stop
-from conftest import PAPER, paper_scenario
+from tests.support.runs import PAPER, paper_scenario
 
 
 def rows_of(ssp, scenario, stepper_kind, ordering, clock="exact", blocks=(7, 300, 193)):

@@ -3,7 +3,7 @@
 import math
 
 import pytest
-from conftest import call_status
+from tests.support.fmus import call_status
 
 from tapmp.control import ControllerModel, Gains
 from tapmp.interface import CONTROLLER, TRAJECTORY

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
 from orchestrator.engine import families
 from orchestrator.cli import main
 

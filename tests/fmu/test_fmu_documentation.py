@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PAPER, ROOT, shared
+from tests.support.runs import PAPER
+from tests.support.shared import ROOT, shared
 
 from orchestrator.engine import fmu_extras
 from orchestrator.engine.fmu_extras import LS_REF, SCENARIO

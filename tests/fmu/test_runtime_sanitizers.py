@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
+from tests.support.ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
 from tapmp.interface import FMU_NAMES
 
 pytestmark = pytest.mark.slow  # sanitizer builds and child processes

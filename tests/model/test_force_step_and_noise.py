@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from tests.support.shared import ROOT
 from orchestrator.tool.results import run_scenario
 from orchestrator.tool.scenario import ScenarioError, load
 from tapmp.errors import ModelInputError

@@ -18,7 +18,7 @@ from tapmp.interface import TRAJECTORY
 from tapmp.kinematics import inverse
 from tapmp.trajectory import TrajectoryParams, move_duration, move_plan, reference
 
-from conftest import ROOT
+from tests.support.shared import ROOT
 
 P2P = ROOT / "scenarios" / "point_to_point.toml"
 DEG = math.pi / 180.0

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from test_toolchain import EXPECTED_BINARIES, shim_path
+from tests.model.test_toolchain import EXPECTED_BINARIES, shim_path
 
 pytestmark = pytest.mark.slow  # builds a wheel and installs it into a fresh venv
 

@@ -1,5 +1,5 @@
 """The master's failure paths, for both orderings, through the real
-CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on (tests/faults.py,
+CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on (tests/support/faults.py,
 the ``faulty_ssps`` fixture):
 
 * ``status``: doStep returns fmi2Error and logs nothing;
@@ -13,7 +13,7 @@ import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.tool.roles import ROLES
-from conftest import PAPER
+from tests.support.runs import PAPER
 
 
 def run(ssp, ordering, steps=20):

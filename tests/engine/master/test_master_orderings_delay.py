@@ -5,7 +5,7 @@ the same macro step, from the measurement at t_k. Read back from the plant FMU's
 
 import numpy as np
 import pytest
-from conftest import paper_scenario
+from tests.support.runs import paper_scenario
 
 from orchestrator.engine.master import CoSimulation
 from orchestrator.tool.roles import ROLES

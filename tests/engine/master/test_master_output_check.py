@@ -7,7 +7,7 @@ import pytest
 from orchestrator.engine.master import CoSimulation, DivergenceError, OutputCheck
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.envelope import Envelope
-from conftest import paper_scenario
+from tests.support.runs import paper_scenario
 
 
 class ReferenceBound(OutputCheck):

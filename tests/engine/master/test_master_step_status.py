@@ -12,8 +12,8 @@ import math
 
 import pytest
 
-from conftest import PAPER
-from faults import faulty_plant_fmu, faulty_ssp
+from tests.support.runs import PAPER
+from tests.support.faults import faulty_plant_fmu, faulty_ssp
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.tool.roles import ROLES
 

@@ -12,7 +12,7 @@ from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
 
-from conftest import PAPER
+from tests.support.runs import PAPER
 
 
 def test_the_clock_knows_its_last_representable_step():

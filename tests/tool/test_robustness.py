@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from tests.support.shared import ROOT
 from orchestrator.tool import analysis
 from orchestrator.tool.baselines import compare_runs, robustness_matched
 from orchestrator.tool.robustness import MODES, mode_peaks

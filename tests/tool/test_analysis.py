@@ -18,7 +18,7 @@ from orchestrator.tool.analysis import (BREAK_POINTS, SplitLoop, analyze, break_
 from orchestrator.tool.scenario import ScenarioError, load
 from orchestrator.tool.stability import OneStepMap, invariant_basis, check
 
-from conftest import PAPER
+from tests.support.runs import PAPER
 
 # The paper scenario without the nonlinear parts, resting at the home pose: the loop the
 # linearization describes exactly, for the co-simulation comparison.

@@ -11,7 +11,7 @@ from orchestrator.paper import null_models as nm
 from orchestrator.paper import predictors as pr
 from tapmp.params import GAIN_PRESETS
 
-from conftest import ROOT
+from tests.support.shared import ROOT
 
 
 @pytest.fixture(scope="module")

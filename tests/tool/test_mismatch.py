@@ -10,7 +10,7 @@ from orchestrator.engine.master import CoSimulation
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import ScenarioError, load
 from tapmp.params import PAPER_MODEL
-from conftest import PAPER
+from tests.support.runs import PAPER
 
 MISMATCH = ["mismatch.m_p=1.25", "mismatch.I_y=0.8", "mismatch.m_2=1.1", "plant.m_p=2.0"]
 NAMES = ("m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g")

@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from conftest import PAPER
+from tests.support.runs import PAPER
 from orchestrator.tool.estimate import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_STEP, DiskSpaceError,
                                                check_output_size, output_estimate, recorded_rows)
 from orchestrator.tool.reading import read_results

@@ -187,7 +187,7 @@ def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path,
     from orchestrator.engine.master import CoSimulation, CoSimulationError
     from orchestrator.tool.roles import ROLES
     from orchestrator.tool.scenario import load
-    from conftest import PAPER
+    from tests.support.runs import PAPER
 
     src = built["ssp"]
     dst = tmp_path / "edited.ssp"

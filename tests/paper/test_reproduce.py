@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 
 import pytest
-from conftest import shared
+from tests.support.shared import shared
 
 from orchestrator.tool.baselines import BASELINES
 from orchestrator.paper.paper_gains import run_paper_gains

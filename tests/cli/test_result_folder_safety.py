@@ -16,7 +16,7 @@ import pytest
 
 pytestmark = pytest.mark.slow  # concurrent tapmp processes, signals, a full disk
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 
 

@@ -65,7 +65,7 @@ def test_the_limit_is_the_plants_else_the_controllers(parameters, limit):
 def test_a_run_with_the_eq40_gains_chatters_at_the_limit_and_the_default_gains_do_not(built, tmp_path):
     """Through the real FMUs: the Eq. 40 gains (unstable at 0.1 ms) hold the 600 N limit most of
     the time; the default gains never reach it. The fraction equals a count over results.csv."""
-    from conftest import paper_scenario
+    from tests.support.runs import paper_scenario
     from orchestrator.tool.results import run_scenario
 
     for name, gains in (("eq40", "paper_simulation"), ("default", "default")):

@@ -13,7 +13,7 @@ import pytest
 from orchestrator.tool.baselines import BASELINES
 from orchestrator.tool.plots import COLUMNS, decimate
 from orchestrator.tool.pool import cores, parse_jobs
-from conftest import PAPER
+from tests.support.runs import PAPER
 
 pytestmark = pytest.mark.slow  # tapmp compare on a process pool
 

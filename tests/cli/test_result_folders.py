@@ -15,7 +15,7 @@ from orchestrator.cli import main
 
 pytestmark = pytest.mark.slow  # tapmp run, compare and plot in child processes
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenarios" / "paper_simulation.toml")
 SHORT = ["--set", "stop_time=0.01", "--no-progress"]
 
