@@ -19,6 +19,7 @@ def _produced_by(folder: Path) -> str:
     return line.removeprefix("Produced by `").removesuffix("`.")
 
 
+@pytest.mark.slow  # a whole comparison: every baseline, its robustness analysis and figures (15-30 s)
 def test_main_from_code_records_its_argv_with_the_top_level_options(built, tmp_path, monkeypatch, capsys):
     # sys.argv is not what main parses here: the old record "tapmp compare " + sys.argv[2:] was wrong twice
     monkeypatch.setattr(sys, "argv", ["pytest", "-q", "tests/test_cli_command_line.py"])
