@@ -26,7 +26,7 @@ def user_errors() -> tuple:
     or build that failed for a reason it names, and OSError (a file or folder the user named, a full
     disk, a scheduler address). Every other exception is a programming error and shows its traceback."""
     from tapmp.errors import ModelInputError
-    from tapmp.native import NativeModelError
+    from tapmp.cmodel import CModelError
     from tapmp.toolchain import CacheTrustError
     from .engine.build import BuildError
     from .engine.build_native import NativeBuildError
@@ -40,7 +40,7 @@ def user_errors() -> tuple:
     from .studies.study import StudyError
     return (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
             ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-            ResultsWriteError, BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
+            ResultsWriteError, BuildError, NativeBuildError, CModelError, CacheTrustError, OSError)
 
 
 def __getattr__(name):
@@ -202,9 +202,9 @@ def cmd_build(args) -> int:
 
 def cache_sources() -> list[Path]:
     """The C sources of the libraries tapmp compiles into its cache (the C model, the stepping core)."""
-    from tapmp import native
+    from tapmp import cmodel
     from .engine import stepper
-    return [native.SOURCE, native.HEADER, stepper.SOURCE]
+    return [cmodel.SOURCE, cmodel.HEADER, stepper.SOURCE]
 
 
 def warn_if_unstable(scenario) -> None:

@@ -9,7 +9,7 @@ of Theorem 1), so F = u / K_T. Gains are per motor (diagonal matrices of the pap
 import math
 from typing import NamedTuple
 
-from . import native
+from . import cmodel
 from .dynamics import generalized_force
 from .errors import KinematicDomainError, ModelInputError, require_finite
 from .kinematics import forward, solve_transpose, task_velocity
@@ -22,7 +22,7 @@ VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured posi
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
 # A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s
 # (the C model's TAPMP_SAMPLE_TOLERANCE, which says why this width).
-SAMPLE_TOLERANCE = native.header_number("TAPMP_SAMPLE_TOLERANCE")
+SAMPLE_TOLERANCE = cmodel.header_number("TAPMP_SAMPLE_TOLERANCE")
 _INPUT_NAMES = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d",
                 "q1", "q2", "q3", "dq1", "dq2", "dq3")
 
@@ -87,7 +87,7 @@ def _settings(values: dict):
     the settings table, the rest at their defaults; ModelInputError for the first setting outside
     its range (tapmp_controller_settings_check)."""
     from .interface import CONTROLLER
-    return native.check_settings(CONTROLLER, values)
+    return cmodel.check_settings(CONTROLLER, values)
 
 
 def sync_errors(e1: float, e2: float, e3: float) -> tuple[float, float, float]:
@@ -158,7 +158,7 @@ def pid_command(e, de, integral_e, u_d, m: ModalGains, K_T) -> tuple[float, floa
 def sample_index(t: float, t0: float, T_s: float) -> int | None:
     """Index k of the sample instant t0 + k T_s [s] that the communication point t [s] falls
     on (within SAMPLE_TOLERANCE T_s), or None if t lies between sample instants."""
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     k = ffi.new("double *")
     return int(k[0]) if lib.tapmp_sample_index(t, t0, T_s, k) else None
 
@@ -188,7 +188,7 @@ class ControllerModel:
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
-        ffi, self._lib = native.load()
+        ffi, self._lib = cmodel.load()
         self._ffi = ffi
         self._cp = ffi.addressof(self._s, "p")  # members of self._s, which keeps them alive
         self._cg = ffi.addressof(self._s, "g")

@@ -7,7 +7,7 @@ them. Defaults come from the model's own parameter tuples, so nothing is typed t
 same rows come the C code that reads an FMU's parameters into the model's settings struct
 (:func:`settings_read_macro`, into model_vars.h), the C range checks every family and the Python
 model run (:func:`settings_check_source`, tapmp_settings.h) and the Python side's filling of
-those structs by field name (tapmp.native.settings).
+those structs by field name (tapmp.cmodel.settings).
 """
 
 from typing import NamedTuple

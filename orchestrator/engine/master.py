@@ -69,7 +69,7 @@ from .schedule import (CONNECTION_STARTS, ORDERINGS, Connection, ScheduleError, 
                        gauss_seidel_order, initialization_order)
 from .ssd import ParameterAddressError, check_elements, column_prefixes, extract_fmus, read_ssp, resolve_parameters
 from .tempdirs import make_folder
-from .units import Unit
+from .instance import Unit
 
 STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]

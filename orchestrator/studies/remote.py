@@ -41,8 +41,8 @@ ZLIB_LEVEL = 6  # zlib's default: a 0.5 s case's run.json + metrics.json shrink 
 
 def identity() -> dict:
     """What a worker must share with the client: the installed tapmp-cosim version and the hash of
-    the model's C sources (tapmp.native.source_hash), with the process's host and pid."""
-    from tapmp.native import source_hash
+    the model's C sources (tapmp.cmodel.source_hash), with the process's host and pid."""
+    from tapmp.cmodel import source_hash
     try:
         version = metadata.version("tapmp-cosim")
     except metadata.PackageNotFoundError:

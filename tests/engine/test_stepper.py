@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine import stepper
-from tapmp import native
+from tapmp import cmodel
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.envelope import envelope
@@ -141,11 +141,11 @@ def test_the_core_is_built_once_into_the_cache_folder(tmp_path, monkeypatch):
 def test_a_core_that_cannot_be_built_is_one_line_and_the_run_steps_in_python(tmp_path, built, monkeypatch):
     """No compiler: `tapmp run` says so in one line and completes with the Python loop (the C
     model's library is there, as after any build: only the stepping core is missing)."""
-    library = native.library_path()
+    library = cmodel.library_path()
     monkeypatch.setenv("TAPMP_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
     (tmp_path / "cache").mkdir()
-    shutil.copyfile(library, native.cached_library_path())
+    shutil.copyfile(library, cmodel.cached_library_path())
     env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), CC=str(tmp_path / "no-such-cc"),
                TMPDIR=str(tmp_path))
     env.pop("TAPMP_STEPPER", None)

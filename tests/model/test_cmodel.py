@@ -3,7 +3,7 @@ the readable Python reference of the equations (tapmp/kinematics.py, dynamics.py
 PlantModel.derivatives, control.py's laws, trajectory.py) and the reference step and sample
 composed here from them.
 
-The C functions are called through the package's own cffi binding (tapmp.native: the
+The C functions are called through the package's own cffi binding (tapmp.cmodel: the
 declarations are read from tapmp_model.h, nothing is mirrored by hand) and compared with their
 Python counterparts on at least N_STATES random states (numpy default_rng with a fixed seed per
 test; realistic ranges: positions +-0.02 m, B +-0.3 rad, rates +-0.5 m/s or rad/s, forces +-300 N,
@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from orchestrator.tool.scenario import load
-from tapmp import dynamics, kinematics, native as native_model
+from tapmp import cmodel, dynamics, kinematics
 from tapmp.closed_loop import simulate
 from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, Gains
 from tapmp.control import ModalGains, apd_command, feedforward, pid_command, scdc_command, sync_deviation
@@ -51,9 +51,9 @@ COMMAND_TOL = 1e-6       # [N] force commands in the closed loop
 MEASURED: dict[str, dict] = {}
 
 
-# --- the binding: tapmp.native's cffi declarations of tapmp_model.h --------------------------
+# --- the binding: tapmp.cmodel's cffi declarations of tapmp_model.h --------------------------
 
-FFI, LIB = native_model.load()
+FFI, LIB = cmodel.load()
 STRUCTS = ("tapmp_params", "tapmp_plant_config", "tapmp_plant", "tapmp_gains", "tapmp_trajectory",
            "tapmp_controller_state")
 
@@ -210,7 +210,7 @@ def compile_shared(sources, output: Path) -> ctypes.CDLL:
 
 @pytest.fixture(scope="session")
 def native_lib():
-    """The C model as the package loads it (tapmp.native)."""
+    """The C model as the package loads it (tapmp.cmodel)."""
     return LIB
 
 
@@ -995,5 +995,5 @@ def test_closed_loop_through_the_c_functions_follows_the_python_loop(native, law
 
 
 def test_the_law_numbers_of_python_are_the_c_models():
-    _, lib = native_model.load()
+    _, lib = cmodel.load()
     assert (SCDC, APDDC, PIDDC) == (lib.TAPMP_SCDC, lib.TAPMP_APDDC, lib.TAPMP_PIDDC) == (0, 1, 2)

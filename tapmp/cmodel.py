@@ -35,7 +35,7 @@ LOOP_SOURCE = C_DIR / "tapmp_loop.c"
 LOOP_HEADER = C_DIR / "tapmp_loop.h"
 
 
-class NativeModelError(RuntimeError):
+class CModelError(RuntimeError):
     """The C model cannot be built or loaded; the message says why in one line."""
 
 
@@ -52,7 +52,7 @@ def header_number(name: str, header: Path = HEADER) -> float:
     cffi's ABI mode cannot read)."""
     m = re.search(rf"^#define {re.escape(name)} (\S+)", header.read_text(), flags=re.M)
     if m is None:
-        raise NativeModelError(f"{header} defines no {name}")
+        raise CModelError(f"{header} defines no {name}")
     return float(m.group(1))
 
 
@@ -80,7 +80,7 @@ def bundled_name() -> str:
 
 def compile_library(output: Path) -> Path:
     """Compile tapmp_model.c and tapmp_loop.c into the shared library ``output`` with the native FMUs' flags
-    (tapmp.toolchain.CFLAGS) but exported symbols; NativeModelError if the compiler fails."""
+    (tapmp.toolchain.CFLAGS) but exported symbols; CModelError if the compiler fails."""
     from .toolchain import CFLAGS, ToolchainError, compile_c
     # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
     flags = [f for f in CFLAGS if not f.startswith("-fvisibility")]
@@ -90,7 +90,7 @@ def compile_library(output: Path) -> Path:
             return compile_c([SOURCE, LOOP_SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
                              what="the C model")
         except ToolchainError as err:
-            raise NativeModelError(str(err)) from None
+            raise CModelError(str(err)) from None
 
 
 def cached_library_path() -> Path:
@@ -107,7 +107,7 @@ def _cached_library() -> Path:
         from .toolchain import build_cached
         return build_cached(path, compile_library)
     except OSError as err:
-        raise NativeModelError(f"cannot write the compiled C model into {path.parent}: "
+        raise CModelError(f"cannot write the compiled C model into {path.parent}: "
                                f"{err.strerror or err} (set TAPMP_CACHE to a writable folder)") from None
 
 
@@ -135,7 +135,7 @@ def load():
             for name in dir(lib):  # every declared function, now: a stale or foreign file fails here
                 getattr(lib, name)
         except (OSError, AttributeError) as err:
-            raise NativeModelError(f"cannot load the compiled C model {path}: {' '.join(str(err).split())} "
+            raise CModelError(f"cannot load the compiled C model {path}: {' '.join(str(err).split())} "
                                    "(delete the file so that it is compiled again)") from None
         _LOADED = ffi, lib
     return _LOADED
