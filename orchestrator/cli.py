@@ -332,37 +332,22 @@ def compare_runs(scenario):
     return runs(scenario)
 
 
-def summary_rows(results: dict) -> list[tuple]:
-    """(run, mean tracking MAE [um], mean sync MAE [um], tracking and sync reduction [%] against
-    APD-DC) per run of a comparison ({run: metrics}); the means over the three motors."""
-    from .tool.metrics import reduction
-
-    def mean(v):
-        return sum(v) / len(v)
-    base = results.get("apd-dc")
-    rows = []
-    for name, m in results.items():
-        t, y = mean(m["tracking_mae_um"]), mean(m["sync_mae_um"])
-        rt = reduction(mean(base["tracking_mae_um"]), t) if base else float("nan")
-        ry = reduction(mean(base["sync_mae_um"]), y) if base else float("nan")
-        rows.append((name, t, y, rt, ry))
-    return rows
-
-
-def summary_table(results: dict) -> str:
-    """The short table `tapmp compare` prints: one row per run (see summary_rows), its force effort
-    and the steady (mean) tracking error on each mode (mode_means)."""
-    rows = summary_rows(results)
+def summary_text(results: dict) -> str:
+    """The short table `tapmp compare` prints: one row per run (orchestrator.tool.report.summary_rows:
+    SC-DC's reduction against each run), its force effort and the steady (mean) tracking error on
+    each mode (mode_means)."""
+    from .tool.report import summary_rows
+    rows = [(name, t, y, rt, ry) for name, _, t, y, rt, ry in summary_rows(results)]
     w = max(len("run"), *(len(r[0]) for r in rows))
     hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), 0.0)
     head = f"F RMS > {hz:g} Hz [N]"
-    lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'vs APD-DC: tracking':>19}  "
+    lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'SC-DC vs it: tracking':>21}  "
              f"{'sync':>8}  {head:>19}  {'mean: common':>12}  {'diff. Z':>8}  {'diff. B':>8} [um]"]
     for name, t, y, rt, ry in rows:
         f = results[name].get("force_hf_rms_n")
         effort = f"{sum(f) / len(f):.4g}" if f else "n/a"  # the mean over the motors
         means = mode_means(results[name]) if "tracking_mean_um" in results[name] else [float("nan")] * 3
-        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%  {effort:>19}  "
+        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+20.1f}%  {ry:>+7.1f}%  {effort:>19}  "
                      f"{means[0]:>+12.4f}  {means[1]:>+8.4f}  {means[2]:>+8.4f}")
     return "\n".join(lines)
 
@@ -401,9 +386,10 @@ def cmd_compare(args) -> int:
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
                                       command, jobs, show, not args.no_figures,
                                       reference=reference_rows(scenario.name))
-    print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
+    print(f"{scenario.name}: mean over the three motors; SC-DC's reduction against each run, positive = SC-DC has "
+          "the smaller error")
     print("mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B (1,-2,1)")
-    print(summary_table(results))
+    print(summary_text(results))
     for line in move_lines(results, ("X", "Z", "B")):  # the motors' too in each run's metrics.json
         print(line)
     print(f"results{'' if args.no_figures else ', figures'} and the full tables (comparison.md) in {out}")

@@ -134,22 +134,33 @@ def runs_table(runs: dict, results: dict, checks: dict) -> str:
     return "\n".join(lines)
 
 
-def summary_table(results: dict) -> str:
-    """Markdown table: each run's mean tracking and synchronization MAE over the motors [um] and
-    SC-DC's reduction against it [%] (positive: SC-DC has the smaller error)."""
+def summary_rows(results: dict) -> list[tuple]:
+    """(run, label, mean tracking MAE [um], mean sync MAE [um], SC-DC's tracking and sync reduction
+    against the run [%]) per run of a comparison ({run: metrics.json}), in the order of
+    baselines.BASELINES, other names after; the means are over the three motors. A reduction is
+    positive where SC-DC has the smaller error (NaN without an SC-DC run): the one direction of
+    every summary, comparison.md's and the one `tapmp compare` prints."""
     sc = results.get("sc-dc")
+    order = [b.name for b in BASELINES if b.name in results] + [r for r in results if r not in BY_NAME]
+    rows = []
+    for name in order:
+        m = results[name]
+        t, y = _mean(m["tracking_mae_um"]), _mean(m["sync_mae_um"])
+        rt = reduction(t, _mean(sc["tracking_mae_um"])) if sc else float("nan")
+        ry = reduction(y, _mean(sc["sync_mae_um"])) if sc else float("nan")
+        rows.append((name, _label(name), t, y, rt, ry))
+    return rows
+
+
+def summary_table(results: dict) -> str:
+    """Markdown table of summary_rows: each run's mean tracking and synchronization MAE over the
+    motors [um], SC-DC's reduction against it [%] and its force RMS above the effort band [N]."""
     hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), None)
     lines = ["| run | mean tracking MAE [um] | mean sync MAE [um] | SC-DC's tracking reduction [%] "
              "| SC-DC's sync reduction [%] | force RMS above " + (f"{hz:g} Hz" if hz else "the band") + " [N] |",
              "|---" * 6 + "|"]
-    for b in BASELINES:
-        if b.name not in results:
-            continue
-        m = results[b.name]
-        t, y = _mean(m["tracking_mae_um"]), _mean(m["sync_mae_um"])
-        rt = reduction(t, _mean(sc["tracking_mae_um"])) if sc else float("nan")
-        ry = reduction(y, _mean(sc["sync_mae_um"])) if sc else float("nan")
-        lines.append(f"| {b.label} | {t:.4f} | {y:.4f} | {rt:+.1f} | {ry:+.1f} | {effort_text(m)} |")
+    for name, label, t, y, rt, ry in summary_rows(results):
+        lines.append(f"| {label} | {t:.4f} | {y:.4f} | {rt:+.1f} | {ry:+.1f} | {effort_text(results[name])} |")
     return "\n".join(lines)
 
 
