@@ -37,7 +37,7 @@ def user_errors() -> tuple:
     from .tool.folders import OutputExistsError, OutputInUseError, ResultsWriteError
     from .tool.reading import ResultFolderError
     from .tool.scenario import ScenarioError
-    from .studies.study import StudyError
+    from .studies.study_file import StudyError
     return (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
             ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
             ResultsWriteError, BuildError, NativeBuildError, CModelError, CacheTrustError, OSError)

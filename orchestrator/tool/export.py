@@ -31,12 +31,13 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from ..engine import fmu_extras
+from ..engine.fmu_extras import SSV, value_text
 from ..engine.ssd import ParameterAddressError, resolve_parameters
-from ..engine.ssp import SSC, SSD, default_experiment, set_system_step
+from ..engine.ssp import SSC, SSD, default_experiment, qname, set_system_step
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 
-SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 TAPMP_NS = "https://github.com/tapmp-cosim/ssp-annotations"
 ET.register_namespace("ssv", SSV)
 ET.register_namespace("tapmp", TAPMP_NS)
@@ -50,10 +51,6 @@ _SSV_TYPES = {"Real": "Real", "Float64": "Real", "Float32": "Real", "Integer": "
 
 class ExportError(ValueError):
     """The scenario cannot be exported; the message names the path or variable and what is allowed."""
-
-
-def _q(ns: str, tag: str) -> str:
-    return f"{{{ns}}}{tag}"
 
 
 def _model_description(fmu_bytes: bytes) -> ET.Element:
@@ -80,66 +77,40 @@ def _fmu_parameters(root: ET.Element) -> tuple[dict, dict]:
     return params, units
 
 
-def _format(kind: str, value) -> str:
-    """A value as SSV/fmpy text that reads back to the same number (repr: shortest round trip)."""
-    if kind == "Integer":
-        return str(int(value))
-    if kind == "Boolean":
-        return "true" if value else "false"
-    return repr(float(value))
-
-
 def parameter_set(name: str, values: dict, declared: dict, units: dict, element: str) -> bytes:
-    """One SSV document: ParameterSet ``name`` with ``values`` ({variable: value}) typed and
-    with units as ``declared`` ({variable: (SSV type, unit)}) by the element's FMU."""
-    root = ET.Element(_q(SSV, "ParameterSet"), version="1.0", name=name)
-    params = ET.SubElement(root, _q(SSV, "Parameters"))
-    used = []
-    for var, value in values.items():
-        if var not in declared:
-            raise ExportError(f"{element}.{var} = {value!r} cannot be exported: the {element} FMU has no "
-                              f"parameter {var}; allowed are {', '.join(sorted(declared))}")
-        kind, unit = declared[var]
-        p = ET.SubElement(params, _q(SSV, "Parameter"), name=var)
-        attrs = {"value": _format(kind, value)}
-        if kind == "Real" and unit in units:
-            attrs["unit"] = unit
-            used.append(unit)
-        ET.SubElement(p, _q(SSV, kind), attrs)
-    if used:
-        table = ET.SubElement(root, _q(SSV, "Units"))
-        for unit in sorted(set(used)):
-            u = ET.SubElement(table, _q(SSC, "Unit"), name=unit)
-            ET.SubElement(u, _q(SSC, "BaseUnit"), units[unit])
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    """One SSV document (engine.fmu_extras.parameter_set); ExportError names a variable the
+    element's FMU does not declare."""
+    try:
+        return fmu_extras.parameter_set(name, values, declared, units, element)
+    except ValueError as err:
+        raise ExportError(str(err)) from None
 
 
 def _default_experiment(root: ET.Element, scenario: Scenario) -> None:
     """Replace the SSD's DefaultExperiment with the scenario's times and step annotations and
     give the system OMSimulator's fixed-step master at the scenario's step."""
-    for old in root.findall(_q(SSD, "DefaultExperiment")):
+    for old in root.findall(qname(SSD, "DefaultExperiment")):
         root.remove(old)
-    set_system_step(root.find(_q(SSD, "System")), scenario.step)
+    set_system_step(root.find(qname(SSD, "System")), scenario.step)
     exp = default_experiment(scenario.start_time, scenario.stop_time, scenario.step, f"{scenario.name}_res.csv")
-    annotations = exp.find(_q(SSD, "Annotations"))
-    own = ET.SubElement(annotations, _q(SSC, "Annotation"), type=SCENARIO_ANNOTATION)
-    ET.SubElement(own, _q(TAPMP_NS, "Scenario"), name=scenario.name, step=repr(scenario.step),
+    annotations = exp.find(qname(SSD, "Annotations"))
+    own = ET.SubElement(annotations, qname(SSC, "Annotation"), type=SCENARIO_ANNOTATION)
+    ET.SubElement(own, qname(TAPMP_NS, "Scenario"), name=scenario.name, step=repr(scenario.step),
                   ordering=scenario.ordering, clock=scenario.clock, connectionStart=scenario.connection_start,
                   law=scenario.law)
     # DefaultExperiment follows Units and precedes Annotations (SSD schema sequence)
-    after = [i for i, child in enumerate(root) if child.tag != _q(SSD, "Annotations")]
+    after = [i for i, child in enumerate(root) if child.tag != qname(SSD, "Annotations")]
     root.insert(after[-1] + 1 if after else 0, exp)
 
 
 def _bind(component: ET.Element, source: str) -> None:
     """Give a Component one ParameterBinding to ``source``, placed where the SSD schema wants
     it (after Connectors and ElementGeometry, before Annotations)."""
-    for old in component.findall(_q(SSD, "ParameterBindings")):
+    for old in component.findall(qname(SSD, "ParameterBindings")):
         component.remove(old)
-    bindings = ET.Element(_q(SSD, "ParameterBindings"))
-    ET.SubElement(bindings, _q(SSD, "ParameterBinding"), source=source)
-    before = [i for i, c in enumerate(component) if c.tag in (_q(SSD, "Connectors"), _q(SSD, "ElementGeometry"))]
+    bindings = ET.Element(qname(SSD, "ParameterBindings"))
+    ET.SubElement(bindings, qname(SSD, "ParameterBinding"), source=source)
+    before = [i for i, c in enumerate(component) if c.tag in (qname(SSD, "Connectors"), qname(SSD, "ElementGeometry"))]
     component.insert(before[-1] + 1 if before else 0, bindings)
 
 
@@ -156,7 +127,7 @@ def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
     if SSD_MEMBER not in members:
         raise ExportError(f"SSP file {source_ssp} has no {SSD_MEMBER}: allowed is an SSP built by `bash build_fmus.sh`")
     root = ET.fromstring(members[SSD_MEMBER])
-    components = {c.get("name"): c for c in root.iter(_q(SSD, "Component"))}
+    components = {c.get("name"): c for c in root.iter(qname(SSD, "Component"))}
     descriptions = {}
     for element, component in components.items():
         fmu = component.get("source", "")
@@ -185,7 +156,7 @@ def start_values(scenario: Scenario) -> list[tuple[str, str]]:
     ``--start-values`` of ``fmpy simulate`` for the container FMU TAPMP_ClosedLoop.fmu."""
     from tapmp.interface import ELEMENT, VARIABLES
     kinds = {f"{ELEMENT[m]}.{v.name}": v.type for m in VARIABLES for v in VARIABLES[m]}
-    return [(f"{element}.{name}", _format(kinds.get(f"{element}.{name}", "Real"), value))
+    return [(f"{element}.{name}", value_text(kinds.get(f"{element}.{name}", "Real"), value))
             for element, table in scenario.parameters().items() for name, value in table.items()]
 
 
