@@ -47,7 +47,7 @@ def planted_library(tmp_path_factory):
 def names(cache: Path) -> dict:
     """{"model" | "stepper": the path in ``cache`` each library is loaded from}."""
     env = {**os.environ, "TAPMP_CACHE": str(cache)}
-    code = ("from tapmp import native; from orchestrator.engine import stepper; "
+    code = ("from tapmp import cmodel; from orchestrator.engine import stepper; "
             "print(cmodel.cached_library_path()); print(stepper.library_path())")
     model, core = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                                  check=True).stdout.split()
