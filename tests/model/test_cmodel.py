@@ -28,8 +28,9 @@ from orchestrator.tool.scenario import load
 from tapmp import cmodel, dynamics, kinematics
 from tapmp.closed_loop import simulate
 from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, Gains
-from tapmp.control import ModalGains, apd_command, feedforward, pid_command, scdc_command, sync_deviation
-from tapmp.control import sync_errors
+from tapmp.control import ModalGains, sync_deviation
+from tests.support.control_reference import apd_command, feedforward, pid_command, scdc_command
+from tests.support.control_reference import sync_errors
 from tapmp.errors import KinematicDomainError
 from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel

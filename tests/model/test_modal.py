@@ -5,7 +5,8 @@ import random
 
 import pytest
 
-from tapmp.control import Gains, apd_command, scdc_command, sync_deviation, sync_errors
+from tapmp.control import Gains, sync_deviation
+from tests.support.control_reference import apd_command, scdc_command, sync_errors
 from tapmp.modal import (LAPLACIAN, MODES, apd_matrices, force_view, main, modal_gains, modal_table,
                          pid_command, scdc_matrices)
 from tapmp.params import GAIN_PRESETS
