@@ -630,6 +630,90 @@ def scenario_arg(sp, example: str) -> None:
                     help=f"override a scenario value, e.g. {example}")
 
 
+def _choices(option: str, values: list, allowed) -> tuple:
+    """``values`` of a repeatable option, each one of ``allowed``; else the one-line refusal."""
+    from tapmp.errors import allowed_are
+    for v in values:
+        if v not in allowed:
+            raise UsageError(f"{option} = {v!r} is invalid: {allowed_are(v, list(allowed))}")
+    return tuple(values)
+
+
+def cmd_paper_gains(args) -> int:
+    """`tapmp paper-gains`: the paper's gains (Eq. 40-43) at fine steps in the plain loop; the table
+    on stdout (progress on stderr), the rows also to --json."""
+    from .paper.paper_gains import CASES, LAWS, PLANTS, READINGS, paper_gains_table, run_paper_gains
+    cases = _choices("--cases", args.cases or list(CASES), CASES)
+    laws = _choices("--laws", args.laws or list(LAWS), LAWS)
+    readings = _choices("--readings", args.readings or list(READINGS), READINGS)
+    plants = _choices("--plants", args.plants or list(PLANTS), PLANTS)
+    steps = tuple(args.steps or (1e-6, 1e-5, 1e-4))
+    if args.workers < 1:
+        raise UsageError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+
+    def progress(done, total, row):  # on stderr, so that stdout stays the table
+        print(f"run {done}/{total}: {row['case']} gains, {row['plant']} plant, reading {row['reading']}, "
+              f"{row['law'].upper()}, step {row['step'] * 1e6:g} us, {row['stop_time']:g} s: {row['status']} "
+              f"({row['wall_s']:.1f} s)", file=sys.stderr, flush=True)
+
+    n = len(cases) * len(plants) * len(readings) * len(laws) * len(steps)
+    print(f"running the paper's gains in the plain loop: {n} runs of {args.stop_time:g} s on {args.workers} "
+          f"process(es); the table follows", file=sys.stderr, flush=True)
+    try:
+        rows = run_paper_gains(steps=steps, stop_time=args.stop_time, readings=readings, cases=cases, laws=laws,
+                               plants=plants, workers=args.workers, progress=progress)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print(paper_gains_table(rows))
+    if args.json:
+        import json
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    """`tapmp calibrate`: fit the plant on the paper's APD-DC rows, predict SC-DC, write the
+    calibrated scenario."""
+    import math
+    if args.horizon is not None and not (math.isfinite(args.horizon) and args.horizon > 0.0):
+        raise UsageError(f"--horizon = {args.horizon!r} is invalid: allowed is a number > 0 [s]")
+    if args.max_nfev < 1:
+        raise UsageError(f"--max-nfev = {args.max_nfev!r} is invalid: allowed is an integer >= 1")
+    from .paper.calibration import calibrate_and_predict, calibrated_file
+    ssp = _ssp(args)
+    work = Path(args.work or Path("results") / "calibration" / args.target)
+    write_to = None if args.no_write else Path(args.write_to or work / calibrated_file(args.target).name)
+    try:
+        lines = calibrate_and_predict(args.target, ssp, work, args.horizon, args.max_nfev, write_to)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print("\n".join(lines))
+    return 0
+
+
+def cmd_null_models(args) -> int:
+    """`tapmp null-models`: the null models' scores on the paper's printed reductions."""
+    from .paper.null_models import null_model_table
+    print(null_model_table())
+    return 0
+
+
+def cmd_theorem1(args) -> int:
+    """`tapmp theorem1`: the counterexample's eigenvalues for both laws and Eq. 31 on a random state."""
+    from .paper.theorem1 import summary_lines
+    print("\n".join(summary_lines()))
+    return 0
+
+
+def cmd_modal(args) -> int:
+    """`tapmp modal [PRESET ...]`: the laws' modal gains of gain presets (tapmp.modal.modal_table)."""
+    from tapmp.modal import modal_table
+    from tapmp.params import GAIN_PRESETS
+    names = _choices("preset", args.presets or ["default", "paper_simulation", "paper_experiment"], GAIN_PRESETS)
+    print(modal_table(list(names)))
+    return 0
+
+
 class Parser(argparse.ArgumentParser):
     """argparse's parser with its errors as one line, ``error: ...`` (the closest names for an
     invalid choice) and where the usage is (``see tapmp run --help``), exit code 2."""
@@ -839,6 +923,47 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--allow-different-horizons", action="store_true",
                     help="overlay runs of different start time, stop time or step")
     pl.set_defaults(func=cmd_plot)
+
+    # The paper study's own commands (orchestrator/paper): what docs/paper-*.md, calibration.md and
+    # theorem1.md print
+    pg = sub.add_parser("paper-gains", help="run the paper's gains (Eq. 40-43) at fine steps in the plain loop",
+                        description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop and print "
+                        "the table (docs/paper-gains.md).")
+    pg.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s] (default 0.5)")
+    pg.add_argument("--steps", type=float, nargs="+", help="steps [s] (default 1e-6 1e-5 1e-4)")
+    pg.add_argument("--cases", nargs="+", help="gain sets: 'Eq. 40-41', 'Eq. 42-43' (default both)")
+    pg.add_argument("--laws", nargs="+", help="sc-dc, apd-dc (default both)")
+    pg.add_argument("--readings", nargs="+", help="readings of the units: A, B (default both)")
+    pg.add_argument("--plants", nargs="+", help="encoder, exact (default both)")
+    pg.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    pg.add_argument("--json", help="also write the rows to this JSON file")
+    pg.set_defaults(func=cmd_paper_gains)
+    ca = sub.add_parser("calibrate", help="calibrate the plant on the paper's APD-DC rows, predict SC-DC",
+                        description="Calibrate the plant on APD-DC (the paper's Tables 1-2 or 4-5), predict SC-DC "
+                        "and write the calibrated scenario (docs/calibration.md).")
+    ca.add_argument("--target", required=True, choices=("simulation", "experiment"))
+    fmu_args(ca)
+    ca.add_argument("--work", help="folder for the runs (default results/calibration/<target>)")
+    ca.add_argument("--horizon", type=float, help="fit horizon [s] (default: one period of the slowest reference)")
+    ca.add_argument("--max-nfev", type=int, default=25, help="least_squares iterations budget (default 25)")
+    ca.add_argument("--no-write", action="store_true", help="do not write the calibrated scenario file")
+    ca.add_argument("--write-to", metavar="FILE", help="calibrated scenario file to write (default: "
+                    "paper_<target>_calibrated.toml in the work folder; scenarios/paper_<target>_calibrated.toml "
+                    "replaces the shipped one)")
+    ca.set_defaults(func=cmd_calibrate)
+    nm = sub.add_parser("null-models", help="score the null models on the paper's reductions (no simulation)",
+                        description="Print how the null models (constants, the gain ratio) score on the paper's "
+                        "printed reductions (docs/paper-reproduction.md).")
+    nm.set_defaults(func=cmd_null_models)
+    t1 = sub.add_parser("theorem1", help="Theorem 1's counterexample and Eq. 31 on a random state",
+                        description="Print the counterexample's eigenvalues for both laws and both sides of Eq. 31 "
+                        "on a random state (docs/theorem1.md).")
+    t1.set_defaults(func=cmd_theorem1)
+    mo = sub.add_parser("modal", help="the laws' modal gains of gain presets",
+                        description="Print the modal gains of SC-DC and APD-DC for gain presets (docs/modal-view.md).")
+    mo.add_argument("presets", nargs="*", metavar="PRESET", help="gain presets (default: default, "
+                    "paper_simulation, paper_experiment)")
+    mo.set_defaults(func=cmd_modal)
     return p
 
 

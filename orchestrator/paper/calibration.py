@@ -34,15 +34,13 @@ capped at the scenario's stop_time. The result is verified on the full horizon o
 base scenario, for APD-DC (the fit) and SC-DC (the prediction), with the stability
 pre-check of both.
 
-Run: ``.venv/bin/python -m orchestrator.paper.calibration --target simulation``
+Run: ``.venv/bin/tapmp calibrate --target simulation``
 (or ``experiment``); it writes <work>/paper_<target>_calibrated.toml (or the file of
 --write-to, e.g. scenarios/paper_<target>_calibrated.toml) and <work>/calibration.json.
 """
 
-import argparse
 import json
 import math
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,7 +58,7 @@ from ..tool.folders import write_json
 from .paper_tables import TABLES, by_metric, tables_of, values
 from ..tool.metrics import METRIC_KEYS, reductions
 from ..tool.results import run_scenario
-from ..tool.scenario import Scenario, ScenarioError
+from ..tool.scenario import Scenario
 
 ROOT = SCENARIOS_DIR  # the shipped scenario files (the repository's scenarios/ in a checkout)
 GAIN_SCALE = 0.36 / 150.0  # Eq. 40's Lambda_v of motor 1 (150) -> the default preset's 0.36
@@ -286,7 +284,7 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
     lines = [
         f"# Calibrated plant for the paper's {target}: APD-DC fitted to Tables {fitted[0]}-{fitted[1]}, "
         "SC-DC predicted.",
-        f"# Written by: .venv/bin/python -m orchestrator.paper.calibration --target {target}",
+        f"# Written by: .venv/bin/tapmp calibrate --target {target}",
         f"# Base: scenarios/{base_file(target).name} (trajectory, step, horizon); see docs/calibration.md.",
         f"# Gains: Eq. 40 with Lambda_p, Lambda_v x {GAIN_SCALE:g} (= 0.36 / 150); APD-DC reads them by Eq. 41.",
         f"# Fit: least squares on ln(ours/paper) of APD-DC tracking and sync MAE (6 residuals), "
@@ -356,47 +354,24 @@ def prediction_table(target: str, pred: dict) -> str:
     return "\n".join(out)
 
 
-def main(argv=None) -> int:
-    """Command line: fit, verify on the full horizon, predict SC-DC, write the scenario file."""
-    ap = argparse.ArgumentParser(prog="python -m orchestrator.paper.calibration",
-                                 description="Calibrate the plant on APD-DC (paper Tables 1-2 or 4-5), predict SC-DC.")
-    ap.add_argument("--target", required=True, choices=TARGETS)
-    ap.add_argument("--ssp", default=None, help="SSP of the FMUs (default: the built native family)")
-    ap.add_argument("--work", default=None, help="folder for the runs (default results/calibration/<target>)")
-    ap.add_argument("--horizon", type=float, default=None, help="fit horizon [s] (default: one period of the slowest reference)")
-    ap.add_argument("--max-nfev", type=int, default=25, help="least_squares iterations budget")
-    ap.add_argument("--no-write", action="store_true", help="do not write the calibrated scenario file")
-    ap.add_argument("--write-to", default=None, metavar="FILE",
-                    help="calibrated scenario file to write (default: paper_<target>_calibrated.toml in the work "
-                    "folder; scenarios/paper_<target>_calibrated.toml replaces the shipped one)")
-    args = ap.parse_args(argv)
-    from ..engine.families import FamilyNotBuilt, resolve_ssp
-    try:
-        ssp = resolve_ssp(args.ssp, "native")
-        if args.horizon is not None and not (math.isfinite(args.horizon) and args.horizon > 0.0):
-            raise ValueError(f"--horizon = {args.horizon!r} is invalid: allowed is a number > 0 [s]")
-        if args.max_nfev < 1:
-            raise ValueError(f"--max-nfev = {args.max_nfev!r} is invalid: allowed is an integer >= 1")
-        work = Path(args.work or Path("results") / "calibration" / args.target)
-        fit = calibrate(args.target, ssp, work, args.horizon, args.max_nfev)
-        pred = predict(args.target, fit["theta"], ssp, work)
-    except (FamilyNotBuilt, ValueError, ScenarioError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+def calibrate_and_predict(target: str, ssp: Path, work: Path, horizon: float | None, max_nfev: int,
+                          write_to: Path | None) -> list[str]:
+    """`tapmp calibrate`: fit the plant on APD-DC of ``target`` (``max_nfev`` least-squares
+    iterations over ``horizon`` [s], default one period of the slowest reference), verify on the
+    full horizon, predict SC-DC; work/calibration.json holds both, the calibrated scenario goes to
+    ``write_to`` (None: not written). Returns the lines to print."""
+    fit = calibrate(target, ssp, work, horizon, max_nfev)
+    pred = predict(target, fit["theta"], ssp, work)
     write_json(work / "calibration.json", {"fit": fit, "prediction": pred})
-    if not args.no_write:
-        target_file = Path(args.write_to or work / calibrated_file(args.target).name)
-        target_file.write_text(scenario_text(args.target, fit, pred))
-        print(f"wrote {target_file}")
-    print(f"fitted ({fit['evaluations']} runs of {fit['horizon_s']:g} s, {fit['wall_s']:.0f} s): "
-          + ", ".join(f"{k} = {v:.6g}" for k, v in fit["values"].items()))
-    print(f"J = {fit['objective']:.4f} (fit horizon), {pred['objective_full']:.4f} (full); "
-          f"residuals ln(ours/paper) = {_fmt(pred['residuals_full'])}")
+    lines = []
+    if write_to is not None:
+        write_to.write_text(scenario_text(target, fit, pred))
+        lines.append(f"wrote {write_to}")
+    lines.append(f"fitted ({fit['evaluations']} runs of {fit['horizon_s']:g} s, {fit['wall_s']:.0f} s): "
+                 + ", ".join(f"{k} = {v:.6g}" for k, v in fit["values"].items()))
+    lines.append(f"J = {fit['objective']:.4f} (fit horizon), {pred['objective_full']:.4f} (full); "
+                 f"residuals ln(ours/paper) = {_fmt(pred['residuals_full'])}")
     for law in ("apd-dc", "sc-dc"):
-        print(f"{law}: {pred[law]['verdict']}, spectral radius {pred[law]['spectral_radius']:.6f}")
-    print(prediction_table(args.target, pred))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+        lines.append(f"{law}: {pred[law]['verdict']}, spectral radius {pred[law]['spectral_radius']:.6f}")
+    lines.append(prediction_table(target, pred))
+    return lines

@@ -137,13 +137,3 @@ def null_model_table(simulated: dict[str, list[float]] | None = None) -> str:
             parts.append(f"{s.hits[0]}/{s.cells} / {s.hits[1]}/{s.cells}, {s.mad:.1f} pp" if s.cells else "not run")
         lines.append(f"| {label} | " + " | ".join(parts) + " |")
     return "\n".join(lines)
-
-
-def main() -> int:
-    """Print the null-model table (no simulation) to stdout."""
-    print(null_model_table())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

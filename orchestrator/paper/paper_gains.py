@@ -34,7 +34,6 @@ of the linearized loop (orchestrator.tool.stability.check) and the wall time.
 """
 
 import math
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -246,44 +245,3 @@ def paper_gains_table(rows: list[dict]) -> str:
                      f"| {_um(r['sync_mae_um'])} | {_um([100 * s for s in r['saturation_fraction']])} "
                      f"| {r['wall_s']:.1f} |")
     return "\n".join(lines)
-
-
-def main(argv=None) -> int:
-    """python -m orchestrator.paper.paper_gains [--stop-time S] [--steps H ...] [--cases ...]
-    [--laws ...] [--readings ...] [--plants ...] [--workers N] [--json FILE]: run_paper_gains and print paper_gains_table (rows also to FILE as JSON)."""
-    import argparse
-    import json
-
-    ap = argparse.ArgumentParser(prog="python -m orchestrator.paper.paper_gains",
-                                 description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop.")
-    ap.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s]")
-    ap.add_argument("--steps", type=float, nargs="+", default=[1e-6, 1e-5, 1e-4], help="steps [s]")
-    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    ap.add_argument("--laws", nargs="+", default=list(LAWS), choices=list(LAWS))
-    ap.add_argument("--readings", nargs="+", default=list(READINGS), choices=list(READINGS))
-    ap.add_argument("--plants", nargs="+", default=list(PLANTS), choices=list(PLANTS))
-    ap.add_argument("--workers", type=int, default=1, help="processes")
-    ap.add_argument("--json", help="also write the rows to this JSON file")
-    a = ap.parse_args(argv)
-    def progress(done, total, row):  # on stderr, so that stdout stays the table
-        print(f"run {done}/{total}: {row['case']} gains, {row['plant']} plant, reading {row['reading']}, "
-              f"{row['law'].upper()}, step {row['step'] * 1e6:g} us, {row['stop_time']:g} s: {row['status']} "
-              f"({row['wall_s']:.1f} s)", file=sys.stderr, flush=True)
-
-    try:
-        n = len(a.cases) * len(a.plants) * len(a.readings) * len(a.laws) * len(a.steps)
-        print(f"running the paper's gains in the plain loop: {n} runs of {a.stop_time:g} s on {a.workers} "
-              f"process(es); the table follows", file=sys.stderr, flush=True)
-        rows = run_paper_gains(steps=tuple(a.steps), stop_time=a.stop_time, readings=tuple(a.readings),
-                               cases=tuple(a.cases), laws=tuple(a.laws), plants=tuple(a.plants),
-                               workers=a.workers, progress=progress)
-    except ValueError as err:
-        ap.exit(2, f"error: {err}\n")
-    print(paper_gains_table(rows))
-    if a.json:
-        Path(a.json).write_text(json.dumps(rows, indent=1))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -124,7 +124,7 @@ def prediction_lines(calibrated: dict, extra: dict) -> list[str]:
         "that scores best, both chosen knowing the answers) and the gain ratio of Eq. 40-41 (what a stiffer "
         "P gain alone gives per mode). The 36 cells are about 16 independent numbers: the X axis repeats "
         "q2 and the STD and MAE reductions of one quantity differ by a few points; the last column keeps "
-        "one MAE cell per quantity. Computed by `python -m orchestrator.paper.null_models` for the "
+        "one MAE cell per quantity. Computed by `tapmp null-models` for the "
         "null models alone.", "",
         table, "",
         f"* The calibrated prediction gets {pred_all.hits[0]} of 36 within {TOLERANCES[0]:g} points; the best "

@@ -363,7 +363,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
     gain_rows = run_paper_gains(steps=PAPER_GAIN_STEPS, stop_time=paper_gains_stop, workers=workers,
                                 progress=lambda done, total, row: say(f"the paper's gains: {done} of {total} runs "
                                                                       "done"))
-    pg_cmd = (f"python -m orchestrator.paper.paper_gains --stop-time {paper_gains_stop:g} --steps "
+    pg_cmd = (f"tapmp paper-gains --stop-time {paper_gains_stop:g} --steps "
               + " ".join(f"{h:g}" for h in PAPER_GAIN_STEPS) + f" --workers {workers}")
 
     parts = ["# Reproducing the paper's Tables 1-6", "",
@@ -409,7 +409,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
         parts += _section(titles[name], name, sc, runs, results, checks,
                           f"tapmp compare scenarios/{name}.toml --overwrite", folders[name])
     parts += ["## The modal view of the gain presets", "",
-              "From `python -m tapmp.modal default paper_simulation paper_experiment` (docs/modal-view.md explains "
+              "From `tapmp modal default paper_simulation paper_experiment` (docs/modal-view.md explains "
               "it): per-mode P, D (V) and I of both laws, in u units and as force (divided by K_T).", "",
               modal_table(("default", "paper_simulation", "paper_experiment")), "",
               "## The paper's gains, run", "",

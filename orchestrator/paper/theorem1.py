@@ -22,7 +22,7 @@ K_I int(e)) (the modal form of tapmp.modal, M_q the joint-space mass matrix at B
 their eigenvalues have a positive real part (about +18.9 1/s) under SC-DC while APD-DC with
 the same numbers (Eq. 41) is stable. ``tapmp check`` at a fine step agrees (docs/theorem1.md).
 
-Run ``python -m orchestrator.paper.theorem1`` to print the eigenvalues and Eq. 31's sides.
+Run ``tapmp theorem1`` to print the eigenvalues and Eq. 31's sides.
 """
 
 import numpy as np
@@ -95,22 +95,21 @@ def lyapunov_v(x, gains: dict) -> float:
     return float(0.5 * es @ Lp @ es + 0.5 * ic @ Bm @ Lp @ Dm @ ic)
 
 
-def main() -> int:
-    """Print the counterexample's eigenvalues for both laws and Eq. 31 on one random state."""
+def summary_lines() -> list[str]:
+    """The counterexample's largest eigenvalue real part [1/s] for both laws, and both sides of
+    Eq. 31 on one random state (seed 1) for the counterexample's and the paper's Eq. 40 gains
+    (`tapmp theorem1`)."""
+    lines = []
     for law in ("sc-dc", "apd-dc"):
         ev = np.linalg.eigvals(error_dynamics(COUNTEREXAMPLE, law))
         worst = sorted(ev, key=lambda z: -z.real)[0]
-        print(f"{law}: largest real part {worst.real:+.4g} 1/s (eigenvalue {worst.real:.4g} "
-              f"{worst.imag:+.4g}j), {'unstable' if worst.real > 0 else 'stable'}")
+        lines.append(f"{law}: largest real part {worst.real:+.4g} 1/s (eigenvalue {worst.real:.4g} "
+                     f"{worst.imag:+.4g}j), {'unstable' if worst.real > 0 else 'stable'}")
     from tapmp.params import GAIN_PRESETS
     rng = np.random.default_rng(1)
     state = [rng.normal(size=3) for _ in range(3)]
     for name, gains in (("the counterexample's uniform gains", COUNTEREXAMPLE),
                         ("the paper's Eq. 40 gains", GAIN_PRESETS["paper_simulation"])):
         lhs, rhs = eq31_sides(*state, gains)
-        print(f"Eq. 31 on a random state (seed 1), {name}: left side {lhs:.6g}, right side {rhs:.6g}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+        lines.append(f"Eq. 31 on a random state (seed 1), {name}: left side {lhs:.6g}, right side {rhs:.6g}")
+    return lines

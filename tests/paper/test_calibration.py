@@ -52,10 +52,13 @@ def test_a_parameter_outside_its_bounds_or_a_wrong_target_is_refused_by_name():
         cal.calibrated_scenario("lab", [2.0, 2.0, 0.0, 1.0])
 
 
-def test_cli_refuses_a_bad_horizon_in_one_line(capsys):
-    assert cal.main(["--target", "simulation", "--horizon", "-1", "--ssp", "unused.ssp"]) == 2
+def test_tapmp_calibrate_refuses_a_bad_horizon_or_budget_in_one_line(capsys):
+    from orchestrator.cli import main
+    assert main(["calibrate", "--target", "simulation", "--horizon", "-1", "--ssp", "unused.ssp"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: --horizon = -1.0 is invalid: allowed is a number > 0 [s]"]
+    assert main(["calibrate", "--target", "simulation", "--max-nfev", "0", "--ssp", "unused.ssp"]) == 2
+    assert capsys.readouterr().err == "error: --max-nfev = 0 is invalid: allowed is an integer >= 1\n"
 
 
 @pytest.mark.parametrize("target", cal.TARGETS)

@@ -70,3 +70,9 @@ def test_the_table_scores_a_simulated_prediction_beside_the_null_models():
     assert row == ("| a perfect predictor | 36/36 / 36/36, 0.0 pp | 18/18 / 18/18, 0.0 pp "
                    "| 16/16 / 16/16, 0.0 pp |")
     assert "| constant: mean of the printed reductions (74.07 %) | 25/36 / 30/36, 10.8 pp" in text
+
+
+def test_tapmp_null_models_prints_the_table(capsys):
+    from orchestrator.cli import main
+    assert main(["null-models"]) == 0
+    assert capsys.readouterr().out == nm.null_model_table() + "\n"

@@ -158,3 +158,12 @@ def test_table_lists_every_row():
     assert len(lines) == 2 + 4
     assert lines[2].startswith("| Eq. 42-43 | exact | A | SC-DC | 100 us | chatters at the force limit |")
     assert all(not math.isnan(r["wall_s"]) for r in rows)
+
+
+def test_tapmp_paper_gains_refuses_an_unknown_case_or_workers_in_one_line(capsys):
+    from orchestrator.cli import main
+    assert main(["paper-gains", "--cases", "Eq. 40"]) == 2
+    assert capsys.readouterr().err == ("error: --cases = 'Eq. 40' is invalid: allowed are Eq. 40-41, Eq. 42-43; "
+                                       "did you mean Eq. 40-41 or Eq. 42-43?\n")
+    assert main(["paper-gains", "--workers", "0"]) == 2
+    assert capsys.readouterr().err == "error: --workers = 0 is invalid: allowed is an integer >= 1\n"

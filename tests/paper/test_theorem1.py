@@ -94,3 +94,12 @@ def test_eq31_survives_a_per_motor_b_but_not_a_per_motor_d_or_lambda_p(gain, hol
     gains[gain] = [x * f for x, f in zip(gains[gain], (1.0, 1.5, 0.7))]
     lhs, rhs = eq31_sides(*state, gains)
     assert (abs(lhs - rhs) <= 1e-9 * abs(lhs)) == holds, (lhs, rhs)
+
+
+def test_tapmp_theorem1_prints_the_counterexample_unstable_for_sc_dc_and_stable_for_apd_dc(capsys):
+    from orchestrator.cli import main
+    assert main(["theorem1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == t1.summary_lines()
+    assert lines[0].startswith("sc-dc: largest real part +") and lines[0].endswith("unstable")
+    assert lines[1].startswith("apd-dc: largest real part -") and lines[1].endswith(", stable")
