@@ -472,7 +472,7 @@ def domain_violating_q(rng, L1):
 
 # --- the library ------------------------------------------------------------------------------
 
-def test_native_model_is_compiled_like_the_fmus_without_fast_math_or_fused_multiply_add():
+def test_the_c_model_is_compiled_like_the_fmus_without_fast_math_or_fused_multiply_add():
     assert "-ffp-contract=off" in CFLAGS
     assert not any("fast-math" in f or f.startswith("-Ofast") for f in CFLAGS)
 
