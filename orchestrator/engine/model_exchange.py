@@ -26,7 +26,7 @@ from fmpy.fmi2 import FMU2Model
 from fmpy.fmi3 import FMU3Model
 
 from .errors import CoSimulationError
-from .units import Unit
+from .instance import Unit
 
 # CVODE's relative tolerance: tight, so that the run checks the RK4 plant (in the paper's closed loop
 # its error is ~1e-7 of a state's range over 0.05 s); 1e-10 costs as much

@@ -20,13 +20,13 @@ CVODE 16 x, OMSimulator's CVODE 127 x, on dB). A state agrees if
 import subprocess
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import shared
-from fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
+from tests.support.fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
+from tests.support.shared import shared
 from fmpy import simulate_fmu
-from test_omsimulator import omsimulator, read_mat, run_omsimulator  # noqa: F401 (omsimulator: its fixture)
+from tests.interop.test_omsimulator import omsimulator, read_mat, run_omsimulator  # noqa: F401 (omsimulator: its fixture)
 
 from tapmp.interface import PLANT
 
@@ -222,7 +222,7 @@ def test_fmu_compliance_checker_passes_the_model_exchange_interface(native_built
 def test_fmil_reads_both_interfaces_under_one_model_identifier(family, plant, tmp_path, request):
     """FMI 2.0: FMIL names both kinds. FMI 3.0: fmil_check's summary names the Co-Simulation kind only;
     the six state derivatives are read as initial unknowns (15 outputs + 6), and the only messages are
-    FMIL's known gaps on the terminals (tests/fmu/fmil_gaps.py)."""
+    FMIL's known gaps on the terminals (tests/support/fmil_gaps.py)."""
     proc = subprocess.run([str(shared(FMIL_CHECK)), "parse", str(plant)], cwd=tmp_path, capture_output=True,
                           text=True, timeout=300)
     assert "outputs 15, initial unknowns 21" in proc.stdout  # the 15 outputs and the 6 state derivatives
@@ -251,7 +251,7 @@ def test_an_fmil_host_runs_the_fmi3_model_exchange_interface_as_the_co_simulatio
     ../shared/tools/fmil) and the host integrates it with the Co-Simulation plant's own method, RK4 at
     0.1 ms: the same states to round-off (the C model's operations in another order: measured 6e-15
     of each state's range). FMIL's only messages are its known gaps on the terminals."""
-    from ctools import compile_c
+    from tests.support.ctools import compile_c
     plant = native_built["fmi3"][PLANT]
     fmil = shared("tools/fmil")
     host = tmp_path / "fmil_me3"

@@ -21,8 +21,8 @@ import pytest
 from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.engine.model_exchange import ModelExchangeUnit
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.scenario import load
 from pathlib import Path
 
 pytestmark = pytest.mark.slow  # builds the native FMUs and runs closed loops
