@@ -13,7 +13,7 @@ FMUs, and an SSP accepts either family.
 
 Layout (``build/native/<fmi2|fmi3>/``): TAPMP_Plant.fmu, TAPMP_Controller.fmu,
 TAPMP_Trajectory.fmu and TAPMP.ssp; FMI 3.0 also TAPMP_ControllerClocked.fmu, the controller with a
-periodic input clock (:func:`model_description_clocked`). Inside each FMU: modelDescription.xml, sources/ (every
+periodic input clock (:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it. Inside each FMU: modelDescription.xml, sources/ (every
 C file and header of the FMU, but not the standard's FMI headers, which the importer brings;
 one file to compile, all.c, which includes the others, so that only the fmi* functions have
 external linkage; FMI 2.0 lists it in <SourceFiles>, both versions in
@@ -458,6 +458,23 @@ def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None =
     return fmu
 
 
+def write_clocked_ssp(path: Path, fmus: dict) -> Path:
+    """The TAPMP system's SSP with the clocked controller in the controller element (``fmus``: {model name or
+    CLOCKED: path}, as :func:`build_native` returns them); atomic. Run it with event_mode (the clock ticks
+    only in Event Mode)."""
+    from .ssp import system_structure
+    path = Path(path)
+    ssd = system_structure().replace(f'source="resources/{CONTROLLER}.fmu"'.encode(),
+                                     f'source="resources/{CLOCKED}.fmu"'.encode(), 1)
+    tmp = path.with_suffix(".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        for model in (PLANT, TRAJECTORY, CLOCKED):
+            z.write(fmus[model], f"resources/{model}.fmu")
+    tmp.replace(path)
+    return path
+
+
 def build_description(model: str) -> bytes:
     """sources/buildDescription.xml of the native ``model``, the same in FMI 2.0 and 3.0 (FMI
     2.0.4 and later take the FMI 3.0 build description; it has precedence over <SourceFiles>).
@@ -714,6 +731,8 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
         if family == "fmi3":
             paths[CLOCKED] = build_clocked_controller(folder, platforms, built[(CLOCKED, family)])
             log(f"built {paths[CLOCKED]}")
+            paths["clocked_ssp"] = write_clocked_ssp(folder / "TAPMP_Clocked.ssp", paths)
+            log(f"wrote {paths['clocked_ssp']}")
         out[family] = paths
     return out
 
