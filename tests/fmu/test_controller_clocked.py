@@ -9,6 +9,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 import zipfile
 
+import compatibility
 import numpy as np
 import pytest
 from conftest import shared
@@ -279,7 +280,7 @@ def test_a_host_that_never_ticks_gets_one_warning_and_a_held_command(fmus, tmp_p
     r.free()
 
 
-def test_fmpy_simulate_fmu_does_not_tick_input_clocks(fmus):
+def test_fmpy_simulate_fmu_does_not_tick_input_clocks(fmus, request):
     """FMPy 0.3 (simulate_fmu) has no input clock scheduling: without Event Mode the clocked FMU refuses
     to instantiate; with it, FMPy never ticks the clock and the command of t = 0 holds (one warning)."""
     fmu = str(fmus[CLOCKED])
@@ -291,3 +292,10 @@ def test_fmpy_simulate_fmu_does_not_tick_input_clocks(fmus):
                         logger=lambda *a: messages.append(a[-1].decode() if isinstance(a[-1], bytes) else a[-1]))
     assert len(rows) == 11 and len(set(tuple(r)[1:] for r in rows)) == 1  # the first command, held
     assert sum("did not tick" in m for m in messages) == 1
+    compatibility.record(
+        request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="3.0", interface="CS, input clock",
+        command="simulate_fmu(native/fmi3/TAPMP_ControllerClocked.fmu, use_event_mode=True, "
+                "early_return_allowed=True)",
+        result="runs, but never ticks the input clock: the command of t = 0 holds (one warning); without "
+               "use_event_mode the FMU refuses to instantiate",
+        difference="not comparable: the controller samples only at t = 0")
