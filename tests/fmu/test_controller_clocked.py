@@ -282,7 +282,8 @@ def test_a_host_that_never_ticks_gets_one_warning_and_a_held_command(fmus, tmp_p
 
 def test_fmpy_simulate_fmu_does_not_tick_input_clocks(fmus, request):
     """FMPy 0.3 (simulate_fmu) has no input clock scheduling: without Event Mode the clocked FMU refuses
-    to instantiate; with it, FMPy never ticks the clock and the command of t = 0 holds (one warning)."""
+    to instantiate; with it, FMPy never ticks the clock and the command computed at initialization holds
+    (one warning)."""
     fmu = str(fmus[CLOCKED])
     with pytest.raises(Exception, match="Failed to instantiate"):
         simulate_fmu(fmu, stop_time=0.001, output_interval=T_S, fmi_type="CoSimulation")
@@ -290,12 +291,37 @@ def test_fmpy_simulate_fmu_does_not_tick_input_clocks(fmus, request):
     rows = simulate_fmu(fmu, stop_time=0.001, output_interval=T_S, fmi_type="CoSimulation", use_event_mode=True,
                         early_return_allowed=True, output=["F1", "F2", "F3"], start_values={"q1": 1e-3},
                         logger=lambda *a: messages.append(a[-1].decode() if isinstance(a[-1], bytes) else a[-1]))
-    assert len(rows) == 11 and len(set(tuple(r)[1:] for r in rows)) == 1  # the first command, held
+    assert len(rows) == 11 and len(set(tuple(r)[1:] for r in rows)) == 1  # the command of initialization, held
     assert sum("did not tick" in m for m in messages) == 1
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="3.0", interface="CS, input clock",
         command="simulate_fmu(native/fmi3/TAPMP_ControllerClocked.fmu, use_event_mode=True, "
                 "early_return_allowed=True)",
-        result="runs, but never ticks the input clock: the command of t = 0 holds (one warning); without "
+        result="runs, but never ticks the input clock: the command of initialization holds (one warning); without "
                "use_event_mode the FMU refuses to instantiate",
-        difference="not comparable: the controller samples only at t = 0")
+        difference="not comparable: the controller never samples")
+
+
+FMUSIM = Path(__file__).resolve().parents[2].parent / "shared" / "tools" / "fmusim" / "bin" / "fmusim"
+
+
+@pytest.mark.needs_shared("tools/fmusim/bin/fmusim")
+def test_fmusim_in_event_mode_does_not_tick_input_clocks(fmus, tmp_path, request):
+    """fmusim (Reference FMUs) runs the clocked FMU with --event-mode-used but never activates the input
+    clock: the first command holds, with the controller's one warning."""
+    import subprocess
+    out = tmp_path / "out.csv"
+    done = subprocess.run([str(FMUSIM), "--interface-type", "cs", "--stop-time", "0.001", "--output-interval", "1e-4",
+                           "--event-mode-used", "--early-return-allowed", "--start-value", "q1", "0.001",
+                           "--output-variable", "F1", "--output-file", str(out), str(fmus[CLOCKED])],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "did not tick at t = 0.0 s" in done.stdout + done.stderr
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert rows.shape == (11, 2) and len(set(rows[:, 1])) == 1  # the command of t = 0 (initialization) holds
+    compatibility.record(
+        request, tool="fmusim", version=compatibility.fmusim_version(FMUSIM), fmi="3.0", interface="CS, input clock",
+        command="fmusim --interface-type cs --event-mode-used --early-return-allowed "
+                "native/fmi3/TAPMP_ControllerClocked.fmu",
+        result="runs, but never ticks the input clock: the command of initialization holds (one warning)",
+        difference="not comparable: the controller never samples")
