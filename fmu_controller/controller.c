@@ -1,8 +1,8 @@
 /* Native TAPMP_Controller FMU (and its clocked variant TAPMP_ControllerClocked, MODEL_CLOCK): maps the
- * FMU variables to the SC-DC / APD-DC / PID-DC controller of tapmp_model.c, as fmu_controller/TAPMP_Controller.py maps them to
- * tapmp.control.ControllerModel. On doStep(t, h) at a sample instant t0 + k T_s not sampled
- * yet it samples its inputs, computes the command and holds it; at any other communication
- * point the outputs hold (tapmp.control.ControllerModel.communication_point). */
+ * FMU variables to the SC-DC / APD-DC / PID-DC controller of tapmp_model.c, as
+ * fmu_controller/TAPMP_Controller.py maps them to tapmp.control.ControllerModel. On doStep(t, h) at a
+ * sample instant t0 + k T_s not sampled yet it samples its inputs, computes the command and holds it; at
+ * any other communication point the outputs hold (tapmp.control.ControllerModel.communication_point). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>

@@ -232,7 +232,8 @@ int main(int argc, char **argv)
     for (int k = 0; k < n_elements; k++)
         if (k != clocked) order[n_order++] = k;
 
-    for (int k = 0; k < n_elements; k++) CHECK(E[k].EnterInitializationMode(E[k].c, fmi3False, 0.0, 0.0, fmi3False, 0.0));
+    for (int k = 0; k < n_elements; k++)
+        CHECK(E[k].EnterInitializationMode(E[k].c, fmi3False, 0.0, 0.0, fmi3False, 0.0));
     for (int k = 0; k < n_elements; k++) CHECK(outputs(k, extra[k], n_extra[k]));
     double h = 0.0;
     for (int k = 0; k < n_elements; k++) {
