@@ -325,3 +325,32 @@ def test_fmusim_in_event_mode_does_not_tick_input_clocks(fmus, tmp_path, request
                 "native/fmi3/TAPMP_ControllerClocked.fmu",
         result="runs, but never ticks the input clock: the command of initialization holds (one warning)",
         difference="not comparable: the controller never samples")
+
+
+def test_getClock_reports_the_activation_until_the_update_ends_it(fmus, tmp_path):
+    r = Host(fmus[CLOCKED], tmp_path)
+    r.slave.enterInitializationMode(startTime=0.0)
+    r.inputs(0.0)
+    r.slave.exitInitializationMode()  # Event Mode at t0
+    clock = [r.vr["sample_clock"]]
+    assert r.slave.getClock(clock) == [False]
+    r.slave.setClock(clock, [True])
+    assert r.slave.getClock(clock) == [True]
+    r.slave.updateDiscreteStates()
+    assert r.slave.getClock(clock) == [False]
+    assert r.log == []
+    r.slave.freeInstance()
+
+
+@pytest.mark.needs_shared("tools/fmil/fmil_check")
+def test_fmil_parses_the_clocked_controller_without_a_warning(fmus, tmp_path, request):
+    import subprocess
+    proc = subprocess.run([str(shared("tools/fmil/fmil_check")), "parse", str(fmus[CLOCKED])], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stdout + proc.stderr
+    assert "FMIL parse: 0 warnings, 0 errors" in proc.stdout
+    assert "outputs 12, initial unknowns 0" in proc.stdout and "hasEventMode 1" in proc.stdout
+    compatibility.record(
+        request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi="3.0", interface="CS, input clock",
+        command="fmil_check parse native/fmi3/TAPMP_ControllerClocked.fmu",
+        difference="none (reads the FMU's XML only): no warning or error")

@@ -56,3 +56,10 @@ def test_the_clocked_controller_without_event_mode_is_refused(fmi3):
         f"event_mode = false is invalid for SSP file {fmi3['clocked_ssp']}: the FMU TAPMP_ControllerClocked of "
         "element controller has the input clock(s) sample_clock, which tick only in Event Mode: allowed is "
         "event_mode = true")
+
+
+def test_the_clocked_controller_with_the_compiled_core_is_refused(fmi3):
+    with pytest.raises(CoSimulationError) as err:
+        run(fmi3["clocked_ssp"], T_S, 1, event_mode=True, stepper="compiled")
+    assert str(err.value) == ("stepper = 'compiled' is unavailable with event_mode = true: allowed are 'python' or "
+                              "'auto' (event mode runs in the Python loop)")
