@@ -444,6 +444,10 @@ def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None =
             if p not in built:
                 built[p] = _compile_one(Path(tmp), src, CLOCKED, "fmi3", p)
     binaries = _members({p: built[p] for p in platforms}, CLOCKED, "fmi3")
+    from .fmu_extras import LICENSE_FILE, license_text
+    # the license only: a reference experiment (FMI-LS-REF) needs an importer that ticks the clock, which
+    # fmusim, its replayer, does not; the controller's documentation is TAPMP_Controller.fmu's
+    extra = {LICENSE_FILE: license_text()}
     partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
     try:
         with zipfile.ZipFile(partial, "w") as z:
@@ -451,6 +455,8 @@ def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None =
             for name, data in sorted(files.items()):
                 _zip_write(z, f"sources/{name}", data)
             for name, data in binaries.items():
+                _zip_write(z, name, data)
+            for name, data in extra.items():
                 _zip_write(z, name, data)
         partial.replace(fmu)
     finally:

@@ -354,3 +354,12 @@ def test_fmil_parses_the_clocked_controller_without_a_warning(fmus, tmp_path, re
         request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi="3.0", interface="CS, input clock",
         command="fmil_check parse native/fmi3/TAPMP_ControllerClocked.fmu",
         difference="none (reads the FMU's XML only): no warning or error")
+
+
+def test_the_clocked_fmu_carries_its_sources_its_binary_and_the_license(fmus):
+    from orchestrator.engine.fmu_extras import LICENSE_FILE
+    names = set(zipfile.ZipFile(fmus[CLOCKED]).namelist())
+    assert {"modelDescription.xml", "binaries/x86_64-linux/TAPMP_ControllerClocked.so", "sources/all.c",
+            "sources/buildDescription.xml", LICENSE_FILE} <= names
+    build = ET.fromstring(zipfile.ZipFile(fmus[CLOCKED]).read("sources/buildDescription.xml"))
+    assert {c.get("modelIdentifier") for c in build.iter("BuildConfiguration")} == {CLOCKED}
