@@ -48,8 +48,8 @@ So the controller samples at every instant t0 + k T_s whatever the macro step. A
 input clocks (the clocked controller, TAPMP_ControllerClocked) is handled the same way with its ticks as
 the events: the master reads the interval and shift after initialization (fmi3GetIntervalDecimal,
 fmi3GetShiftDecimal), cuts the macro step at every tick t0 + shift + k interval and there activates the
-clocks (fmi3SetClock) in Event Mode before the inputs and the update; such an FMU requires event_mode. The FMI 3.0 FMUs
-without Event Mode and the FMI 2.0 ones step as before. An early return at a time the FMU did not
+clocks (fmi3SetClock) in Event Mode before the inputs and the update; such an FMU requires event_mode.
+The FMI 3.0 FMUs without Event Mode and the FMI 2.0 ones step as before. An early return at a time the FMU did not
 announce is refused: the others have stepped past it already.
 """
 
