@@ -16,8 +16,8 @@ TAPMP_Trajectory.fmu and TAPMP.ssp; FMI 3.0 also TAPMP_ControllerClocked.fmu, th
 periodic input clock (:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it.
 Inside each FMU: modelDescription.xml, sources/ (every C file and header of the FMU, but not the
 standard's FMI headers, which the importer brings; one file to compile, all.c, which includes the
-others, so that only the fmi* functions have external linkage; FMI 2.0 lists it in <SourceFiles>, both versions in
-sources/buildDescription.xml with libm), and binaries/ for every platform of PLATFORM_DIRS:
+others, so that only the fmi* functions have external linkage; FMI 2.0 lists it in <SourceFiles>,
+both versions in sources/buildDescription.xml with libm), and binaries/ for every platform of PLATFORM_DIRS:
 FMI 2.0 linux64, aarch64-linux, win64, win32 and darwin64 (one universal x86_64 + arm64 dylib);
 FMI 3.0 x86_64-linux, aarch64-linux, x86_64-windows, x86-windows, x86_64-darwin and aarch64-darwin.
 """
