@@ -434,6 +434,7 @@ def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None =
     """Build TAPMP_ControllerClocked.fmu (FMI 3.0) into ``out_dir``; atomic. ``platforms`` as for
     :func:`build_native_fmu` (default: all); ``built`` ({platform: bytes}) the binaries compiled already."""
     out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
     fmu = out_dir / f"{CLOCKED}.fmu"
     platforms = check_platforms(ALL_PLATFORMS if platforms is None else platforms)
     files = clocked_source_files()
