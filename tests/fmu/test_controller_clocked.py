@@ -9,10 +9,10 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 import zipfile
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import shared
+from tests.support.shared import shared
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu

@@ -81,7 +81,7 @@ def test_the_loop_with_every_fmu_and_the_host_under_address_and_ub_sanitizers_ru
     clock's calls (GetIntervalDecimal, SetClock, UpdateDiscreteStates) and the loop report nothing, leak
     nothing, and give the shipped binaries' rows."""
     import os
-    from ctools import SANITIZE, SANITIZER_ENV, compile_c as cc, extract_sources
+    from tests.support.ctools import SANITIZE, SANITIZER_ENV, compile_c as cc, extract_sources
     from orchestrator.engine.build_native import CLOCKED
     exe = tmp_path / "loop_asan"
     proc = cc([*SANITIZE, "-std=c99", "-o", exe, HOST_SOURCE, "-ldl"])

@@ -14,7 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
 
