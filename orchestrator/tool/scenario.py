@@ -63,7 +63,6 @@ TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": 
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
        "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "event_mode": bool}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.tool.results)
-orchestrator/tool/scenario.py
 TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
