@@ -63,7 +63,8 @@ MISMATCH_RANGE = (0.01, 100.0)
 TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
        "start_time": float, "step": float, "ordering": str, "output": str,
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "plant_interface": str}
+       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "event_mode": bool,
+       "plant_interface": str}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.tool.results)
 # The plant's FMI interface in a run: "cs" (Co-Simulation, its own RK4) or "me" (Model Exchange,
 # integrated by the master with CVODE: orchestrator.engine.model_exchange)
@@ -248,6 +249,9 @@ class Scenario:
     start_on_trajectory: bool = True
     clock: Annotated[str, one_of(CLOCKS)] = "exact"
     connection_start: Annotated[str, one_of(CONNECTION_STARTS)] = "propagated"
+    # FMI 3.0 Event Mode: FMUs with hasEventMode get eventModeUsed; the master handles their time events and
+    # ticks their input clocks (orchestrator.engine.master)
+    event_mode: bool = False
     trajectory: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
     plant: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
     controller: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
