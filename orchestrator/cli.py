@@ -398,7 +398,7 @@ def cmd_compare(args) -> int:
         select_runs(out, list(compare_runs(scenario)), show)
     from .experiments.compare import run_comparison
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show, not args.no_figures)
+                                      command, jobs, show, not args.no_figures, noise=not args.no_noise)
     print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
     print("mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B (1,-2,1)")
     print(summary_table(results))
@@ -765,6 +765,9 @@ def parser() -> argparse.ArgumentParser:
                    "in comparison.md")
     c.add_argument("--no-figures", action="store_true", help="write no figures (the runs and comparison.md only; "
                    "draw them later with `tapmp plot FOLDER`)")
+    c.add_argument("--no-noise", action="store_true", help="leave out the noise runs (SC-DC, APD-DC and the "
+                   "matched baselines again at 20 and 100 nm rms measurement noise, seeded; 10 more runs) and "
+                   "comparison.md's noise table")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write the paper-reproduction page (results/paper-reproduction.md)",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "

@@ -65,13 +65,48 @@ def _numeric(values) -> bool:
 
 
 def plot_study(out: Path, study, params: list) -> list:
-    """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
+    """Figures of a grid / Monte Carlo study from its study.csv, and a Monte Carlo study's
+    summary.md (monte_carlo_summary); returns the paths written."""
     paths = []
     for path, fig in study_figures(out, study).items():
         fig.savefig(path, dpi=110)
         plt.close(fig)
         paths.append(path)
+    text = monte_carlo_summary(out, study)
+    if text:
+        path = Path(out) / SUMMARY_MD
+        path.write_text(text)
+        paths.append(path)
     return paths
+
+
+SUMMARY_MD = "summary.md"
+
+
+def monte_carlo_summary(out: Path, study) -> str:
+    """Markdown table of a Monte Carlo study from out/study.csv, one row per grid point (e.g. per
+    law or baseline): cases completed of cases, and the median / 90th percentile / maximum over
+    the samples of the mean tracking and synchronization MAE [um]; "" for a study without samples."""
+    if not study.samples:
+        return ""
+    rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
+    group_keys = list(study.grid)
+    groups = {}
+    for r in rows:
+        groups.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
+    lines = [f"# {study.name}: {study.samples} samples (seed {study.seed}) of "
+             + ", ".join(f.name for f in study.factors), "",
+             f"| {', '.join(group_keys) or 'cases'} | cases completed | tracking MAE, median / 90th pct / max [um] "
+             "| sync MAE, median / 90th pct / max [um] |", "|---|---|---|---|"]
+    for g, rs in groups.items():
+        done = [r for r in rs if r["status"] == "completed" and all(isinstance(r.get(k), float) for k, _ in _MAE)]
+        cells = []
+        for key, _ in _MAE:
+            d = np.array([r[key] for r in done])
+            cells.append(" / ".join(f"{v:.3f}" for v in (np.median(d), np.percentile(d, 90), d.max()))
+                         if len(d) else "none completed")
+        lines.append(f"| {', '.join(g) or 'all'} | {len(done)} / {len(rs)} | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines) + "\n"
 
 
 def study_figures(out: Path, study) -> dict:
@@ -109,10 +144,14 @@ def _histograms(study, groups, group_keys):
         data = {g: np.array([r[key] for r in rs]) for g, rs in groups.items()}
         lo = min(d.min() for d in data.values())
         hi = max(d.max() for d in data.values())
-        bins = np.linspace(lo, hi if hi > lo else lo + 1e-9, 25)
+        wide = lo > 0 and hi / lo > 5  # laws an order of magnitude apart: log bins keep each visible
+        bins = (np.geomspace(lo, hi, 30) if wide else np.linspace(lo, hi if hi > lo else lo + 1e-9, 25))
         for g, d in data.items():
-            ax.hist(d, bins=bins, alpha=0.55, label=f"{_label(group_keys, g)} (n = {len(d)}, "
+            # outlines, not filled bars: several laws overlap on the same bins
+            ax.hist(d, bins=bins, histtype="step", lw=1.6, label=f"{_label(group_keys, g)} (n = {len(d)}, "
                     f"median {np.median(d):.3f})")
+        if wide:
+            ax.set_xscale("log")
         ax.set_xlabel(title)
         ax.set_ylabel("cases [count]")
         ax.legend(fontsize=8)
