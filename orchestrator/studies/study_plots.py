@@ -89,7 +89,9 @@ def monte_carlo_summary(out: Path, study) -> str:
     the samples of the mean tracking and synchronization MAE [um]; "" for a study without samples."""
     if not study.samples:
         return ""
-    rows = [r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")]
+    # in case order (study.csv has them in the order they finished): within a grid point, sample i is row i
+    rows = sorted((r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")),
+                  key=lambda r: r["case"])
     group_keys = list(study.grid)
     groups = {}
     for r in rows:
@@ -106,7 +108,33 @@ def monte_carlo_summary(out: Path, study) -> str:
             cells.append(" / ".join(f"{v:.3f}" for v in (np.median(d), np.percentile(d, 90), d.max()))
                          if len(d) else "none completed")
         lines.append(f"| {', '.join(g) or 'all'} | {len(done)} / {len(rs)} | {cells[0]} | {cells[1]} |")
+    if len(groups) > 1:
+        lines += ["", *_paired_lines(groups, group_keys, study.samples)]
     return "\n".join(lines) + "\n"
+
+
+def _paired_lines(groups: dict, group_keys: list, samples: int) -> list[str]:
+    """Markdown: the first grid point against each other one, sample by sample (the same sampled
+    plant: the cases of a grid point are its samples in draw order): in how many samples its mean
+    MAE is the smaller, and the median of its reduction 100 (other - first) / other [%]."""
+    (first, base), *others = groups.items()
+    name = ", ".join(first)
+    lines = [f"Sample by sample (the same sampled plant), `{name}` against each other row: in how many samples "
+             f"its mean MAE is the smaller, and the median of its reduction 100 (other - {name}) / other over the "
+             "samples where both completed.", "",
+             f"| {', '.join(group_keys)} | tracking: {name} smaller in | tracking: median reduction [%] "
+             f"| sync: {name} smaller in | sync: median reduction [%] |", "|---|---|---|---|---|"]
+    for g, rs in others:
+        cells = []
+        for key, _ in _MAE:
+            pairs = [(a[key], b[key]) for a, b in zip(base[:samples], rs[:samples])
+                     if isinstance(a.get(key), float) and isinstance(b.get(key), float)
+                     and a["status"] == b["status"] == "completed"]
+            red = [100.0 * (b - a) / b for a, b in pairs if b > 0]
+            cells += [f"{sum(a < b for a, b in pairs)} of {len(pairs)}",
+                      f"{np.median(red):+.1f}" if red else "n/a"]
+        lines.append(f"| {', '.join(g)} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def study_figures(out: Path, study) -> dict:
@@ -139,7 +167,7 @@ def _label(group_keys, group) -> str:
 
 
 def _histograms(study, groups, group_keys):
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4 + 0.25 * len(groups)))
     for (key, title), ax in zip(_MAE, axes):
         data = {g: np.array([r[key] for r in rs]) for g, rs in groups.items()}
         lo = min(d.min() for d in data.values())
@@ -154,7 +182,7 @@ def _histograms(study, groups, group_keys):
             ax.set_xscale("log")
         ax.set_xlabel(title)
         ax.set_ylabel("cases [count]")
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16))  # below: the outlines stay visible
     fig.suptitle(f"{study.name}: {study.samples} samples of "
                  + ", ".join(f.name for f in study.factors) + f" (seed {study.seed})", fontsize=10)
     fig.tight_layout()

@@ -11,6 +11,7 @@ import pytest
 from orchestrator.cli import main
 from orchestrator.experiments.baselines import compare_runs
 from orchestrator.studies.study import load_study, read_study_csv
+from orchestrator.studies.study_file import base_value
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "studies" / "robustness.toml"
@@ -38,7 +39,7 @@ def test_the_robustness_study_runs_every_matched_baseline_on_the_same_sampled_pl
     assert {"sc-dc", "apd-dc", "apd-dc-ms-matched", "pid-dc-full"} <= set(names)
     assert main(["study", str(path), "--ssp", built["ssp"], "--workers", "1", "--no-progress"]) == 0
     out = tmp_path / "out"
-    rows = read_study_csv(out / "study.csv")
+    rows = sorted(read_study_csv(out / "study.csv"), key=lambda r: r["case"])  # written as cases finish
     assert [r["baseline"] for r in rows] == [n for n in names for _ in range(SAMPLES)]
     assert all(r["status"] == "completed" for r in rows), rows
     runs = compare_runs(study.base_scenario())  # the gains compare gives each run on the nominal scenario
@@ -54,7 +55,7 @@ def test_the_robustness_study_runs_every_matched_baseline_on_the_same_sampled_pl
         plant = scenario["plant"]
         plants.setdefault(index, []).append(plant)
         # the sampled factors are columns of the row, the same for every baseline at a sample index
-        assert plant["m_p"] == pytest.approx(r["m_p"] * study.base_scenario().parameters()["plant"]["m_p"])
+        assert plant["m_p"] == pytest.approx(r["m_p"] * base_value(study.base_scenario(), "plant.m_p"))
     for index, same in plants.items():
         assert all(p == same[0] for p in same), index
     assert plants[0] != plants[1]
@@ -62,8 +63,14 @@ def test_the_robustness_study_runs_every_matched_baseline_on_the_same_sampled_pl
     assert runs["apd-dc-ms-matched"].controller["ki_c"] == runs["apd-dc-ms-matched"].controller["ki_d"] == 0
     summary = (out / "summary.md").read_text().splitlines()
     for name in names:
-        line, = [s for s in summary if s.startswith(f"| {name} |")]
+        line, *paired = [s for s in summary if s.startswith(f"| {name} |")]
         assert f"| {SAMPLES} / {SAMPLES} |" in line
+        if name != names[0]:  # sample by sample against the first: counts from the rows
+            first = [r for r in rows if r["baseline"] == names[0]]
+            other = [r for r in rows if r["baseline"] == name]
+            wins = [sum(a[k] < b[k] for a, b in zip(first, other)) for k in ("tracking_mae_um_mean", "sync_mae_um_mean")]
+            cells = paired[0].strip("|").split("|")
+            assert (cells[1].strip(), cells[3].strip()) == tuple(f"{w} of {SAMPLES}" for w in wins)
     assert (out / "robustness.png").stat().st_size > 10_000
 
 
