@@ -37,7 +37,7 @@ def user_errors() -> tuple:
     from .experiments.folders import OutputExistsError, OutputInUseError, ResultsWriteError
     from .experiments.reading import ResultFolderError
     from .experiments.scenario import ScenarioError
-    from .studies.study import StudyError
+    from .studies.study_file import StudyError
     return (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
             ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
             ResultsWriteError, BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)

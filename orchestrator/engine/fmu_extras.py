@@ -48,7 +48,7 @@ def _q(ns: str, tag: str) -> str:
     return f"{{{ns}}}{tag}"
 
 
-def _format(kind: str, value) -> str:
+def value_text(kind: str, value) -> str:
     """A value as SSV/CSV text that reads back to the same number (repr: shortest round trip)."""
     if kind == "Integer":
         return str(int(value))
@@ -70,7 +70,7 @@ def parameter_set(name: str, values: dict, declared: dict, units: dict, element:
                              f"parameter {var}; allowed are {', '.join(sorted(declared))}")
         kind, unit = declared[var]
         p = ET.SubElement(params, _q(SSV, "Parameter"), name=var)
-        attrs = {"value": _format(kind, value)}
+        attrs = {"value": value_text(kind, value)}
         if kind == "Real" and unit in units:
             attrs["unit"] = unit
             used.append(unit)
@@ -406,7 +406,7 @@ def documentation_html(model: str, family: str, platforms=None) -> bytes:
     e = html.escape
     rows = []
     for v in VARIABLES[model]:
-        start = "" if v.causality == "output" else e(_format("Integer" if v.type == "Integer" else "Real", v.start))
+        start = "" if v.causality == "output" else e(value_text("Integer" if v.type == "Integer" else "Real", v.start))
         rows.append(f"<tr><td><code>{e(v.name)}</code></td><td>{e(v.causality)}</td><td>{e(v.unit)}</td>"
                     f"<td>{start}</td><td>{_range(v)}</td><td>{e(v.description)}</td></tr>")
     eqs = "".join(f"<tr><th>{e(name)}</th><td><code>{e(text)}</code></td></tr>" for name, text in _equations(model))

@@ -31,12 +31,13 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from ..engine import fmu_extras
+from ..engine.fmu_extras import SSV, value_text
 from ..engine.ssd import ParameterAddressError, resolve_parameters
 from ..engine.ssp import SSC, SSD, default_experiment, set_system_step
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 
-SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 TAPMP_NS = "https://github.com/tapmp-cosim/ssp-annotations"
 ET.register_namespace("ssv", SSV)
 ET.register_namespace("tapmp", TAPMP_NS)
@@ -80,39 +81,13 @@ def _fmu_parameters(root: ET.Element) -> tuple[dict, dict]:
     return params, units
 
 
-def _format(kind: str, value) -> str:
-    """A value as SSV/fmpy text that reads back to the same number (repr: shortest round trip)."""
-    if kind == "Integer":
-        return str(int(value))
-    if kind == "Boolean":
-        return "true" if value else "false"
-    return repr(float(value))
-
-
 def parameter_set(name: str, values: dict, declared: dict, units: dict, element: str) -> bytes:
-    """One SSV document: ParameterSet ``name`` with ``values`` ({variable: value}) typed and
-    with units as ``declared`` ({variable: (SSV type, unit)}) by the element's FMU."""
-    root = ET.Element(_q(SSV, "ParameterSet"), version="1.0", name=name)
-    params = ET.SubElement(root, _q(SSV, "Parameters"))
-    used = []
-    for var, value in values.items():
-        if var not in declared:
-            raise ExportError(f"{element}.{var} = {value!r} cannot be exported: the {element} FMU has no "
-                              f"parameter {var}; allowed are {', '.join(sorted(declared))}")
-        kind, unit = declared[var]
-        p = ET.SubElement(params, _q(SSV, "Parameter"), name=var)
-        attrs = {"value": _format(kind, value)}
-        if kind == "Real" and unit in units:
-            attrs["unit"] = unit
-            used.append(unit)
-        ET.SubElement(p, _q(SSV, kind), attrs)
-    if used:
-        table = ET.SubElement(root, _q(SSV, "Units"))
-        for unit in sorted(set(used)):
-            u = ET.SubElement(table, _q(SSC, "Unit"), name=unit)
-            ET.SubElement(u, _q(SSC, "BaseUnit"), units[unit])
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    """One SSV document (engine.fmu_extras.parameter_set); ExportError names a variable the
+    element's FMU does not declare."""
+    try:
+        return fmu_extras.parameter_set(name, values, declared, units, element)
+    except ValueError as err:
+        raise ExportError(str(err)) from None
 
 
 def _default_experiment(root: ET.Element, scenario: Scenario) -> None:
@@ -185,7 +160,7 @@ def start_values(scenario: Scenario) -> list[tuple[str, str]]:
     ``--start-values`` of ``fmpy simulate`` for the container FMU TAPMP_ClosedLoop.fmu."""
     from tapmp.interface import ELEMENT, VARIABLES
     kinds = {f"{ELEMENT[m]}.{v.name}": v.type for m in VARIABLES for v in VARIABLES[m]}
-    return [(f"{element}.{name}", _format(kinds.get(f"{element}.{name}", "Real"), value))
+    return [(f"{element}.{name}", value_text(kinds.get(f"{element}.{name}", "Real"), value))
             for element, table in scenario.parameters().items() for name, value in table.items()]
 
 

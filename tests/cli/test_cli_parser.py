@@ -37,6 +37,13 @@ def test_help_and_a_refused_option_load_no_numerical_library(tmp_path, argv):
     assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
 
 
+def test_a_run_loads_no_dask(tmp_path):
+    # the error types the CLI reports as one line include the studies' (StudyError): naming them
+    # must not import the study runner and Dask (about 0.6 s of every `tapmp run`)
+    loaded = _modules_loaded_by(["run", str(tmp_path / "missing.toml")], tmp_path)
+    assert "orchestrator" in loaded and not loaded & {"dask", "distributed"}, sorted(loaded & {"dask", "distributed"})
+
+
 def test_the_help_lists_every_subcommand_and_the_shipped_names(tmp_path):
     res = _tapmp("--help", cwd=tmp_path)
     assert res.returncode == 0 and res.stderr == ""
