@@ -11,6 +11,7 @@ from pathlib import Path
 from .estimate import check_output_size
 from .folders import ResultsWriteError, check_output, output_lock, prepare_output, write_comparison_status
 from .progress import progress_bar, say
+from .scenario import MAX_INT
 from .results import one_line
 
 
@@ -81,7 +82,7 @@ def noise_runs(runs: dict) -> dict:
             for level in NOISE_LEVELS:
                 out[f"{run}-{_nm(level)}nm"] = sc.with_changes(
                     plant={**sc.plant, "noise_rms": level, "noise_seed": NOISE_SEED},
-                    record_every=sc.n_steps, format="csv")
+                    record_every=min(sc.n_steps, MAX_INT), format="csv")
     return out
 
 
