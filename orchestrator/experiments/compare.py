@@ -107,14 +107,15 @@ def _reduction(base: float, new: float) -> float:
     return 100.0 * (base - new) / base if base else float("nan")
 
 
-def noise_table(noise: dict) -> list[str]:
+def noise_table(noise: dict, own_rms: float = 0.0) -> list[str]:
     """Markdown lines: per noise run ({run: {rms [m]: metrics}}, read_noise), mean tracking and sync
     MAE [um] and force RMS above the effort band [N] at each rms, SC-DC's sync reduction against the
-    run at each rms [%], and one sentence on SC-DC's advantage over the robustness-matched PD."""
+    run at each rms [%], and one sentence on SC-DC's advantage over the robustness-matched PD.
+    own_rms [m]: the noise_rms of the compared scenario itself (its runs are the first column)."""
     if "sc-dc" not in noise:  # no noise runs (compare --no-noise): no table
         return []
     levels = (0.0, *NOISE_LEVELS)
-    head = ", ".join(_nm(x) for x in levels) + " nm"
+    head = ", ".join(_nm(x) for x in (own_rms, *NOISE_LEVELS)) + " nm"
     sc = noise["sc-dc"]
     hz = sc[0.0].get("force_rms_above_hz")
     lines = [f"| run | tracking MAE [um] at {head} | sync MAE [um] at {head} | force RMS above "
@@ -130,8 +131,9 @@ def noise_table(noise: dict) -> list[str]:
     if "apd-dc-ms-matched" in noise:
         ms = noise["apd-dc-ms-matched"]
         r0, r1 = (_reduction(_mean(ms[x]["sync_mae_um"]), _mean(sc[x]["sync_mae_um"])) for x in (0.0, levels[-1]))
-        lines += ["", f"SC-DC's synchronization advantage over the robustness-matched PD is {r0:+.1f} % without "
-                  f"noise and {r1:+.1f} % at {_nm(levels[-1])} nm rms."]
+        lines += ["", f"SC-DC's synchronization advantage over the robustness-matched PD is {r0:+.1f} % "
+                  + ("without noise" if not own_rms else f"at {_nm(own_rms)} nm rms (the scenario's own)")
+                  + f" and {r1:+.1f} % at {_nm(levels[-1])} nm rms."]
     return lines
 
 
@@ -140,7 +142,8 @@ def noise_intro() -> str:
     return (f"The runs {', '.join(f'`{r}`' for r in NOISE_RUNS)} again with white Gaussian noise on every "
             "measured position before quantization (docs/disturbances.md), rms "
             + " and ".join(f"{_nm(x)} nm" for x in NOISE_LEVELS) + f", seed {NOISE_SEED} (the same noise for "
-            f"every law); 0 nm is the run itself. Each noise run is its run with the plant's `noise_rms` and "
+            f"every law); the first value is the run itself, at its scenario's own noise_rms (0 nm unless the "
+            f"scenario sets one). Each noise run is its run with the plant's `noise_rms` and "
             f"`noise_seed` set, nothing else changed (its folder: `{NOISE_FOLDER}/<run>-<rms>nm`).")
 
 
@@ -187,7 +190,9 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks)
         if noise:
             text += "\n".join(["", "## Measurement noise: SC-DC, APD-DC and the matched baselines", "",
-                                noise_intro(), "", *noise_table(read_noise(out, results)), ""])
+                                noise_intro(), "",
+                                *noise_table(read_noise(out, results), float(scenario.plant.get("noise_rms", 0.0))),
+                                ""])
             _write_text(out / "comparison.md", text)
         if not figures:
             return runs, results, checks, text

@@ -390,8 +390,9 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
     parts += ["## Measurement noise: SC-DC, APD-DC and the matched baselines", "",
               f"{noise_intro()} Written by `tapmp compare` into each comparison's folder (its comparison.md has "
               "the same table) and read back from the noise runs' metrics.json.", ""]
-    for name, (_, _, results, _) in {**comparisons, **calibrated}.items():
-        parts += [f"**`{name}`**", "", *noise_table(read_noise(folders[name], results)), ""]
+    for name, (sc, _, results, _) in {**comparisons, **calibrated}.items():
+        parts += [f"**`{name}`**", "",
+                  *noise_table(read_noise(folders[name], results), float(sc.plant.get("noise_rms", 0.0))), ""]
     text = "\n".join(parts)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -78,3 +78,12 @@ def test_no_noise_leaves_out_the_noise_runs_and_their_table(built, tmp_path):
     out = _compare(built, tmp_path / "cmp", "--no-noise")
     assert not (out / "noise").exists()
     assert "## Measurement noise" not in (out / "comparison.md").read_text()
+
+
+def test_a_scenario_with_its_own_noise_heads_the_first_column_with_it(built, tmp_path):
+    out = _compare(built, tmp_path / "cmp", "--set", "plant.noise_rms=5e-8")
+    text = (out / "comparison.md").read_text()
+    assert "| run | tracking MAE [um] at 50, 20, 100 nm | sync MAE [um] at 50, 20, 100 nm |" in text
+    assert "% at 50 nm rms (the scenario's own) and " in text
+    run = json.loads((out / "sc-dc" / "run.json").read_text())["scenario"]
+    assert run["plant"]["noise_rms"] == 5e-8
