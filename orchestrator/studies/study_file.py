@@ -1,6 +1,6 @@
 """The study file (see orchestrator.studies.study): [study], [set], [grid], [monte_carlo] and
 [tune] as pydantic models whose rules give the one-line messages of
-orchestrator.experiments.config; load_study validates a file, then looks for its base scenario
+orchestrator.tool.config; load_study validates a file, then looks for its base scenario
 and checks it with the study's changes (the only steps that read files)."""
 
 import math
@@ -15,8 +15,8 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from tapmp.errors import allowed_are, suggestion
 from tapmp.params import GAIN_NAMES
 
-from ..experiments.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
-from ..experiments.scenario import SECTION_PARAMS, Scenario, ScenarioError, load
+from ..tool.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
+from ..tool.scenario import SECTION_PARAMS, Scenario, ScenarioError, load
 
 DISTRIBUTIONS = ("uniform", "loguniform", "normal")
 _SECTIONS = ("plant", "controller", "trajectory")
@@ -128,7 +128,7 @@ def base_value(scenario: Scenario, key: str):
 
 STUDY_KEYS = ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file", "start_on_trajectory",
               "baseline")
-BASELINE_KEY = "baseline"  # a grid key naming compare runs (orchestrator.experiments.baselines), not a scenario field
+BASELINE_KEY = "baseline"  # a grid key naming compare runs (orchestrator.tool.baselines), not a scenario field
 
 
 def check_key(key: str, where: str) -> None:
@@ -203,7 +203,7 @@ def _grid(table: dict) -> dict:
         require(isinstance(values, list) and len(values) >= 1,
                 f"grid.{key} = {values!r} is invalid: allowed is a non-empty list of values")
     if BASELINE_KEY in table:
-        from ..experiments.baselines import BY_NAME
+        from ..tool.baselines import BY_NAME
         for v in table[BASELINE_KEY]:
             require(isinstance(v, str) and v in BY_NAME, f"grid.{BASELINE_KEY} = {v!r} is invalid: "
                     + allowed_are(str(v), list(BY_NAME)))
@@ -214,13 +214,13 @@ def _grid(table: dict) -> dict:
 
 def expand_baseline(scenario: Scenario, changes: dict) -> dict:
     """``changes`` with a ``baseline`` key replaced by what makes ``scenario`` (with the other
-    changes) that compare run (orchestrator.experiments.baselines.compare_runs): its law, gain
+    changes) that compare run (orchestrator.tool.baselines.compare_runs): its law, gain
     overrides and [controller] table, as whole-table changes. The baseline's gains come from
     the scenario's nominal gains and controller model, so Monte Carlo draws applied later change
     the plant, never the matched gains (a controller designed once, run on every sampled plant)."""
     if BASELINE_KEY not in changes:
         return dict(changes)
-    from ..experiments.baselines import compare_runs
+    from ..tool.baselines import compare_runs
     rest = {k: v for k, v in changes.items() if k != BASELINE_KEY}
     at = apply_changes(scenario, rest, "grid") if rest else scenario
     run = compare_runs(at)[changes[BASELINE_KEY]]

@@ -10,7 +10,7 @@ import pytest
 
 from orchestrator import cli
 from orchestrator.engine.families import data_dir
-from orchestrator.experiments.scenario import RESULT_FORMATS
+from orchestrator.tool.scenario import RESULT_FORMATS
 
 pytestmark = pytest.mark.slow  # child processes
 
@@ -105,9 +105,9 @@ def test_a_shipped_study_is_found_by_name_like_a_shipped_scenario(tmp_path):
 
 def test_check_prints_a_growth_factor_just_above_1_with_the_digits_that_show_it(tmp_path):
     # Theorem 1's counterexample at a 1 us step: the worst mode grows by about 2e-5 per step
-    from test_theorem1 import COUNTER
-    from orchestrator.experiments.scenario import load
-    from orchestrator.experiments.stability import check
+    from tests.paper.test_theorem1 import COUNTER
+    from orchestrator.tool.scenario import load
+    from orchestrator.tool.stability import check
     scenario = tmp_path / "theorem1.toml"
     scenario.write_text('name = "theorem1"\nstop_time = 0.01\nstep = 1e-6\n[gain_overrides]\n'
                         + "".join(f"{k} = {v[0]!r}\n" for k, v in COUNTER.items()))

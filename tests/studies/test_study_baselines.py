@@ -1,5 +1,5 @@
 """The robustness study's matched baselines: a grid over compare's run names (grid.baseline) runs
-SC-DC, APD-DC and the matched baselines of orchestrator.experiments.baselines on the same sampled
+SC-DC, APD-DC and the matched baselines of orchestrator.tool.baselines on the same sampled
 plants, each with the gains `tapmp compare` gives it on the nominal scenario."""
 
 import json
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.baselines import compare_runs
+from orchestrator.tool.baselines import compare_runs
 from orchestrator.studies.study import load_study, read_study_csv
 from orchestrator.studies.study_file import base_value
 

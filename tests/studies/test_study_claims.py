@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.robustness import mode_peaks
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.robustness import mode_peaks
+from orchestrator.tool.scenario import load
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text()

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.experiments.robustness import MODES, mode_peaks
-from orchestrator.experiments.scenario import load
-from orchestrator.experiments.stability import check
+from orchestrator.tool.robustness import MODES, mode_peaks
+from orchestrator.tool.scenario import load
+from orchestrator.tool.stability import check
 from orchestrator.studies.study import load_study
 
 ROOT = Path(__file__).resolve().parents[2]
