@@ -452,7 +452,17 @@ def _check_controller(s: Scenario) -> None:
             f"{s.controller.get('force_limit')!r} is invalid: allowed is a number >= 0")
 
 
-_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_move, _check_order, _check_controller)
+def _check_plant_interface(s: Scenario) -> None:
+    """Model Exchange has no communication step to draw the measurement noise at."""
+    rms = s.plant.get("noise_rms", 0.0)
+    require(s.plant_interface != "me" or rms == 0.0,
+            f"plant.noise_rms = {rms!r} is invalid with plant_interface = \"me\": allowed is 0 (the noise is drawn "
+            "once per communication step, which Model Exchange does not have; use plant_interface = \"cs\", or "
+            "tapmp compare --no-noise)")
+
+
+_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_move, _check_order, _check_controller,
+                 _check_plant_interface)
 
 
 def read_gains_file(s: Scenario) -> Scenario:
