@@ -162,8 +162,12 @@ class Unit:
             if not again:
                 self.n_events += 1
                 return
-        raise CoSimulationError(f"{self.name}: fmi3UpdateDiscreteStates still needs another update after 100 "
-                                "rounds: allowed is an FMU whose discrete states settle", self.name)
+        raise self.not_settled_error()
+
+    def not_settled_error(self) -> CoSimulationError:
+        """The error of discrete states that still need an update after 100 rounds (the compiled core's too)."""
+        return CoSimulationError(f"{self.name}: fmi3UpdateDiscreteStates still needs another update after 100 "
+                                 "rounds: allowed is an FMU whose discrete states settle", self.name)
 
     def clock_kinds_refused(self) -> list[str]:
         """The names of the input clocks the master cannot tick: every one that is not periodic with a

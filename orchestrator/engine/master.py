@@ -141,9 +141,6 @@ class CoSimulation:
         if event_mode not in (True, False):
             raise CoSimulationError(f"event_mode = {event_mode!r} is invalid: allowed is true or false")
         self.event_mode = bool(event_mode)
-        if self.event_mode and stepper == "compiled":
-            raise CoSimulationError("stepper = 'compiled' is unavailable with event_mode = true: allowed are "
-                                    "'python' or 'auto' (event mode runs in the Python loop)")
         self.model_exchange = model_exchange  # elements or roles run as Model Exchange (model_exchange.py)
         self.me_tolerance = me_tolerance
         if model_exchange and stepper == "compiled":
@@ -287,13 +284,13 @@ class CoSimulation:
                 envelope_units.append((unit, i, float(limit)))
         self._check_outputs(self.t0)
         self._event_units = [u for u in self._step_units if u.event_mode]
-        if self.event_mode or any(isinstance(u, ModelExchangeUnit) for u in self._step_units):
-            pass  # the Python loop: the compiled core has no Event Mode and no integrator
+        if any(isinstance(u, ModelExchangeUnit) for u in self._step_units):
+            pass  # the Python loop: the compiled core has no integrator
         elif self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
             try:
                 self._core = stepper_core.CompiledStepper(
                     self._row_units, self._step_units, self.ordering == "jacobi", self.clock, envelope_units,
-                    self._log_count, self._log_errors)
+                    self._log_count, self._log_errors, self._event_units, self.event_mode)
             except (stepper_core.StepperBuildError, OSError) as err:
                 raise CoSimulationError(f"stepper = 'compiled' is unavailable: {err}") from None
 
@@ -476,10 +473,7 @@ class CoSimulation:
             for unit in self._event_units:
                 early = unit.returned_early()
                 if early is not None and early < target - tol:
-                    raise CoSimulationError(
-                        f"{unit.name}: doStep returned early at t = {early:.9g} s, before t = {target:.9g} s, a "
-                        "time it did not announce as nextEventTime: the other FMUs have stepped past it (allowed "
-                        "is an FMU whose events are the time events it announces)", unit.name, early, list(self.log))
+                    self._early_return(unit, early, target)
             now = target
             if not inside:
                 break
@@ -487,6 +481,13 @@ class CoSimulation:
             self._handle_events(now)
         self.k += 1
         self._check_outputs(self.clock.at(self.k))
+
+    def _early_return(self, unit: Unit, early: float, target: float) -> None:
+        """Raise for ``unit``'s doStep that returned early at ``early`` [s] before ``target`` [s]."""
+        raise CoSimulationError(
+            f"{unit.name}: doStep returned early at t = {early:.9g} s, before t = {target:.9g} s, a "
+            "time it did not announce as nextEventTime: the other FMUs have stepped past it (allowed "
+            "is an FMU whose events are the time events it announces)", unit.name, early, list(self.log))
 
     def _handle_events(self, t: float) -> None:
         """The event FMUs whose last doStep asked for event handling, in the step order: enter Event
@@ -555,20 +556,35 @@ class CoSimulation:
         while self.filled < len(rows):
             s = self._core.advance(self.k, rows[self.filled:], len(rows) - self.filled)
             self.filled += s.rows
-            if s.outcome == stepper_core.SUSPECT_OUTPUT:
-                self.k = s.k
+            self.k = s.k
+            if s.outcome == stepper_core.SUSPECT_OUTPUT and s.mid:
+                # at an event inside the macro step: the C check is the Python check, value by value
+                self._check_outputs(s.t)
+                raise CoSimulationError(f"the compiled core stopped at t = {s.t:.9g} s on outputs that the "
+                                        "Python check accepts")
+            elif s.outcome == stepper_core.SUSPECT_OUTPUT:
                 self._check_outputs(self.time)  # raises as step() does, unless only the C check was stricter
                 rows[self.filled] = self.row()
                 self.filled += 1
+            elif s.outcome == stepper_core.FAIL_EVENT:
+                unit = self._row_units[s.unit]
+                what, function = stepper_core.EVENT_CALLS[s.call]
+                err = None
+                if s.status > 1:  # as fmpy raises, or as _call words a returned status
+                    err = (FMICallException(function, s.status) if function else
+                           f"status {_STATUS[s.status] if s.status < 6 else s.status}")
+                self._fail(unit, what, s.t, err)
+            elif s.outcome == stepper_core.EARLY_RETURN:
+                self._early_return(self._row_units[s.unit], s.early, s.target)
+            elif s.outcome == stepper_core.NOT_SETTLED:
+                unit = self._row_units[s.unit]
+                raise unit.not_settled_error()
             elif s.outcome == stepper_core.FAIL_CALL:
-                self.k = s.k
-                unit, t = self._row_units[s.unit], self.clock.at(s.k)
+                unit, t = self._row_units[s.unit], s.t
                 self._step_failed(unit, t, s.n_log, s.status)
                 raise CoSimulationError(f"{unit.name}: {stepper_core.CALLS[s.call]} failed at t = {t:.6g} s: "
                                         f"status {_STATUS[s.status] if 0 <= s.status < 6 else s.status}",
                                         unit.name, t, list(self.log))
-            else:
-                self.k = s.k
         return self.filled
 
     def _check_outputs(self, t: float) -> None:

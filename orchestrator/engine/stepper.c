@@ -8,8 +8,15 @@
  * the worst status kept) and that every output is finite and inside the envelope, then
  * store the row (time, every element's outputs) into the caller's block.
  *
- * It never decides what a failure means: on a failed call or a suspect output it stops
- * and reports where, and the Python master raises exactly the error its own loop raises.
+ * In event mode (FMI 3.0 units instantiated with eventModeUsed, orchestrator.engine.master's
+ * _step_events and _handle_events) a macro step is cut at every event inside it, and at each
+ * event the event units enter Event Mode, tick their clocks if a tick is due, take their inputs,
+ * update their discrete states, publish their outputs and return to Step Mode: the same FMI calls
+ * in the same order as the Python loop, so every double is the same.
+ *
+ * It never decides what a failure means: on a failed call, a suspect output, an unannounced
+ * early return or discrete states that do not settle it stops and reports where, and the
+ * Python master raises exactly the error its own loop raises.
  * Times are those of orchestrator.engine.clocks, to the bit. No allocation, no I/O. */
 #include <math.h>
 #include <stdbool.h>
@@ -22,6 +29,9 @@ typedef int (*step2_t)(void *, double, double, int);
 typedef int (*get3_t)(void *, const uint32_t *, size_t, double *, size_t);
 typedef int (*set3_t)(void *, const uint32_t *, size_t, const double *, size_t);
 typedef int (*step3_t)(void *, double, double, bool, bool *, bool *, bool *, double *);
+typedef int (*call3_t)(void *);
+typedef int (*clock3_t)(void *, const uint32_t *, size_t, const bool *);
+typedef int (*update3_t)(void *, bool *, bool *, bool *, bool *, bool *, double *);
 
 typedef struct {
     void *instance;
@@ -33,11 +43,26 @@ typedef struct {
     const uint32_t *in_vrs;
     double *inp;                   /* input values handed to setReal */
     double *const *src;            /* per input: the source's output it copies */
+    /* FMI 3.0: fmi3DoStep's out-arguments, the Unit's own ctypes objects (instance.Unit._flags) */
+    bool *event_needed, *terminate, *early;
+    double *last_time;
+    /* event units only (instance.Unit: event_mode, next_event, clocks) */
+    void *enter_event, *set_clock, *update, *enter_step;  /* fmi3EnterEventMode, SetClock, ... */
+    double next_event;             /* in/out: nextEventTime [s], INFINITY if none */
+    int64_t clock_k;               /* in/out: index of the next clock tick */
+    int64_t n_events;              /* in/out: events handled */
+    int32_t n_clocks;              /* input clocks, ticked together */
+    const uint32_t *clock_vrs;
+    const bool *clock_on;          /* n_clocks times true */
+    double clock_t0, clock_interval;
 } tapmp_unit;
 
 enum { CLOCK_EXACT = 0, CLOCK_ACCUMULATED = 1, CLOCK_NANOSECONDS = 2 };
-enum { DONE = 0, FAIL_CALL = 1, SUSPECT_OUTPUT = 2 };
+enum { DONE = 0, FAIL_CALL = 1, SUSPECT_OUTPUT = 2, FAIL_EVENT = 3, EARLY_RETURN = 4, NOT_SETTLED = 5 };
 enum { CALL_SET = 0, CALL_STEP = 1, CALL_GET = 2 };
+/* FAIL_EVENT calls, in the order _handle_events makes them */
+enum { EV_ENTER = 0, EV_CLOCK = 1, EV_SET = 2, EV_UPDATE = 3, EV_GET = 4, EV_STEP_MODE = 5 };
+enum { MAX_UPDATE_ROUNDS = 100 };  /* instance.Unit.update_discrete_states */
 
 typedef struct {
     tapmp_unit *units;
@@ -52,6 +77,9 @@ typedef struct {
     const double *env_limit;
     volatile const int64_t *log_count;   /* messages logged so far (the master's logger counts) */
     volatile const int64_t *log_errors;  /* of those, ERROR or FATAL */
+    int32_t event_mode;            /* cut macro steps at events, handle them (master._step_events) */
+    int32_t n_event;
+    const int32_t *event_order;    /* the event units, indices into units in step order */
 } tapmp_plan;
 
 typedef struct {
@@ -63,6 +91,10 @@ typedef struct {
     int32_t call;       /* FAIL_CALL: CALL_SET, CALL_STEP or CALL_GET */
     int32_t status;     /* FAIL_CALL: the worst status of the unit's calls in that step */
     int64_t n_log;      /* FAIL_CALL: log_count at the start of the failing step */
+    double t;           /* FAIL_CALL, FAIL_EVENT: the (sub-)step's start or the event time [s];
+                           SUSPECT_OUTPUT inside a macro step: the event time */
+    int32_t mid;        /* SUSPECT_OUTPUT: 1 if at an event inside the macro step, else 0 */
+    double early, target;  /* EARLY_RETURN: lastSuccessfulTime and the time it should have reached [s] */
 } tapmp_state;
 
 static double time_at(const tapmp_plan *p, int64_t k)
@@ -85,11 +117,8 @@ static int set_inputs(tapmp_unit *u)
 
 static int do_step(tapmp_unit *u, double t, double h)
 {
-    if (u->fmi3) {
-        bool event = false, terminate = false, early = false;
-        double last = 0.0;
-        return ((step3_t)u->step)(u->instance, t, h, true, &event, &terminate, &early, &last);
-    }
+    if (u->fmi3)
+        return ((step3_t)u->step)(u->instance, t, h, true, u->event_needed, u->terminate, u->early, u->last_time);
     return ((step2_t)u->step)(u->instance, t, h, 1);
 }
 
@@ -132,12 +161,183 @@ static int outputs_suspect(const tapmp_plan *p)
     return 0;
 }
 
+/* The tolerance [s] of the Python loop: 8 ulps of |x|, at least 1e-12 s. */
+static double ulps8(double x)
+{
+    double a = fabs(x), d = 8.0 * (nextafter(a, INFINITY) - a);
+    return d > 1e-12 ? d : 1e-12;  /* max(1e-12, d) */
+}
+
+/* Exchange the values and step every unit from t by h in the planned ordering
+ * (master.CoSimulation._substep). Returns 1 on a failed call (s filled in). */
+static int substep(const tapmp_plan *p, tapmp_state *s, double t, double h)
+{
+    s->n_log = *p->log_count;
+    s->t = t;
+    int64_t errors = *p->log_errors;
+    if (!p->jacobi) {
+        for (int32_t i = 0; i < p->n_units; i++) {
+            int32_t ui = p->step_order[i];
+            tapmp_unit *u = &p->units[ui];
+            int worst = 0;
+            if (failed(p, s, ui, CALL_SET, set_inputs(u), &worst, errors)
+                || failed(p, s, ui, CALL_STEP, do_step(u, t, h), &worst, errors)
+                || failed(p, s, ui, CALL_GET, get_outputs(u), &worst, errors))
+                return 1;
+        }
+        return 0;
+    }
+    for (int32_t i = 0; i < p->n_units; i++) {
+        int worst = 0, ui = p->step_order[i];
+        if (failed(p, s, ui, CALL_SET, set_inputs(&p->units[ui]), &worst, errors))
+            return 1;
+    }
+    for (int32_t i = 0; i < p->n_units; i++) {
+        int worst = 0, ui = p->step_order[i];
+        if (failed(p, s, ui, CALL_STEP, do_step(&p->units[ui], t, h), &worst, errors))
+            return 1;
+    }
+    for (int32_t i = 0; i < p->n_units; i++) {
+        int worst = 0, ui = p->step_order[i];
+        if (failed(p, s, ui, CALL_GET, get_outputs(&p->units[ui]), &worst, errors))
+            return 1;
+    }
+    return 0;
+}
+
+/* One FMI call in Event Mode (master.CoSimulation._call): 1 if it returned above Warning or an
+ * error was logged during it (s filled in: the call and its status). */
+static int event_failed(const tapmp_plan *p, tapmp_state *s, int32_t unit, int32_t call, int status,
+                        int64_t errors, double t)
+{
+    if (status > 1 || *p->log_errors != errors) {
+        s->outcome = FAIL_EVENT;
+        s->unit = unit;
+        s->call = call;
+        s->status = status;
+        s->t = t;
+        return 1;
+    }
+    return 0;
+}
+
+/* fmi3UpdateDiscreteStates until settled (instance.Unit.update_discrete_states); 1 on failure. */
+static int update_discrete_states(const tapmp_plan *p, tapmp_state *s, int32_t ui, double t)
+{
+    tapmp_unit *u = &p->units[ui];
+    int64_t errors = *p->log_errors;
+    for (int round = 0; round < MAX_UPDATE_ROUNDS; round++) {
+        bool again = false, terminate = false, nominals = false, values = false, defined = false;
+        double next = 0.0;
+        int status = ((update3_t)u->update)(u->instance, &again, &terminate, &nominals, &values, &defined, &next);
+        if (status > 1)  /* fmpy raises at once, before the log is looked at */
+            return event_failed(p, s, ui, EV_UPDATE, status, errors, t);
+        u->next_event = defined ? next : INFINITY;
+        if (u->n_clocks) {  /* the next tick, as the FMU's grid t0 + k T_s computes it */
+            double tick = u->clock_t0 + (double)u->clock_k * u->clock_interval;
+            if (tick < u->next_event)
+                u->next_event = tick;
+        }
+        if (!again) {
+            u->n_events++;
+            return event_failed(p, s, ui, EV_UPDATE, status, errors, t);
+        }
+    }
+    s->outcome = NOT_SETTLED;
+    s->unit = ui;
+    s->t = t;
+    return 1;
+}
+
+/* The event units that asked for event handling or whose clocks tick at t, in the step order
+ * (master.CoSimulation._handle_events). Returns 1 on failure (s filled in). */
+static int handle_events(const tapmp_plan *p, tapmp_state *s, double t)
+{
+    double tol = ulps8(t);
+    for (int32_t e = 0; e < p->n_event; e++) {
+        int32_t ui = p->event_order[e];
+        tapmp_unit *u = &p->units[ui];
+        int tick = u->n_clocks > 0 && fabs(t - u->next_event) <= tol;
+        if (!(*u->event_needed || tick))
+            continue;
+        *u->event_needed = false;  /* handled */
+        int64_t errors = *p->log_errors;
+        if (event_failed(p, s, ui, EV_ENTER, ((call3_t)u->enter_event)(u->instance), errors, t))
+            return 1;
+        if (tick) {
+            errors = *p->log_errors;
+            int status = ((clock3_t)u->set_clock)(u->instance, u->clock_vrs, (size_t)u->n_clocks, u->clock_on);
+            if (event_failed(p, s, ui, EV_CLOCK, status, errors, t))
+                return 1;
+            u->clock_k++;
+        }
+        errors = *p->log_errors;
+        if (event_failed(p, s, ui, EV_SET, set_inputs(u), errors, t)
+            || update_discrete_states(p, s, ui, t))
+            return 1;
+        errors = *p->log_errors;
+        if (event_failed(p, s, ui, EV_GET, get_outputs(u), errors, t))
+            return 1;
+        errors = *p->log_errors;
+        if (event_failed(p, s, ui, EV_STEP_MODE, ((call3_t)u->enter_step)(u->instance), errors, t))
+            return 1;
+    }
+    return 0;
+}
+
+/* One macro step from t (= t_k) to end (= t_{k+1}) in event mode (master.CoSimulation._step_events):
+ * the events due at t, then sub-steps ending at each event inside the step, each followed by its
+ * event. Returns 1 on failure (s filled in). */
+static int step_events(const tapmp_plan *p, tapmp_state *s, double t, double h, double end)
+{
+    double tol = ulps8(end);
+    if (handle_events(p, s, t))
+        return 1;
+    double now = t;
+    for (;;) {
+        double next_event = INFINITY;
+        for (int32_t e = 0; e < p->n_event; e++) {
+            double x = p->units[p->event_order[e]].next_event;
+            if (e == 0 || x < next_event)  /* Python's min() */
+                next_event = x;
+        }
+        int inside = next_event < end - tol;
+        double target = inside ? next_event : end;
+        /* from t_k the step is h as without events, so a run whose events fall on its grid is the same */
+        if (substep(p, s, now, now == t && !inside ? h : target - now))
+            return 1;
+        for (int32_t e = 0; e < p->n_event; e++) {
+            int32_t ui = p->event_order[e];
+            tapmp_unit *u = &p->units[ui];
+            if (*u->early && *u->last_time < target - tol) {
+                s->outcome = EARLY_RETURN;
+                s->unit = ui;
+                s->early = *u->last_time;
+                s->target = target;
+                return 1;
+            }
+        }
+        now = target;
+        if (!inside)
+            return 0;
+        if (outputs_suspect(p)) {
+            s->outcome = SUSPECT_OUTPUT;
+            s->mid = 1;
+            s->t = now;
+            return 1;
+        }
+        if (handle_events(p, s, now))
+            return 1;
+    }
+}
+
 /* Step from s->k at most n_steps times, storing a row of n_cols doubles per completed step
  * into rows (row-major). Returns s->outcome. */
 int tapmp_advance(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *rows, int32_t n_cols)
 {
     s->rows = 0;
     s->outcome = DONE;
+    s->mid = 0;
     for (int64_t n = 0; n < n_steps; n++) {
         int64_t k = s->k;
         double t, h;
@@ -148,34 +348,12 @@ int tapmp_advance(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *
             t = time_at(p, k);
             h = p->clock == CLOCK_NANOSECONDS ? time_at(p, k + 1) - t : p->h;
         }
-        s->n_log = *p->log_count;
-        int64_t errors = *p->log_errors;
-        if (!p->jacobi) {
-            for (int32_t i = 0; i < p->n_units; i++) {
-                int32_t ui = p->step_order[i];
-                tapmp_unit *u = &p->units[ui];
-                int worst = 0;
-                if (failed(p, s, ui, CALL_SET, set_inputs(u), &worst, errors)
-                    || failed(p, s, ui, CALL_STEP, do_step(u, t, h), &worst, errors)
-                    || failed(p, s, ui, CALL_GET, get_outputs(u), &worst, errors))
-                    return FAIL_CALL;
-            }
-        } else {
-            for (int32_t i = 0; i < p->n_units; i++) {
-                int worst = 0, ui = p->step_order[i];
-                if (failed(p, s, ui, CALL_SET, set_inputs(&p->units[ui]), &worst, errors))
-                    return FAIL_CALL;
-            }
-            for (int32_t i = 0; i < p->n_units; i++) {
-                int worst = 0, ui = p->step_order[i];
-                if (failed(p, s, ui, CALL_STEP, do_step(&p->units[ui], t, h), &worst, errors))
-                    return FAIL_CALL;
-            }
-            for (int32_t i = 0; i < p->n_units; i++) {
-                int worst = 0, ui = p->step_order[i];
-                if (failed(p, s, ui, CALL_GET, get_outputs(&p->units[ui]), &worst, errors))
-                    return FAIL_CALL;
-            }
+        if (p->event_mode) {
+            double end = p->clock == CLOCK_ACCUMULATED ? s->acc_t + p->h : time_at(p, k + 1);
+            if (step_events(p, s, t, h, end))
+                return s->outcome;
+        } else if (substep(p, s, t, h)) {
+            return FAIL_CALL;
         }
         s->k = k + 1;
         if (p->clock == CLOCK_ACCUMULATED)

@@ -6,7 +6,9 @@ function pointers of the libraries fmpy loaded, a block of steps per call, and r
 Python after every block (progress, stop requests, recording) and at the first failed call
 or suspect output, which the master reports with the same error as its Python loop
 (``CoSimulation.step``). The rows are the Python loop's to the bit
-(tests/engine/test_stepper.py).
+(tests/engine/test_stepper.py), in FMI 3.0 Event Mode too (the event units' state, their
+nextEventTime, clock tick index and events handled, is handed over at every call:
+tests/engine/master/test_stepper_events.py).
 
 The C file is compiled on first use (or by ``tapmp build``) into a cache folder outside
 the package: ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
@@ -28,8 +30,13 @@ STEPPERS = ("auto", "compiled", "python")
 # No -ffast-math, no contraction: the core only copies and compares doubles, and must keep them.
 CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-Wall"]  # exported for ctypes: no hidden visibility
 
-DONE, FAIL_CALL, SUSPECT_OUTPUT = 0, 1, 2
+DONE, FAIL_CALL, SUSPECT_OUTPUT, FAIL_EVENT, EARLY_RETURN, NOT_SETTLED = 0, 1, 2, 3, 4, 5
 CALLS = ("setReal", "doStep", "getReal")
+# FAIL_EVENT: the call as CoSimulation._handle_events names it, and fmpy's name of the function that
+# raises FMICallException above Warning (None: a direct ctypes call whose status the master words)
+EVENT_CALLS = (("enterEventMode", "fmi3EnterEventMode"), ("setClock", "fmi3SetClock"), ("setFloat64", None),
+               ("updateDiscreteStates", "fmi3UpdateDiscreteStates"), ("getFloat64", None),
+               ("enterStepMode", "fmi3EnterStepMode"))
 CLOCK_KINDS = {"exact": 0, "accumulated": 1, "nanoseconds": 2}
 
 
@@ -113,19 +120,26 @@ class _UnitC(Structure):
     _fields_ = [("instance", c_void_p), ("get", c_void_p), ("set", c_void_p), ("step", c_void_p),
                 ("fmi3", c_int32), ("n_out", c_int32), ("n_in", c_int32),
                 ("out_vrs", c_void_p), ("out", c_void_p), ("in_vrs", c_void_p), ("inp", c_void_p),
-                ("src", c_void_p)]
+                ("src", c_void_p),
+                ("event_needed", c_void_p), ("terminate", c_void_p), ("early", c_void_p), ("last_time", c_void_p),
+                ("enter_event", c_void_p), ("set_clock", c_void_p), ("update", c_void_p), ("enter_step", c_void_p),
+                ("next_event", c_double), ("clock_k", c_int64), ("n_events", c_int64), ("n_clocks", c_int32),
+                ("clock_vrs", c_void_p), ("clock_on", c_void_p), ("clock_t0", c_double),
+                ("clock_interval", c_double)]
 
 
 class _Plan(Structure):
     _fields_ = [("units", c_void_p), ("n_units", c_int32), ("jacobi", c_int32), ("step_order", c_void_p),
                 ("clock", c_int32), ("t0", c_double), ("h", c_double), ("t0_ns", c_int64), ("h_ns", c_int64),
                 ("n_env", c_int32), ("env_unit", c_void_p), ("env_index", c_void_p), ("env_limit", c_void_p),
-                ("log_count", c_void_p), ("log_errors", c_void_p)]
+                ("log_count", c_void_p), ("log_errors", c_void_p),
+                ("event_mode", c_int32), ("n_event", c_int32), ("event_order", c_void_p)]
 
 
 class _State(Structure):
     _fields_ = [("k", c_int64), ("acc_t", c_double), ("rows", c_int64), ("outcome", c_int32),
-                ("unit", c_int32), ("call", c_int32), ("status", c_int32), ("n_log", c_int64)]
+                ("unit", c_int32), ("call", c_int32), ("status", c_int32), ("n_log", c_int64),
+                ("t", c_double), ("mid", c_int32), ("early", c_double), ("target", c_double)]
 
 
 def _addr(obj) -> int:
@@ -136,9 +150,11 @@ class CompiledStepper:
     """The C loop bound to the units of one opened CoSimulation (``sim``): ``units`` in row
     order, ``step_order`` their indices in step order, ``envelope`` the bounds of the master's
     OutputCheck as (unit, output index, limit), the logger's counters ``log_count`` and
-    ``log_errors`` (c_int64)."""
+    ``log_errors`` (c_int64); ``event_units``: the units in Event Mode in step order (empty
+    without event mode), whose macro steps are cut at their events."""
 
-    def __init__(self, units, step_order, jacobi: bool, clock, envelope, log_count, log_errors):
+    def __init__(self, units, step_order, jacobi: bool, clock, envelope, log_count, log_errors,
+                 event_units=(), event_mode: bool = False):
         self.lib = load()
         self._keep = []  # every ctypes object the C side points into
         index = {id(u): i for i, u in enumerate(units)}
@@ -153,16 +169,35 @@ class CompiledStepper:
             cunits[i] = _UnitC(u.slave.component, get, set_, step, int(u.fmi3), u.n_out, u.n_in,
                                _addr(u.out_vrs), _addr(u.out), _addr(u.in_vrs) if u.n_in else None,
                                _addr(u.inp) if u.n_in else None, _addr(src))
+            if u.fmi3:  # doStep writes into the Unit's own flags: the Python loop reads them on
+                c = cunits[i]
+                c.event_needed, c.terminate, c.early = (_addr(f) for f in u._flags)
+                c.last_time = _addr(u._last_time)
+            if u.event_mode:
+                c = cunits[i]
+                c.enter_event, c.set_clock, c.update, c.enter_step = (
+                    ctypes.cast(getattr(dll, n), c_void_p).value for n in
+                    ("fmi3EnterEventMode", "fmi3SetClock", "fmi3UpdateDiscreteStates", "fmi3EnterStepMode"))
+                n_clocks = len(u.clock_vrs)
+                vrs, on = (ctypes.c_uint32 * max(n_clocks, 1))(*u.clock_vrs), (ctypes.c_bool * max(n_clocks, 1))()
+                for j in range(n_clocks):
+                    on[j] = True
+                self._keep += [vrs, on]
+                c.n_clocks, c.clock_vrs, c.clock_on = n_clocks, _addr(vrs), _addr(on)
+                c.clock_t0, c.clock_interval = u.clock_t0, u.clock_interval
         order = (c_int32 * len(step_order))(*(index[id(u)] for u in step_order))
         env_unit = (c_int32 * max(len(envelope), 1))(*(index[id(u)] for u, _, _ in envelope))
         env_index = (c_int32 * max(len(envelope), 1))(*(i for _, i, _ in envelope))
         env_limit = (c_double * max(len(envelope), 1))(*(lim for _, _, lim in envelope))
-        self._keep += [cunits, order, env_unit, env_index, env_limit, log_count, log_errors]
+        events = (c_int32 * max(len(event_units), 1))(*(index[id(u)] for u in event_units))
+        self._keep += [cunits, order, env_unit, env_index, env_limit, log_count, log_errors, events]
+        self.units, self.cunits = units, cunits
+        self.event_units = [(index[id(u)], u) for u in event_units]
         ns = clock.kind == "nanoseconds"
         self.plan = _Plan(_addr(cunits), len(units), int(jacobi), _addr(order), CLOCK_KINDS[clock.kind],
                           clock.t0, clock.h, clock._t0_ns if ns else 0, clock._h_ns if ns else 0,
                           len(envelope), _addr(env_unit), _addr(env_index), _addr(env_limit),
-                          _addr(log_count), _addr(log_errors))
+                          _addr(log_count), _addr(log_errors), int(event_mode), len(event_units), _addr(events))
         self.state = _State()
         self.clock = clock
 
@@ -173,7 +208,15 @@ class CompiledStepper:
         s.k = k
         if self.clock.kind == "accumulated":
             s.acc_t = self.clock.at(k)
-        self.lib.tapmp_advance(ctypes.byref(self.plan), ctypes.byref(s), n, rows.ctypes.data, rows.shape[1])
+        for i, u in self.event_units:  # the Python loop may have stepped since (CoSimulation.step)
+            c = self.cunits[i]
+            c.next_event, c.clock_k, c.n_events = u.next_event, u.clock_k, u.n_events
+        try:
+            self.lib.tapmp_advance(ctypes.byref(self.plan), ctypes.byref(s), n, rows.ctypes.data, rows.shape[1])
+        finally:
+            for i, u in self.event_units:
+                c = self.cunits[i]
+                u.next_event, u.clock_k, u.n_events = c.next_event, c.clock_k, c.n_events
         if self.clock.kind == "accumulated":  # the Python clock continues from where C stopped
             self.clock._acc_k, self.clock._acc_t = s.k, s.acc_t
         return s
