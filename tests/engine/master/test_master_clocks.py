@@ -58,8 +58,14 @@ def test_the_clocked_controller_without_event_mode_is_refused(fmi3):
         "event_mode = true")
 
 
-def test_the_clocked_controller_with_the_compiled_core_is_refused(fmi3):
-    with pytest.raises(CoSimulationError) as err:
-        run(fmi3["clocked_ssp"], T_S, 1, event_mode=True, stepper="compiled")
-    assert str(err.value) == ("stepper = 'compiled' is unavailable with event_mode = true: allowed are 'python' or "
-                              "'auto' (event mode runs in the Python loop)")
+def test_the_clocked_controller_with_the_compiled_core_gives_the_python_loops_rows(fmi3):
+    rows = {}
+    for stepper in ("compiled", "python"):
+        scenario = load(PAPER, ["stop_time=0.05"])
+        with CoSimulation(fmi3["clocked_ssp"], scenario.parameters(), 0.0, 1e-3, event_mode=True, stepper=stepper,
+                          roles=ROLES) as sim:
+            rows[stepper] = np.zeros((20, len(sim.columns)))
+            sim.advance(rows[stepper])
+            assert (sim._core is not None) == (stepper == "compiled")
+            assert sim.units["controller"].n_events == 200  # t = 0 and every tick up to 0.0199 s
+    np.testing.assert_array_equal(rows["compiled"], rows["python"])

@@ -74,14 +74,18 @@ def test_event_mode_without_an_fmu_with_event_mode_is_refused(native_fmi2_ssp):
         run(native_fmi2_ssp, T_S, 1, event_mode=True)
 
 
-def test_event_mode_with_the_compiled_core_is_refused(fmi3):
-    with pytest.raises(CoSimulationError, match="stepper = 'compiled' is unavailable with event_mode = true: "
-                       "allowed are 'python' or 'auto'"):
-        run(fmi3["ssp"], T_S, 1, event_mode=True, stepper="compiled")
+def advance(ssp, step, n, stepper):
+    """Rows after each of n macro steps in event mode through CoSimulation.advance, and whether the
+    compiled core ran."""
+    scenario = load(PAPER, ["stop_time=0.05"])
+    with CoSimulation(ssp, scenario.parameters(), 0.0, step, event_mode=True, stepper=stepper, roles=ROLES) as sim:
+        rows = np.zeros((n, len(sim.columns)))
+        sim.advance(rows)
+        return rows, sim._core is not None
 
 
-@pytest.fixture(scope="module")
-def native_fmi2_ssp(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native
-    return build_native(tmp_path_factory.mktemp("native2"), families=("fmi2",), log=lambda *_: None,
-                        windows=False)["fmi2"]["ssp"]
+def test_event_mode_with_the_compiled_core_gives_the_python_loops_rows(fmi3):
+    compiled, core = advance(fmi3["ssp"], 1e-3, 20, "compiled")
+    python, _ = advance(fmi3["ssp"], 1e-3, 20, "python")
+    assert core
+    np.testing.assert_array_equal(compiled, python)
