@@ -51,6 +51,8 @@ fmi3GetShiftDecimal), cuts the macro step at every tick t0 + shift + k interval 
 clocks (fmi3SetClock) in Event Mode before the inputs and the update; such an FMU requires event_mode.
 The FMI 3.0 FMUs without Event Mode and the FMI 2.0 ones step as before. An early return at a time the FMU did not
 announce is refused: the others have stepped past it already.
+The compiled stepping core (stepper.c) runs the same event loop with the same FMI calls in the same
+order, so its rows are the Python loop's to the bit.
 """
 
 import math
