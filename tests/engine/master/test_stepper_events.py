@@ -36,13 +36,13 @@ def parameters(**controller_and_plant):
     return p
 
 
-def run(ssp, step, n, stepper, ordering="gauss-seidel", blocks=(7,), params=None, check=None):
+def run(ssp, step, n, stepper, ordering="gauss-seidel", blocks=(7,), params=None, check=None, clock="exact"):
     """Rows after each of n macro steps of ``step`` [s] in event mode, advanced in ``blocks`` then the rest,
     with one Python-loop step() between the blocks; the error raised (or None), the rows stored before it,
     the controller's events handled and whether the compiled core ran."""
     rows = None
     with CoSimulation(ssp, params or parameters(), 0.0, step, ordering, event_mode=True, stepper=stepper,
-                      roles=ROLES, check=check) as sim:
+                      roles=ROLES, check=check, clock=clock) as sim:
         rows = np.full((n, len(sim.columns)), np.nan)
         done, error = 0, None
         try:
@@ -72,6 +72,16 @@ def test_the_compiled_core_in_event_mode_gives_the_python_loops_rows_bit_for_bit
     assert events_c == events_p == 500  # every sample instant from t0 up to 0.0499 s, whatever the step
     assert python.shape == compiled.shape == (n, python.shape[1])
     np.testing.assert_array_equal(compiled, python)  # every column, every double
+
+
+@pytest.mark.parametrize("clock", ["accumulated", "nanoseconds"])
+@pytest.mark.parametrize("system, step", [("ssp", 2.5e-4), ("clocked_ssp", 1e-3)])
+def test_the_compiled_core_in_event_mode_keeps_the_other_masters_clocks_to_the_bit(fmi3, system, step, clock):
+    n = round(0.05 / step)
+    python, _, events_p, _ = run(fmi3[system], step, n, "python", clock=clock)
+    compiled, _, events_c, core = run(fmi3[system], step, n, "compiled", clock=clock)
+    assert core and events_c == events_p == 500
+    np.testing.assert_array_equal(compiled, python)
 
 
 @pytest.mark.parametrize("system", ["ssp", "clocked_ssp"])
