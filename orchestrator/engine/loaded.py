@@ -1,0 +1,254 @@
+"""An SSP's FMUs extracted and loaded once, and kept loaded between co-simulations.
+
+:class:`LoadedSystem` is what a co-simulation opens before it instantiates anything: the SSP read
+(``ssd.read_ssp``), its elements checked, their FMUs extracted into a temporary folder of this
+process (``tempdirs.make_folder``) and loaded by fmpy, one :class:`~orchestrator.engine.units.Unit`
+per element. A co-simulation on its own loads a system, runs, and closes it (every instance freed,
+the folder removed).
+
+:class:`LoadedFMUs` keeps systems for the next co-simulation of the same SSP content (a study
+worker runs one SSP case after case): when a co-simulation ends, every instance is reset
+(``fmi2Reset`` / ``fmi3Reset``), which returns it to the state right after instantiation, so
+the next co-simulation applies its parameters to it exactly as to a new instance. An instance
+whose reset fails (an exception, a status above Warning, or an error it logs) is freed and its
+FMU loaded again from the extracted folder, and the next co-simulation instantiates it anew.
+Systems are keyed by the SHA-256 of the SSP file and the event mode they were instantiated in.
+"""
+
+import hashlib
+import os
+import shutil
+import threading
+import weakref
+from ctypes import byref
+from pathlib import Path
+
+from fmpy import calloc, free
+from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                       fmi2CallbackLoggerTYPE)
+
+from .archive import ExtractBudget, ExtractLimitError
+from .errors import CoSimulationError
+from .ssd import check_elements, extract_fmus, read_ssp
+from .tempdirs import make_folder
+from .units import Unit
+
+
+class LoadedSystem:
+    """The FMUs of the SSP file ``ssp_path`` extracted into a new temporary folder (:attr:`tmp`)
+    and loaded, one :class:`Unit` per element (:attr:`units`, in the SSD's order; none
+    instantiated yet), their sizes counted against ``budget`` (archive.ExtractBudget).
+
+    Every FMU's log messages go to :attr:`target` (the running co-simulation's logger, called as
+    ``target(env, instance, status, category, message)``; None drops them). CoSimulationError
+    names the SSP and the element for an SSP or FMU that cannot be read, extracted or loaded;
+    nothing is left behind then.
+    """
+
+    def __init__(self, ssp_path: Path, budget: ExtractBudget, event_mode: bool = False):
+        self.ssp_path = Path(ssp_path)
+        self.event_mode = event_mode
+        self.target = None
+        self.units: dict[str, Unit] = {}
+        self.tmp = None
+        try:
+            self._load(budget)
+        except BaseException:
+            self.close()
+            raise
+
+    def _load(self, budget: ExtractBudget) -> None:
+        self.ssd, members = read_ssp(self.ssp_path, budget)
+        self.elements = check_elements(self.ssp_path, self.ssd.system.elements, members)  # before extracting
+        self.tmp = make_folder()
+        weakref.finalize(self, shutil.rmtree, str(self.tmp), True)  # also if close() is never reached
+        self.fmus = extract_fmus(self.ssp_path, members, self.elements, self.tmp / "ssp", budget)
+        # one callback table per system: an FMI 2.0 instance may keep its pointer until it is freed
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        from fmpy.logging import addLoggerProxy
+        addLoggerProxy(byref(self.callbacks))
+        for name in self.elements:
+            self.units[name] = self._unit(name, budget)
+
+    def _unit(self, name: str, budget: ExtractBudget | None) -> Unit:
+        """The Unit of element ``name``: its FMU extracted (``budget`` given) or already extracted
+        (None), then loaded."""
+        source = self.elements[name][0]
+        try:
+            return Unit(name, self.fmus[name], self.tmp / "fmu" / name, [], budget,
+                        f"SSP file {self.ssp_path}: the FMU {source} of element {name}", extract=budget is not None)
+        except ExtractLimitError as err:
+            raise CoSimulationError(str(err), name) from None
+        except Exception as err:
+            raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {source} of "
+                                    f"element {name} (truncated or not an FMU): {err}", name) from err
+
+    def _log(self, env, instance, status, category, message):
+        target = self.target
+        if target is not None:
+            target(env, instance, status, category, message)
+
+    def log_message(self, env, instance, status, category, message):
+        """The FMI 3.0 instances' logger (the same dispatch as the FMI 2.0 callback table's)."""
+        self._log(env, instance, status, category, message)
+
+    def reset(self) -> int:
+        """Reset every instantiated instance (fmi2Reset / fmi3Reset) for the next co-simulation.
+        An instance whose reset fails is freed and its FMU loaded again (not instantiated).
+        Returns how many instances had to be replaced."""
+        replaced = 0
+        for name, unit in list(self.units.items()):
+            if not unit.instantiated:  # never instantiated (its co-simulation stopped before)
+                unit.prepare_reuse()
+                continue
+            errors = []
+            self.target = lambda env, instance, status, category, message: errors.append(status >= 3)
+            try:
+                status = unit.reset()
+            except Exception:
+                status = 3
+            self.target = None
+            if status <= 1 and not any(errors):
+                unit.prepare_reuse()
+                continue
+            replaced += 1
+            _free(unit)
+            self.units[name] = self._unit(name, None)
+        return replaced
+
+    def close(self) -> None:
+        """Terminate and free every instance and delete the extracted files; idempotent."""
+        self.target = None
+        for unit in self.units.values():
+            _free(unit)
+        self.units = {}
+        if self.tmp is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            self.tmp = None
+
+
+def _free(unit: Unit) -> None:
+    """Terminate and free ``unit``'s instance if it has one (an instance in error state may refuse
+    to terminate; it is freed regardless)."""
+    if unit.instantiated:
+        try:
+            unit.slave.terminate()
+        except Exception:
+            pass
+        try:
+            unit.slave.freeInstance()
+        except Exception:
+            pass
+        unit.instantiated = False
+
+
+class LoadedFMUs:
+    """Loaded systems kept for the next co-simulation of the same SSP content (module docstring);
+    thread-safe. ``per_key`` systems at most are kept idle per SSP content and event mode, and
+    ``keys`` contents at most (the least recently used are closed first).
+
+    :attr:`counts` says what happened: "loaded" (systems loaded), "reused" (systems taken from
+    the cache), "reset" (instances reset), "replaced" (instances whose reset failed).
+    """
+
+    def __init__(self, per_key: int = 4, keys: int = 4):
+        self.per_key, self.keys = per_key, keys
+        self._idle: dict[tuple, list[LoadedSystem]] = {}
+        self._lock = threading.Lock()
+        self._hashes: dict[tuple, str] = {}
+        self.closed = False
+        self.counts = {"loaded": 0, "reused": 0, "reset": 0, "replaced": 0}
+
+    def key(self, ssp_path: Path, event_mode: bool) -> tuple:
+        """(SHA-256 of the SSP file's bytes, event mode); the hash is computed again whenever the
+        file's size, modification time or inode changed."""
+        st = os.stat(ssp_path)
+        stamp = (os.path.realpath(ssp_path), st.st_size, st.st_mtime_ns, st.st_ino)
+        sha = self._hashes.get(stamp)
+        if sha is None:
+            sha = hashlib.sha256(Path(ssp_path).read_bytes()).hexdigest()
+            self._hashes[stamp] = sha
+        return sha, bool(event_mode)
+
+    def take(self, ssp_path: Path, budget: ExtractBudget, event_mode: bool = False) -> LoadedSystem:
+        """A loaded system of ``ssp_path``: an idle one of the same content and event mode whose
+        instances were reset, else a new LoadedSystem."""
+        try:
+            key = self.key(ssp_path, event_mode)
+        except OSError as err:
+            raise CoSimulationError(f"cannot read SSP file {ssp_path}: {err.strerror or err}") from None
+        with self._lock:
+            idle = self._idle.get(key)
+            system = idle.pop() if idle else None
+            if system is not None:
+                self._idle[key] = self._idle.pop(key)  # most recently used last
+                self.counts["reused"] += 1
+        if system is None:
+            system = LoadedSystem(ssp_path, budget, event_mode)
+            with self._lock:
+                self.counts["loaded"] += 1
+        system.ssp_path = Path(ssp_path)  # messages name the path this co-simulation was given
+        system.key = key
+        return system
+
+    def give(self, system: LoadedSystem) -> None:
+        """Take back ``system`` after its co-simulation: its instances reset (those that fail
+        replaced) and kept for the next co-simulation of its SSP, or closed if the cache is full
+        or closed."""
+        try:
+            n_reset = sum(u.instantiated for u in system.units.values())
+            replaced = system.reset()
+        except BaseException:
+            system.close()
+            raise
+        surplus = []
+        with self._lock:
+            self.counts["reset"] += n_reset - replaced
+            self.counts["replaced"] += replaced
+            idle = self._idle.setdefault(system.key, [])
+            if self.closed or len(idle) >= self.per_key:
+                surplus.append(system)
+            else:
+                idle.append(system)
+                self._idle[system.key] = self._idle.pop(system.key)  # most recently used last
+            while len(self._idle) > self.keys:
+                surplus += self._idle.pop(next(iter(self._idle)))
+        for s in surplus:
+            s.close()
+
+    def close(self) -> None:
+        """Close every idle system; a system given back later is closed too."""
+        with self._lock:
+            self.closed = True
+            systems = [s for idle in self._idle.values() for s in idle]
+            self._idle = {}
+        for s in systems:
+            s.close()
+
+
+_PROCESS = None
+_PROCESS_LOCK = threading.Lock()
+
+
+def process_fmus() -> LoadedFMUs:
+    """This process's LoadedFMUs (a study worker's), made on first use and closed when the
+    process exits (atexit; a worker killed outright leaves its folder to
+    tempdirs.remove_stale_folders)."""
+    global _PROCESS
+    with _PROCESS_LOCK:
+        if _PROCESS is None or _PROCESS.closed:
+            import atexit
+            _PROCESS = LoadedFMUs()
+            atexit.register(_PROCESS.close)
+        return _PROCESS
+
+
+def close_process_fmus() -> None:
+    """Close this process's LoadedFMUs if it has one (a study's end on a worker)."""
+    with _PROCESS_LOCK:
+        cache = _PROCESS
+    if cache is not None:
+        cache.close()
