@@ -50,6 +50,7 @@ class LoadedSystem:
         self.event_mode = event_mode
         self.target = None
         self.units: dict[str, Unit] = {}
+        self.abandoned: list[Unit] = []  # instances whose reset returned Fatal (never called again)
         self.tmp = None
         try:
             self._load(budget)
@@ -97,8 +98,9 @@ class LoadedSystem:
 
     def reset(self) -> int:
         """Reset every instantiated instance (fmi2Reset / fmi3Reset) for the next co-simulation.
-        An instance whose reset fails is freed and its FMU loaded again (not instantiated).
-        Returns how many instances had to be replaced."""
+        An instance whose reset fails (a status above Warning or an error logged) is freed, or after
+        Fatal left alone (FMI: no call is allowed after Fatal, not even freeInstance), and its FMU
+        loaded again, not instantiated. Returns how many instances had to be replaced."""
         replaced = 0
         for name, unit in list(self.units.items()):
             if not unit.instantiated:  # never instantiated (its co-simulation stopped before)
@@ -109,13 +111,20 @@ class LoadedSystem:
             try:
                 status = unit.reset()
             except Exception:
-                status = 3
+                status = 4  # nothing says what state the instance is in: never call it again
             self.target = None
             if status <= 1 and not any(errors):
                 unit.prepare_reuse()
                 continue
             replaced += 1
-            _free(unit)
+            if status >= 4:  # fmi2Fatal: no further call on the instance is allowed, not even freeing it
+                self.abandoned.append(unit)
+            else:
+                try:
+                    unit.slave.freeInstance()
+                except Exception:
+                    pass
+            unit.instantiated = False
             self.units[name] = self._unit(name, None)
         return replaced
 
