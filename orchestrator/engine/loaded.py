@@ -244,14 +244,17 @@ _PROCESS_LOCK = threading.Lock()
 
 def process_fmus() -> LoadedFMUs:
     """This process's LoadedFMUs (a study worker's), made on first use and closed when the
-    process exits (atexit; a worker killed outright leaves its folder to
-    tempdirs.remove_stale_folders)."""
+    process exits: atexit (a Dask worker process, started by spawn, exits through it), and
+    multiprocessing's exit finalizers for a process it forked (which ends with os._exit,
+    skipping atexit). A worker killed outright leaves its folder to tempdirs.remove_stale_folders."""
     global _PROCESS
     with _PROCESS_LOCK:
         if _PROCESS is None or _PROCESS.closed:
             import atexit
+            from multiprocessing import util
             _PROCESS = LoadedFMUs()
             atexit.register(_PROCESS.close)
+            util.Finalize(_PROCESS, _PROCESS.close, exitpriority=10)
         return _PROCESS
 
 
