@@ -34,6 +34,27 @@ from .tempdirs import make_folder
 from .units import Unit
 
 
+# fmpy's logger proxy (it formats the FMI 2.0 logger's variadic arguments, which ctypes cannot
+# take) keeps one Python logger for the whole process: the last one given to addLoggerProxy. So
+# every system gives it the same logger, which is never freed, and tells it apart by the
+# componentEnvironment its instances pass back (a key of _SYSTEMS).
+_SYSTEMS: dict = {}  # componentEnvironment -> weak reference to its LoadedSystem
+_SYSTEMS_LOCK = threading.Lock()
+_NEXT_ID = 0
+
+
+def _dispatch(env, instance, status, category, message):
+    ref = _SYSTEMS.get(env)
+    system = ref() if ref is not None else None
+    if system is not None:
+        system._log(env, instance, status, category, message)
+
+
+_LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
+_ALLOCATE = fmi2CallbackAllocateMemoryTYPE(calloc)
+_FREE = fmi2CallbackFreeMemoryTYPE(free)
+
+
 class LoadedSystem:
     """The FMUs of the SSP file ``ssp_path`` extracted into a new temporary folder (:attr:`tmp`)
     and loaded, one :class:`Unit` per element (:attr:`units`, in the SSD's order; none
@@ -66,9 +87,15 @@ class LoadedSystem:
         self.fmus = extract_fmus(self.ssp_path, members, self.elements, self.tmp / "ssp", budget)
         # one callback table per system: an FMI 2.0 instance may keep its pointer until it is freed
         self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self.callbacks.logger = _LOGGER
+        self.callbacks.allocateMemory = _ALLOCATE
+        self.callbacks.freeMemory = _FREE
+        with _SYSTEMS_LOCK:
+            global _NEXT_ID
+            _NEXT_ID += 1
+            self._id = _NEXT_ID
+            _SYSTEMS[self._id] = weakref.ref(self)
+        self.callbacks.componentEnvironment = self._id  # the logger finds this system by it
         from fmpy.logging import addLoggerProxy
         addLoggerProxy(byref(self.callbacks))
         for name in self.elements:
@@ -134,6 +161,8 @@ class LoadedSystem:
         for unit in self.units.values():
             _free(unit)
         self.units = {}
+        with _SYSTEMS_LOCK:
+            _SYSTEMS.pop(getattr(self, "_id", None), None)
         if self.tmp is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
             self.tmp = None

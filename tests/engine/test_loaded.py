@@ -241,3 +241,19 @@ def test_an_instance_whose_reset_fails_is_replaced_by_a_new_one(native_built, tm
     assert cached["after_second"] == {"loaded": 1, "reused": 1, "reset": 4, "replaced": 2}
     # the second case ran on a new trajectory instance, logged no error and gave a fresh run's rows
     assert cached["errors"] == [] and cached["rows"] == out["fresh"]["rows"] * 2
+
+
+def test_an_fmu_kept_loaded_logs_into_its_own_run_after_other_runs_came_and_went(faulty_ssps):
+    import gc
+    ssp, sc = faulty_ssps["error_log"], paper_scenario(0.05)  # the plant logs an error from t = 0.5 ms on
+    loaded = LoadedFMUs()
+    try:
+        run(ssp, sc.parameters(), sc, loaded, steps=4)  # kept, reset
+        for _ in range(3):  # runs on FMUs of their own, loaded and freed
+            run(ssp, sc.parameters(), sc, steps=4)
+        gc.collect()
+        with pytest.raises(CoSimulationError, match="encoder lost at t = 0.0005 s") as info:
+            run(ssp, sc.parameters(), sc, loaded)
+        assert loaded.counts["reused"] == 1 and any("encoder lost" in m for m in info.value.log)
+    finally:
+        loaded.close()
