@@ -10,8 +10,10 @@ the folder removed).
 worker runs one SSP case after case): when a co-simulation ends, every instance is reset
 (``fmi2Reset`` / ``fmi3Reset``), which returns it to the state right after instantiation, so
 the next co-simulation applies its parameters to it exactly as to a new instance. An instance
-whose reset fails (an exception, a status above Warning, or an error it logs) is freed and its
-FMU loaded again from the extracted folder, and the next co-simulation instantiates it anew.
+whose reset fails (an exception, a status above Warning, or an error it logs) is freed (after
+Fatal it is left alone: FMI allows no further call) and its FMU loaded again from the extracted
+folder, and the next co-simulation instantiates it anew. The reset runs when a co-simulation has
+ended, so no co-simulation runs on an instance whose reset failed.
 Systems are keyed by the SHA-256 of the SSP file and the event mode they were instantiated in.
 """
 
@@ -44,10 +46,17 @@ _NEXT_ID = 0
 
 
 def _dispatch(env, instance, status, category, message):
+    """The FMI 2.0 logger of every system: to the system whose componentEnvironment ``env`` is; an
+    FMU that passes back another pointer than it was given logs to every system that is running."""
     ref = _SYSTEMS.get(env)
     system = ref() if ref is not None else None
     if system is not None:
         system._log(env, instance, status, category, message)
+        return
+    for ref in list(_SYSTEMS.values()):
+        system = ref()
+        if system is not None and system.target is not None:
+            system._log(env, instance, status, category, message)
 
 
 _LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
@@ -80,6 +89,7 @@ class LoadedSystem:
             raise
 
     def _load(self, budget: ExtractBudget) -> None:
+        global _NEXT_ID
         self.ssd, members = read_ssp(self.ssp_path, budget)
         self.elements = check_elements(self.ssp_path, self.ssd.system.elements, members)  # before extracting
         self.tmp = make_folder()
@@ -91,7 +101,6 @@ class LoadedSystem:
         self.callbacks.allocateMemory = _ALLOCATE
         self.callbacks.freeMemory = _FREE
         with _SYSTEMS_LOCK:
-            global _NEXT_ID
             _NEXT_ID += 1
             self._id = _NEXT_ID
             _SYSTEMS[self._id] = weakref.ref(self)
@@ -208,6 +217,8 @@ class LoadedFMUs:
         sha = self._hashes.get(stamp)
         if sha is None:
             sha = hashlib.sha256(Path(ssp_path).read_bytes()).hexdigest()
+            if len(self._hashes) >= 64:
+                self._hashes.clear()
             self._hashes[stamp] = sha
         return sha, bool(event_mode)
 
@@ -235,10 +246,16 @@ class LoadedFMUs:
     def give(self, system: LoadedSystem) -> None:
         """Take back ``system`` after its co-simulation: its instances reset (those that fail
         replaced) and kept for the next co-simulation of its SSP, or closed if the cache is full
-        or closed."""
+        or closed. Never raises for the next co-simulation's sake (the one that ended keeps its
+        outcome): a system whose FMU cannot be loaded again is closed."""
+        n_reset = sum(u.instantiated for u in system.units.values())
         try:
-            n_reset = sum(u.instantiated for u in system.units.values())
             replaced = system.reset()
+        except Exception:  # an FMU that cannot be loaded again: the next co-simulation loads them all
+            system.close()
+            with self._lock:
+                self.counts["replaced"] += n_reset
+            return
         except BaseException:
             system.close()
             raise
@@ -246,12 +263,12 @@ class LoadedFMUs:
         with self._lock:
             self.counts["reset"] += n_reset - replaced
             self.counts["replaced"] += replaced
-            idle = self._idle.setdefault(system.key, [])
+            idle = self._idle.get(system.key, [])
             if self.closed or len(idle) >= self.per_key:
                 surplus.append(system)
             else:
-                idle.append(system)
-                self._idle[system.key] = self._idle.pop(system.key)  # most recently used last
+                self._idle.pop(system.key, None)
+                self._idle[system.key] = idle + [system]  # most recently used last
             while len(self._idle) > self.keys:
                 surplus += self._idle.pop(next(iter(self._idle)))
         for s in surplus:
