@@ -39,8 +39,8 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     start = time.perf_counter()
     sys.path.insert(0, str(ROOT))
     from orchestrator import cli
-    from orchestrator.experiments import compare, plots, pool
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool import compare, plots, pool
+    from orchestrator.tool.scenario import load
     times = {"imports": time.perf_counter() - start}
     during = [False]  # inside run_many: figures drawn there are taken out of the runs' time
 
@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     jobs = ["--jobs", args.jobs] if args.jobs else []
     if args.stages:
         sys.path.insert(0, str(ROOT))
-        from orchestrator.experiments.pool import parse_jobs
+        from orchestrator.tool.pool import parse_jobs
         stages(args.scenario, parse_jobs(args.jobs), args.stop_time, args.ssp)
         return 0
     best = {"tapmp run": float("inf"), "tapmp compare": float("inf"), "tapmp compare --no-figures": float("inf")}

@@ -40,9 +40,9 @@ import numpy as np  # noqa: E402
 
 from orchestrator.engine import build  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.results import run_scenario  # noqa: E402
-from orchestrator.experiments.scenario import load  # noqa: E402
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.results import run_scenario  # noqa: E402
+from orchestrator.tool.scenario import load  # noqa: E402
 from orchestrator.engine.ssp import write_ssp  # noqa: E402
 from tapmp.closed_loop import simulate  # noqa: E402
 from tapmp.interface import FMU_NAMES  # noqa: E402

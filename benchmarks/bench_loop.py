@@ -8,7 +8,7 @@ repository root:
 
 Prints the wall time and microseconds per step of each loop, whether their rows are the same
 doubles, and the ratio Python / C. `tapmp reproduce` runs these loops for its paper-gain table
-(orchestrator.experiments.paper_gains), 0.5 s per run at 1 us, 10 us and 0.1 ms.
+(orchestrator.paper.paper_gains), 0.5 s per run at 1 us, 10 us and 0.1 ms.
 """
 
 import argparse
@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from orchestrator.experiments.paper_gains import CASES, LAWS, paper_scenario  # noqa: E402
+from orchestrator.paper.paper_gains import CASES, LAWS, paper_scenario  # noqa: E402
 from tapmp.closed_loop import COLUMNS, run, simulate  # noqa: E402
 
 SIMULATE_COLUMNS = [i for i, c in enumerate(COLUMNS) if not c.startswith("q_d")]

@@ -30,9 +30,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from orchestrator.engine.master import CoSimulation  # noqa: E402
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.envelope import envelope  # noqa: E402
-from orchestrator.experiments.scenario import load  # noqa: E402
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.envelope import envelope  # noqa: E402
+from orchestrator.tool.scenario import load  # noqa: E402
 
 INTEGER_PARAMETERS = {"law", "velocity_source", "substeps"}
 

@@ -33,10 +33,10 @@ import numpy as np  # noqa: E402
 from orchestrator.cli import main  # noqa: E402
 from orchestrator.engine.families import resolve_ssp  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.envelope import envelope  # noqa: E402
-from orchestrator.experiments.results import BLOCK  # noqa: E402
-from orchestrator.experiments.scenario import load  # noqa: E402
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.envelope import envelope  # noqa: E402
+from orchestrator.tool.results import BLOCK  # noqa: E402
+from orchestrator.tool.scenario import load  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_simulation.toml"
 

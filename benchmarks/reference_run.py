@@ -15,8 +15,8 @@ sys.path.insert(0, str(ROOT))
 
 from orchestrator.engine.build import build_all  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.scenario import load  # noqa: E402
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.scenario import load  # noqa: E402
 
 REFERENCE = ROOT / "tests" / "data" / "reference_run.csv"
 CASES = (("sc-dc", "gauss-seidel"), ("apd-dc", "gauss-seidel"), ("sc-dc", "jacobi"))

@@ -1,4 +1,4 @@
-"""Python side of the FMU binary's fmi2Instantiate (see fmu_common/native/python_model.c).
+"""Python side of the FMU binary's fmi2Instantiate (see fmu_common/pyfront/python_model.c).
 
 The binary has put the FMU's resources folder on sys.path; this loads the adapter script
 that ``pythonfmu build`` recorded in ``resources/slavemodule.txt`` and creates its class.

@@ -7,7 +7,7 @@ the parameters), ``step``, ``hidden_state`` and ``restore_hidden_state``.
 pythonfmu's ``Fmi2Slave`` is the base class so that ``pythonfmu build`` writes the
 modelDescription. At run time the FMU's binary is the native FMUs' runtime
 (``fmu_common/c``: the FMI state machine, statuses, messages and FMU states) with model
-operations that call the ``fmi2_*`` methods below (``fmu_common/native/python_model.c``).
+operations that call the ``fmi2_*`` methods below (``fmu_common/pyfront/python_model.c``).
 Every variable's value lives in the runtime's instance; before each call it is copied
 into one of two arrays indexed by value reference, ``reals`` (float64) and ``ints``
 (int32), and the outputs are copied back from ``reals``. The adapters see the same values
@@ -25,7 +25,7 @@ from array import array
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 
-from tapmp import native
+from tapmp import cmodel
 from tapmp.errors import ModelInputError
 from tapmp.interface import DEFAULT_EXPERIMENT
 
@@ -57,7 +57,7 @@ def require_state(check: str, *args) -> None:
     """Run one of the C model's checks of an FMU state's hidden values (tapmp_plant_state_check,
     tapmp_controller_state_check) on ``args``; ModelInputError naming the first offender with
     the value the check saw, as the native FMUs report it."""
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     name, value, allowed = ffi.new("const char **"), ffi.new("double *"), ffi.new("const char **")
     if getattr(lib, check)(*args, name, value, allowed):
         raise ModelInputError(ffi.string(name[0]).decode(), value[0], ffi.string(allowed[0]).decode())

@@ -2,7 +2,7 @@
 tapmp.control.ControllerModel."""
 
 from fmu_common.slave import WARNING, TapmpSlave, as_float, is_number, require_state
-from tapmp import native
+from tapmp import cmodel
 from tapmp.control import ControllerModel, Gains, ModalGains
 from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER_VARS
@@ -51,7 +51,7 @@ class TAPMP_Controller(TapmpSlave):
                                   "null), [t0, k_last (a number or null), warned (true or false)]]")
         integral, q_prev, (t0, k_last, warned) = hidden
         m = self._build()  # the settings as the C structs the check reads
-        ffi, _ = native.load()
+        ffi, _ = cmodel.load()
         st = ffi.new("tapmp_controller_state *", {"integral": [as_float(v) for v in integral],
                                                    "q_prev": [as_float(v) for v in q_prev or (0, 0, 0)],
                                                    "has_q_prev": q_prev is not None})

@@ -1,7 +1,7 @@
 """FMI adapter of the reference trajectory: maps FMU variables to tapmp.trajectory."""
 
 from fmu_common.slave import TapmpSlave
-from tapmp import native
+from tapmp import cmodel
 from tapmp.interface import TRAJECTORY, TRAJECTORY_VARS
 from tapmp.kinematics import inverse
 from tapmp.trajectory import TrajectoryParams, reference
@@ -23,7 +23,7 @@ class TAPMP_Trajectory(TapmpSlave):
 
     def setup_model(self):
         self.params = TrajectoryParams(*(getattr(self, n) for n in TrajectoryParams._fields))
-        native.check_settings(TRAJECTORY, {**self.params._asdict(), "L_1": self.L_1})
+        cmodel.check_settings(TRAJECTORY, {**self.params._asdict(), "L_1": self.L_1})
         self.publish(self.time)
 
     def step(self, t, h):

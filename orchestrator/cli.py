@@ -26,21 +26,21 @@ def user_errors() -> tuple:
     or build that failed for a reason it names, and OSError (a file or folder the user named, a full
     disk, a scheduler address). Every other exception is a programming error and shows its traceback."""
     from tapmp.errors import ModelInputError
-    from tapmp.native import NativeModelError
+    from tapmp.cmodel import CModelError
     from tapmp.toolchain import CacheTrustError
     from .engine.build import BuildError
     from .engine.build_native import NativeBuildError
     from .engine.master import CoSimulationError
     from .engine.schedule import ScheduleError
     from .engine.ssd import ParameterAddressError
-    from .experiments.export import ExportError
-    from .experiments.folders import OutputExistsError, OutputInUseError, ResultsWriteError
-    from .experiments.reading import ResultFolderError
-    from .experiments.scenario import ScenarioError
-    from .studies.study import StudyError
+    from .tool.export import ExportError
+    from .tool.folders import OutputExistsError, OutputInUseError, ResultsWriteError
+    from .tool.reading import ResultFolderError
+    from .tool.scenario import ScenarioError
+    from .studies.study_file import StudyError
     return (UsageError, ScenarioError, StudyError, ExportError, ScheduleError, ParameterAddressError,
             ModelInputError, ResultFolderError, CoSimulationError, OutputExistsError, OutputInUseError,
-            ResultsWriteError, BuildError, NativeBuildError, NativeModelError, CacheTrustError, OSError)
+            ResultsWriteError, BuildError, NativeBuildError, CModelError, CacheTrustError, OSError)
 
 
 def __getattr__(name):
@@ -58,7 +58,7 @@ def _family(value: str) -> str:
     return value
 
 
-# The result file formats (experiments.scenario.RESULT_FORMATS, which loads pydantic and numpy;
+# The result file formats (tool.scenario.RESULT_FORMATS, which loads pydantic and numpy;
 # tests/cli/test_cli_parser.py checks the two agree).
 RESULT_FORMATS = ("csv", "mat")
 
@@ -112,8 +112,8 @@ def study_file(name: str) -> str:
 
 
 def _run_one(scenario, ssp, out, overwrite, progress, label):
-    from .experiments.progress import progress_bar
-    from .experiments.results import run_scenario
+    from .tool.progress import progress_bar
+    from .tool.results import run_scenario
     update, close = progress_bar(label, progress)
     try:
         return run_scenario(scenario, ssp, out, overwrite, update)
@@ -139,13 +139,13 @@ def _recording(args, scenario):
 
 def _load(args):
     """The scenario of a run/compare command: the file, its --set overrides, --format and --record-every."""
-    from .experiments.scenario import load
+    from .tool.scenario import load
     return _recording(args, load(scenario_file(args.scenario), args.set))
 
 
 def record_every(value) -> int:
     """--record-every checked: an integer from 1 to MAX_INT (the scenario key's bound)."""
-    from .experiments.scenario import MAX_INT
+    from .tool.scenario import MAX_INT
     try:
         n = int(value)
     except ValueError:
@@ -164,7 +164,7 @@ def result_base(scenario) -> Path:
 
 def warn_if_implausible(scenario) -> None:
     """One warning line on stderr per parameter far outside this machine's usual range."""
-    from .experiments.plausibility import implausible
+    from .tool.plausibility import implausible
     for line in implausible(scenario):
         print(f"warning: {line}", file=sys.stderr, flush=True)
 
@@ -202,14 +202,14 @@ def cmd_build(args) -> int:
 
 def cache_sources() -> list[Path]:
     """The C sources of the libraries tapmp compiles into its cache (the C model, the stepping core)."""
-    from tapmp import native
+    from tapmp import cmodel
     from .engine import stepper
-    return [native.SOURCE, native.HEADER, stepper.SOURCE]
+    return [cmodel.SOURCE, cmodel.HEADER, stepper.SOURCE]
 
 
 def warn_if_unstable(scenario) -> None:
     """One line on stderr if the stability pre-check finds the scenario's loop unstable."""
-    from .experiments.stability import check, radius_text
+    from .tool.stability import check, radius_text
     report = check(scenario)
     if not report.stable:
         print(f"warning: {scenario.name}: the sampled closed loop is {report.verdict} (spectral radius "
@@ -218,8 +218,8 @@ def warn_if_unstable(scenario) -> None:
 
 
 def cmd_check(args) -> int:
-    from .experiments.scenario import load
-    from .experiments.stability import check
+    from .tool.scenario import load
+    from .tool.stability import check
     if args.fmus is not None:
         raise UsageError(f"--fmus = {args.fmus!r} is not an option of check: the check linearizes the FMI-free model, "
                          "which every FMU family reproduces bit for bit, so its verdict is the same for all "
@@ -234,12 +234,12 @@ def cmd_check(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    from .experiments.analysis import analyze, pole_table, robustness_table, table
-    from .experiments.scenario import load
-    from .experiments.stability import verdict_for
+    from .tool.analysis import analyze, pole_table, robustness_table, table
+    from .tool.scenario import load
+    from .tool.stability import verdict_for
     scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
-    from .experiments.baselines import compare_runs
+    from .tool.baselines import compare_runs
     for key, v in (("--delay", args.delay), ("--actuator-bandwidth", args.actuator_bandwidth)):
         if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
             raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
@@ -253,7 +253,7 @@ def cmd_analyze(args) -> int:
           "a delay in one loop, a first-order actuator on every motor")
     print(robustness_table(result))
     if args.delay or args.actuator_bandwidth is not None:
-        from .experiments.analysis import inserted_radius
+        from .tool.analysis import inserted_radius
         what = " and ".join(x for x in (f"a delay of {args.delay:g} s on every motor's force" if args.delay else "",
                                         f"a first-order actuator of {args.actuator_bandwidth:g} Hz on every motor"
                                         if args.actuator_bandwidth is not None else "") if x)
@@ -271,7 +271,7 @@ def cmd_run(args) -> int:
     warn_if_implausible(scenario)
     warn_if_unstable(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / scenario.law
-    from .experiments.estimate import check_output_size
+    from .tool.estimate import check_output_size
     check_output_size([scenario], out, scenario.name)
     m = _run_one(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
@@ -301,7 +301,7 @@ def mode_means(m: dict) -> list[float]:
 
 def move_lines(results: dict, channels=("X", "Z", "B", "q1", "q2", "q3")) -> list[str]:
     """A point-to-point run's move metrics ({run: metrics} with a "move" entry, see
-    experiments.metrics.MoveMetrics), one line per run and moving channel of ``channels``: rise
+    tool.metrics.MoveMetrics), one line per run and moving channel of ``channels``: rise
     time [ms], overshoot [um, urad for B], settling time into each band [ms after the reference
     stops]; [] if no run has them."""
     lines = []
@@ -327,42 +327,27 @@ def move_lines(results: dict, channels=("X", "Z", "B", "q1", "q2", "q3")) -> lis
 
 def compare_runs(scenario):
     """The runs of `tapmp compare` ({folder name: Scenario}): SC-DC, APD-DC (Eq. 41) and the fair
-    baselines and ablations of orchestrator.experiments.baselines."""
-    from .experiments.baselines import compare_runs as runs
+    baselines and ablations of orchestrator.tool.baselines."""
+    from .tool.baselines import compare_runs as runs
     return runs(scenario)
 
 
-def summary_rows(results: dict) -> list[tuple]:
-    """(run, mean tracking MAE [um], mean sync MAE [um], tracking and sync reduction [%] against
-    APD-DC) per run of a comparison ({run: metrics}); the means over the three motors."""
-    from .experiments.report import reduction
-
-    def mean(v):
-        return sum(v) / len(v)
-    base = results.get("apd-dc")
-    rows = []
-    for name, m in results.items():
-        t, y = mean(m["tracking_mae_um"]), mean(m["sync_mae_um"])
-        rt = reduction(mean(base["tracking_mae_um"]), t) if base else float("nan")
-        ry = reduction(mean(base["sync_mae_um"]), y) if base else float("nan")
-        rows.append((name, t, y, rt, ry))
-    return rows
-
-
-def summary_table(results: dict) -> str:
-    """The short table `tapmp compare` prints: one row per run (see summary_rows), its force effort
-    and the steady (mean) tracking error on each mode (mode_means)."""
-    rows = summary_rows(results)
+def summary_text(results: dict) -> str:
+    """The short table `tapmp compare` prints: one row per run (orchestrator.tool.report.summary_rows:
+    SC-DC's reduction against each run), its force effort and the steady (mean) tracking error on
+    each mode (mode_means)."""
+    from .tool.report import summary_rows
+    rows = [(name, t, y, rt, ry) for name, _, t, y, rt, ry in summary_rows(results)]
     w = max(len("run"), *(len(r[0]) for r in rows))
     hz = next((m["force_rms_above_hz"] for m in results.values() if "force_rms_above_hz" in m), 0.0)
     head = f"F RMS > {hz:g} Hz [N]"
-    lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'vs APD-DC: tracking':>19}  "
+    lines = [f"{'run':<{w}}  {'tracking MAE [um]':>17}  {'sync MAE [um]':>13}  {'SC-DC vs it: tracking':>21}  "
              f"{'sync':>8}  {head:>19}  {'mean: common':>12}  {'diff. Z':>8}  {'diff. B':>8} [um]"]
     for name, t, y, rt, ry in rows:
         f = results[name].get("force_hf_rms_n")
         effort = f"{sum(f) / len(f):.4g}" if f else "n/a"  # the mean over the motors
         means = mode_means(results[name]) if "tracking_mean_um" in results[name] else [float("nan")] * 3
-        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+18.1f}%  {ry:>+7.1f}%  {effort:>19}  "
+        lines.append(f"{name:<{w}}  {t:>17.4f}  {y:>13.4f}  {rt:>+20.1f}%  {ry:>+7.1f}%  {effort:>19}  "
                      f"{means[0]:>+12.4f}  {means[1]:>+8.4f}  {means[2]:>+8.4f}")
     return "\n".join(lines)
 
@@ -380,7 +365,7 @@ def _check_workers(workers: int) -> None:
 
 def _jobs(args) -> int:
     """--jobs checked: a positive integer up to the cores (default: one per core)."""
-    from .experiments.pool import parse_jobs
+    from .tool.pool import parse_jobs
     return parse_jobs(args.jobs)
 
 
@@ -394,14 +379,17 @@ def cmd_compare(args) -> int:
     if show and args.no_figures:
         raise UsageError("--runs chooses the runs the figures show: it cannot go with --no-figures")
     if show:  # before any run starts
-        from .experiments.plots import select_runs
+        from .tool.plots import select_runs
         select_runs(out, list(compare_runs(scenario)), show)
-    from .experiments.compare import run_comparison
+    from .paper.paper_tables import reference_rows
+    from .tool.compare import run_comparison
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show, not args.no_figures)
-    print(f"{scenario.name}: mean over the three motors; reduction against APD-DC (Eq. 41), positive = smaller error")
+                                      command, jobs, show, not args.no_figures,
+                                      reference=reference_rows(scenario.name))
+    print(f"{scenario.name}: mean over the three motors; SC-DC's reduction against each run, positive = SC-DC has "
+          "the smaller error")
     print("mean: the steady tracking error per mode, e = common (1,1,1) + diff. Z (1,0,-1) + diff. B (1,-2,1)")
-    print(summary_table(results))
+    print(summary_text(results))
     for line in move_lines(results, ("X", "Z", "B")):  # the motors' too in each run's metrics.json
         print(line)
     print(f"results{'' if args.no_figures else ', figures'} and the full tables (comparison.md) in {out}")
@@ -410,12 +398,12 @@ def cmd_compare(args) -> int:
 
 @contextmanager
 def heartbeat(tell=None, every: float = 10.0):
-    """A ``tell(line)`` (default: experiments.progress.say, a line on stderr) for the duration that
+    """A ``tell(line)`` (default: tool.progress.say, a line on stderr) for the duration that
     also repeats the last line with the seconds since it whenever ``every`` seconds pass without
     one, so a long phase is never silent."""
     import time
     if tell is None:
-        from .experiments.progress import say as tell
+        from .tool.progress import say as tell
     last = {"line": None, "since": time.monotonic(), "beat": time.monotonic()}
     lock, done = threading.Lock(), threading.Event()
 
@@ -446,7 +434,7 @@ def check_reproduce_may_replace(folder: Path, overwrite: bool) -> None:
     """OutputExistsError (one line) if ``folder`` holds a completed comparison that `tapmp reproduce`
     did not write (comparison.json's written_by), unless ``overwrite``; reproduce replaces its own."""
     import json
-    from .experiments.folders import COMPARISON_JSON, OutputExistsError, folder_completed, marked_kind
+    from .tool.folders import COMPARISON_JSON, OutputExistsError, folder_completed, marked_kind
     if overwrite or marked_kind(folder) != "comparison" or not folder_completed(folder):
         return
     try:
@@ -460,9 +448,9 @@ def check_reproduce_may_replace(folder: Path, overwrite: bool) -> None:
 
 
 def cmd_reproduce(args) -> int:
-    from .experiments.estimate import check_output_size
-    from .experiments.reproduction import reproduce
-    from .experiments.scenario import load
+    from .tool.estimate import check_output_size
+    from .paper.reproduction import reproduce
+    from .tool.scenario import load
     command = args.command_line
     jobs = _jobs(args)
 
@@ -476,7 +464,7 @@ def cmd_reproduce(args) -> int:
         raise UsageError(f"--out = {str(page)!r} is invalid: allowed is a Markdown file ending in .md")
     if args.record_every is not None:
         record_every(args.record_every)
-    from .experiments.reproduction import SCENARIOS
+    from .paper.reproduction import SCENARIOS
     files = [Path(args.scenarios) / f"{name}{suffix}.toml" for suffix in ("", "_calibrated") for name in SCENARIOS]
     for f in files[:len(SCENARIOS)]:
         if not f.is_file():
@@ -509,9 +497,9 @@ def cmd_study(args) -> int:
     """`tapmp study`: 0 if every case ran (completed, diverged or rejected), 1 if any failed (an error)."""
     from .studies.run import run_study
     from .engine.tempdirs import remove_stale_folders
-    from .experiments.estimate import check_output_size
-    from .experiments.folders import output_lock
-    from .experiments.progress import say
+    from .tool.estimate import check_output_size
+    from .tool.folders import output_lock
+    from .tool.progress import say
     from .studies.study import MAX_CASES, StudyError, check_case_count, close_client, load_study, open_client
     study = load_study(study_file(args.study))
     every = record_every(args.record_every) if args.record_every is not None else None
@@ -579,8 +567,8 @@ def cmd_study(args) -> int:
 
 def cmd_export(args) -> int:
     """`tapmp export`: the scenario's SSP with its parameter set, and the container's start values."""
-    from .experiments.export import export
-    from .experiments.scenario import load
+    from .tool.export import export
+    from .tool.scenario import load
     scenario = load(scenario_file(args.scenario), args.set)
     source = _ssp(args, scenario)
     ssp, values = export(scenario, source, Path(args.out), args.overwrite)
@@ -599,7 +587,7 @@ def _names(text) -> list | None:
 
 
 def cmd_plot(args) -> int:
-    from .experiments.plots import parse_window, plot_runs
+    from .tool.plots import parse_window, plot_runs
     window = parse_window(args.window)
     written = plot_runs(args.result_dir, args.label, _names(args.signals), window,
                         Path(args.out) if args.out else None, args.svg, args.allow_different_horizons,
@@ -640,6 +628,90 @@ def scenario_arg(sp, example: str) -> None:
                     f"scenario shipped with the package: {', '.join(shipped_names('scenarios'))}")
     sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help=f"override a scenario value, e.g. {example}")
+
+
+def _choices(option: str, values: list, allowed) -> tuple:
+    """``values`` of a repeatable option, each one of ``allowed``; else the one-line refusal."""
+    from tapmp.errors import allowed_are
+    for v in values:
+        if v not in allowed:
+            raise UsageError(f"{option} = {v!r} is invalid: {allowed_are(v, list(allowed))}")
+    return tuple(values)
+
+
+def cmd_paper_gains(args) -> int:
+    """`tapmp paper-gains`: the paper's gains (Eq. 40-43) at fine steps in the plain loop; the table
+    on stdout (progress on stderr), the rows also to --json."""
+    from .paper.paper_gains import CASES, LAWS, PLANTS, READINGS, paper_gains_table, run_paper_gains
+    cases = _choices("--cases", args.cases or list(CASES), CASES)
+    laws = _choices("--laws", args.laws or list(LAWS), LAWS)
+    readings = _choices("--readings", args.readings or list(READINGS), READINGS)
+    plants = _choices("--plants", args.plants or list(PLANTS), PLANTS)
+    steps = tuple(args.steps or (1e-6, 1e-5, 1e-4))
+    if args.workers < 1:
+        raise UsageError(f"--workers = {args.workers} is invalid: allowed is an integer >= 1")
+
+    def progress(done, total, row):  # on stderr, so that stdout stays the table
+        print(f"run {done}/{total}: {row['case']} gains, {row['plant']} plant, reading {row['reading']}, "
+              f"{row['law'].upper()}, step {row['step'] * 1e6:g} us, {row['stop_time']:g} s: {row['status']} "
+              f"({row['wall_s']:.1f} s)", file=sys.stderr, flush=True)
+
+    n = len(cases) * len(plants) * len(readings) * len(laws) * len(steps)
+    print(f"running the paper's gains in the plain loop: {n} runs of {args.stop_time:g} s on {args.workers} "
+          f"process(es); the table follows", file=sys.stderr, flush=True)
+    try:
+        rows = run_paper_gains(steps=steps, stop_time=args.stop_time, readings=readings, cases=cases, laws=laws,
+                               plants=plants, workers=args.workers, progress=progress)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print(paper_gains_table(rows))
+    if args.json:
+        import json
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    """`tapmp calibrate`: fit the plant on the paper's APD-DC rows, predict SC-DC, write the
+    calibrated scenario."""
+    import math
+    if args.horizon is not None and not (math.isfinite(args.horizon) and args.horizon > 0.0):
+        raise UsageError(f"--horizon = {args.horizon!r} is invalid: allowed is a number > 0 [s]")
+    if args.max_nfev < 1:
+        raise UsageError(f"--max-nfev = {args.max_nfev!r} is invalid: allowed is an integer >= 1")
+    from .paper.calibration import calibrate_and_predict, calibrated_file
+    ssp = _ssp(args)
+    work = Path(args.work or Path("results") / "calibration" / args.target)
+    write_to = None if args.no_write else Path(args.write_to or work / calibrated_file(args.target).name)
+    try:
+        lines = calibrate_and_predict(args.target, ssp, work, args.horizon, args.max_nfev, write_to)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print("\n".join(lines))
+    return 0
+
+
+def cmd_null_models(args) -> int:
+    """`tapmp null-models`: the null models' scores on the paper's printed reductions."""
+    from .paper.null_models import null_model_table
+    print(null_model_table())
+    return 0
+
+
+def cmd_theorem1(args) -> int:
+    """`tapmp theorem1`: the counterexample's eigenvalues for both laws and Eq. 31 on a random state."""
+    from .paper.theorem1 import summary_lines
+    print("\n".join(summary_lines()))
+    return 0
+
+
+def cmd_modal(args) -> int:
+    """`tapmp modal [PRESET ...]`: the laws' modal gains of gain presets (tapmp.modal.modal_table)."""
+    from tapmp.modal import modal_table
+    from tapmp.params import GAIN_PRESETS
+    names = _choices("preset", args.presets or ["default", "paper_simulation", "paper_experiment"], GAIN_PRESETS)
+    print(modal_table(list(names)))
+    return 0
 
 
 class Parser(argparse.ArgumentParser):
@@ -753,7 +825,7 @@ def parser() -> argparse.ArgumentParser:
     c = sub.add_parser("compare", help="run a scenario with SC-DC, APD-DC and fair baselines",
                        description="Run the scenario with SC-DC, APD-DC (Eq. 41), APD-DC with SC-DC's common-mode "
                        "and differential-mode stiffness, the mode-matched PD and PID (PID-DC) and the SC-DC "
-                       "ablations b = 0 and Lambda_p = 0 (orchestrator/experiments/baselines.py); write "
+                       "ablations b = 0 and Lambda_p = 0 (orchestrator/tool/baselines.py); write "
                        "comparison.md (the full tables) and figures and print one summary row per run. Output folder by default "
                        "<output>/compare, e.g. results/paper_simulation/compare (one subfolder per run).",
                        epilog=PATHS_HELP)
@@ -851,6 +923,47 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--allow-different-horizons", action="store_true",
                     help="overlay runs of different start time, stop time or step")
     pl.set_defaults(func=cmd_plot)
+
+    # The paper study's own commands (orchestrator/paper): what docs/paper-*.md, calibration.md and
+    # theorem1.md print
+    pg = sub.add_parser("paper-gains", help="run the paper's gains (Eq. 40-43) at fine steps in the plain loop",
+                        description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop and print "
+                        "the table (docs/paper-gains.md).")
+    pg.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s] (default 0.5)")
+    pg.add_argument("--steps", type=float, nargs="+", help="steps [s] (default 1e-6 1e-5 1e-4)")
+    pg.add_argument("--cases", nargs="+", help="gain sets: 'Eq. 40-41', 'Eq. 42-43' (default both)")
+    pg.add_argument("--laws", nargs="+", help="sc-dc, apd-dc (default both)")
+    pg.add_argument("--readings", nargs="+", help="readings of the units: A, B (default both)")
+    pg.add_argument("--plants", nargs="+", help="encoder, exact (default both)")
+    pg.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    pg.add_argument("--json", help="also write the rows to this JSON file")
+    pg.set_defaults(func=cmd_paper_gains)
+    ca = sub.add_parser("calibrate", help="calibrate the plant on the paper's APD-DC rows, predict SC-DC",
+                        description="Calibrate the plant on APD-DC (the paper's Tables 1-2 or 4-5), predict SC-DC "
+                        "and write the calibrated scenario (docs/calibration.md).")
+    ca.add_argument("--target", required=True, choices=("simulation", "experiment"))
+    fmu_args(ca)
+    ca.add_argument("--work", help="folder for the runs (default results/calibration/<target>)")
+    ca.add_argument("--horizon", type=float, help="fit horizon [s] (default: one period of the slowest reference)")
+    ca.add_argument("--max-nfev", type=int, default=25, help="least_squares iterations budget (default 25)")
+    ca.add_argument("--no-write", action="store_true", help="do not write the calibrated scenario file")
+    ca.add_argument("--write-to", metavar="FILE", help="calibrated scenario file to write (default: "
+                    "paper_<target>_calibrated.toml in the work folder; scenarios/paper_<target>_calibrated.toml "
+                    "replaces the shipped one)")
+    ca.set_defaults(func=cmd_calibrate)
+    nm = sub.add_parser("null-models", help="score the null models on the paper's reductions (no simulation)",
+                        description="Print how the null models (constants, the gain ratio) score on the paper's "
+                        "printed reductions (docs/paper-reproduction.md).")
+    nm.set_defaults(func=cmd_null_models)
+    t1 = sub.add_parser("theorem1", help="Theorem 1's counterexample and Eq. 31 on a random state",
+                        description="Print the counterexample's eigenvalues for both laws and both sides of Eq. 31 "
+                        "on a random state (docs/theorem1.md).")
+    t1.set_defaults(func=cmd_theorem1)
+    mo = sub.add_parser("modal", help="the laws' modal gains of gain presets",
+                        description="Print the modal gains of SC-DC and APD-DC for gain presets (docs/modal-view.md).")
+    mo.add_argument("presets", nargs="*", metavar="PRESET", help="gain presets (default: default, "
+                    "paper_simulation, paper_experiment)")
+    mo.set_defaults(func=cmd_modal)
     return p
 
 
@@ -865,7 +978,7 @@ def _signals_interrupt():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    from .experiments.stops import STOP_SIGNALS, Interrupted, deliver_signal
+    from .tool.stops import STOP_SIGNALS, Interrupted, deliver_signal
     command = os.getpid()
 
     def interrupt(signum, frame):
@@ -891,7 +1004,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     args.command_line = "tapmp " + shlex.join(argv)  # what was typed, as comparison.md and study.json record it
     errors = user_errors()
-    from .experiments.results import one_line
+    from .tool.results import one_line
     try:
         with _signals_interrupt():
             return args.func(args)

@@ -4,7 +4,7 @@ Everything here follows Zhou, Gao, Zhang, "Synchronization Control with Dynamics
 Compensation for Three-Axis Parallel Motion Platform", Actuators 2024, 13, 166.
 Units are SI throughout (m, rad, kg, N, s). Equation numbers refer to the paper.
 The equations are computed by the C model tapmp/c/tapmp_model.c (loaded through cffi,
-tapmp.native), the code every FMU family runs; the Python modules write them readably.
+tapmp.cmodel), the code every FMU family runs; the Python modules write them readably.
 """
 
 __version__ = "0.1.0"

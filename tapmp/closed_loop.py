@@ -88,14 +88,14 @@ def run(plant: PlantModel, controller: ControllerModel, traj: TrajectoryParams,
     It may raise to stop the run (the models then hold the state after that block).
     """
     import numpy as np
-    from . import native
+    from . import cmodel
     if ordering not in ORDERINGS:
         raise ValueError(f"ordering = {ordering!r} is invalid: allowed are {', '.join(ORDERINGS)}")
     if not (isinstance(block, int) and block >= 1):
         raise ValueError(f"block = {block!r} is invalid: allowed is an integer >= 1")
     L1 = plant.p.L_1 if L1_ref is None else L1_ref
     gauss_seidel = ordering == "gauss-seidel"
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     ref = reference(t0, traj)
     q = plant.measured_positions()
     dq = plant.joint_velocities()

@@ -9,20 +9,18 @@ of Theorem 1), so F = u / K_T. Gains are per motor (diagonal matrices of the pap
 import math
 from typing import NamedTuple
 
-from . import native
-from .dynamics import generalized_force
+from . import cmodel
 from .errors import KinematicDomainError, ModelInputError, require_finite
-from .kinematics import forward, solve_transpose, task_velocity
 from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, SERVO_STEP, ModelParams, scdc_modal_image
 
 SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
 APDDC = 1  # law: augmented PD with dynamics compensation (Eq. 38)
-PIDDC = 2  # law: PID on e with modal gains and dynamics compensation (pid_command)
+PIDDC = 2  # law: PID on e with modal gains and dynamics compensation
 VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
 # A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s
 # (the C model's TAPMP_SAMPLE_TOLERANCE, which says why this width).
-SAMPLE_TOLERANCE = native.header_number("TAPMP_SAMPLE_TOLERANCE")
+SAMPLE_TOLERANCE = cmodel.header_number("TAPMP_SAMPLE_TOLERANCE")
 _INPUT_NAMES = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "ddB_d",
                 "q1", "q2", "q3", "dq1", "dq2", "dq3")
 
@@ -87,12 +85,7 @@ def _settings(values: dict):
     the settings table, the rest at their defaults; ModelInputError for the first setting outside
     its range (tapmp_controller_settings_check)."""
     from .interface import CONTROLLER
-    return native.check_settings(CONTROLLER, values)
-
-
-def sync_errors(e1: float, e2: float, e3: float) -> tuple[float, float, float]:
-    """Synchronization errors in adjacent order, Eq. 18 [m]. They sum to zero."""
-    return e1 - e2, e2 - e3, e3 - e1
+    return cmodel.check_settings(CONTROLLER, values)
 
 
 def sync_deviation(es1: float, es2: float, es3: float) -> tuple[float, float, float]:
@@ -100,65 +93,10 @@ def sync_deviation(es1: float, es2: float, es3: float) -> tuple[float, float, fl
     return es1 - es3, es2 - es1, es3 - es2
 
 
-def feedforward(q, dq, dx_d, ddx_d, p: ModelParams) -> tuple[float, float, float]:
-    """Dynamics compensation u_d of Eq. 26 / 39 [N].
-
-    u_d = J^-T(x) (M(x) xdd_d + C(x, xd) xd_d + G(x)) with x = FK(q) (Eq. 1) and
-    xd = J(x)^-1 dq from the measured motor positions q [m] and rates dq [m/s];
-    dx_d, ddx_d are the desired task rates and accelerations (X, Z, B).
-    """
-    L1 = p.L_1
-    _, _, B = forward(q[0], q[1], q[2], L1)
-    dB = task_velocity(B, dq[0], dq[1], dq[2], L1)[2]
-    gX, gZ, gB = generalized_force(B, dB, ddx_d[0], ddx_d[1], ddx_d[2], dx_d[2], p)
-    return solve_transpose(B, gX, gZ, gB, L1)
-
-
-def scdc_command(e, de, c, integral_c, u_d, g: Gains) -> tuple[float, float, float]:
-    """SC-DC command u of Eq. 22-25 (one value per motor).
-
-    e, de: tracking error [m] and its rate [m/s]; c: Eq. 21 [m]; integral_c: the
-    running integral of c [m s]; u_d: Eq. 26 [N].
-    """
-    u = [0.0, 0.0, 0.0]
-    for i in range(3):
-        b = g.b[i]
-        e_c = e[i] + b * integral_c[i]  # Eq. 22
-        de_c = de[i] + b * c[i]         # Eq. 23
-        n = de_c + g.D[i] * e_c         # Eq. 24
-        u[i] = g.K_T[i] * u_d[i] + g.Lambda_v[i] * n + g.Lambda_p[i] * c[i]  # Eq. 25
-    return u[0], u[1], u[2]
-
-
-def apd_command(e, de, u_d, g: Gains) -> tuple[float, float, float]:
-    """APD-DC command of Eq. 38 with k_v = Lambda_v, k_p = Lambda_p, K_T1 = K_T (Eq. 41)."""
-    return tuple(g.K_T[i] * u_d[i] + g.Lambda_v[i] * de[i] + g.Lambda_p[i] * e[i] for i in range(3))
-
-
-def _modal(k_c: float, k_d: float, x, i: int, mean: float) -> float:
-    """Row i of (k_c Pi_c + k_d Pi_d) x, with mean = (x1 + x2 + x3) / 3 (Pi_c x = mean 1)."""
-    return k_c * mean + k_d * (x[i] - mean)
-
-
-def pid_command(e, de, integral_e, u_d, m: ModalGains, K_T) -> tuple[float, float, float]:
-    """PID-DC command u = K_T u_d + K_P e + K_V de + K_I int(e) (one value per motor).
-
-    Each K = k_c Pi_c + k_d Pi_d acts on the common mode (the mean of the three motors)
-    with k_c and on the differential modes (the deviations from the mean) with k_d.
-    e [m], de [m/s], integral_e [m s] (right-rectangle sum of e), u_d [N] (Eq. 26/39),
-    K_T per motor. With ModalGains.matching_scdc(g) it equals scdc_command for uniform g.
-    """
-    me = (e[0] + e[1] + e[2]) / 3.0
-    mv = (de[0] + de[1] + de[2]) / 3.0
-    mi = (integral_e[0] + integral_e[1] + integral_e[2]) / 3.0
-    return tuple(K_T[i] * u_d[i] + _modal(m.kp_c, m.kp_d, e, i, me) + _modal(m.kv_c, m.kv_d, de, i, mv)
-                 + _modal(m.ki_c, m.ki_d, integral_e, i, mi) for i in range(3))
-
-
 def sample_index(t: float, t0: float, T_s: float) -> int | None:
     """Index k of the sample instant t0 + k T_s [s] that the communication point t [s] falls
     on (within SAMPLE_TOLERANCE T_s), or None if t lies between sample instants."""
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     k = ffi.new("double *")
     return int(k[0]) if lib.tapmp_sample_index(t, t0, T_s, k) else None
 
@@ -188,7 +126,7 @@ class ControllerModel:
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
-        ffi, self._lib = native.load()
+        ffi, self._lib = cmodel.load()
         self._ffi = ffi
         self._cp = ffi.addressof(self._s, "p")  # members of self._s, which keeps them alive
         self._cg = ffi.addressof(self._s, "g")

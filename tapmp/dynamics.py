@@ -60,13 +60,6 @@ def mass_matrix_eq13(B: float, p: ModelParams) -> Mat3:
     return ((M11, 0.0, k * c), (0.0, p.m_p + 2.0 * m1 / 3.0, k * s), (k * c, k * s, M33))
 
 
-def coriolis_eq13(B: float, dB: float, p: ModelParams) -> Mat3:
-    """The paper's closed-form C of Eq. 13 (assumes m_1 = m_3)."""
-    L, m1, c, s = p.L_1, p.m_1, math.cos(B), math.sin(B)
-    k = 2.0 * math.sqrt(3.0) * m1 * L * dB / 3.0
-    return ((0.0, 0.0, -k * s), (0.0, 0.0, k * c), (0.0, 0.0, 4.0 * m1 * L * L * dB * c * s / 3.0))
-
-
 def solve_sym3(M: Mat3, r1: float, r2: float, r3: float) -> tuple[float, float, float]:
     """Solve M y = r for a symmetric positive definite 3x3 M by its adjugate."""
     (a, b, c), (_, d, e), (_, _, f) = M

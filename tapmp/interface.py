@@ -7,7 +7,7 @@ them. Defaults come from the model's own parameter tuples, so nothing is typed t
 same rows come the C code that reads an FMU's parameters into the model's settings struct
 (:func:`settings_read_macro`, into model_vars.h), the C range checks every family and the Python
 model run (:func:`settings_check_source`, tapmp_settings.h) and the Python side's filling of
-those structs by field name (tapmp.native.settings).
+those structs by field name (tapmp.cmodel.settings).
 """
 
 from typing import NamedTuple
@@ -225,7 +225,7 @@ TRAJECTORY_VARS: tuple[Var, ...] = tuple(
 # checks them with the C model's generated checks (settings_check_source), which the Python
 # model, scenarios, studies and `tapmp check` run too: at fmi2SetReal for a tunable parameter in
 # Step Mode, else when the model is set up.
-# Masses from 1e-12: the paper-gain reading (orchestrator/experiments/paper_gains.py) gives the
+# Masses from 1e-12: the paper-gain reading (orchestrator/paper/paper_gains.py) gives the
 # controller its nominal masses times K_T, e.g. I_y K_T = 3.2e-7 in command units.
 _MASS = (1e-12, 1e6)
 RANGES: dict[str, tuple[float, float]] = {

@@ -83,9 +83,3 @@ def solve_transpose(B: float, v1: float, v2: float, v3: float, L1: float) -> tup
     w1 = (v3 + a3 * d) / (a1 + a3)
     w3 = w1 - d
     return w1, v1 - w1 - w3, w3
-
-
-def transpose_times(B: float, F1: float, F2: float, F3: float, L1: float) -> tuple[float, float, float]:
-    """J(x)^T F: motor forces [N] -> generalized forces (u_X [N], u_Z [N], u_B [N m])."""
-    a1, a3 = rotation_column(B, L1)
-    return F1 + F2 + F3, S3 * (F1 - F3), a1 * F1 + a3 * F3

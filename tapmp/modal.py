@@ -30,14 +30,14 @@ Units: the command u is in K_T-scaled newtons (u = K_T F, the paper's K_T u_1 = 
 so K_P is in u/m, K_V in u s/m, K_I in u/(m s). ``force_view`` gives the same gains as
 force on the motors, F = K_T^-1 u: K_P in N/m, K_V in N s/m, K_I in N/(m s).
 
-Run ``python -m tapmp.modal`` to print the table of the gain presets (Markdown).
+Run ``tapmp modal`` to print the table of the gain presets (Markdown).
 """
 
 import math
 from typing import NamedTuple
 
 from .control import Gains
-from .params import GAIN_PRESETS, gain_preset
+from .params import gain_preset
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
@@ -186,21 +186,3 @@ def modal_table(preset_names=("default", "paper_simulation", "paper_experiment")
                              f"| {_fmt(f.P)} | {_fmt(f.V)} | {_fmt(f.I)} | {_fmt(f.coupling_P)}, "
                              f"{_fmt(f.coupling_I)} |")
     return "\n".join(lines)
-
-
-def main(argv=None) -> int:
-    """Print modal_table for the presets named on the command line (all presets if none)."""
-    import sys
-
-    names = list(sys.argv[1:] if argv is None else argv) or ["default", "paper_simulation", "paper_experiment"]
-    for n in names:
-        if n not in GAIN_PRESETS:
-            print(f"error: gain preset {n!r} is unknown: allowed are {', '.join(sorted(GAIN_PRESETS))}",
-                  file=sys.stderr)
-            return 2
-    print(modal_table(names))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -7,7 +7,7 @@ plus a default set that is stable in a loop sampled at 0.1 ms (see README).
 import math
 from typing import NamedTuple
 
-from . import native
+from . import cmodel
 
 
 class ModelParams(NamedTuple):
@@ -25,7 +25,7 @@ class ModelParams(NamedTuple):
         """Return self after checking every field's range in the settings table (ModelInputError
         otherwise; the C model's generated tapmp_plant_settings_check, which every FMU runs too)."""
         from .interface import PLANT
-        native.check_settings(PLANT, self._asdict())
+        cmodel.check_settings(PLANT, self._asdict())
         return self
 
 

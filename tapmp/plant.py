@@ -32,7 +32,7 @@ docs/disturbances.md gives each term's source or marks it as an assumption.
 import math
 from typing import NamedTuple
 
-from . import native
+from . import cmodel
 from .dynamics import task_acceleration
 from .errors import KinematicDomainError, require_finite
 from .kinematics import inverse, joint_velocity, rotation_column, S3
@@ -83,14 +83,14 @@ IDEAL = PlantConfig(encoder_resolution=0.0, c_v1=0.0, c_v2=0.0, c_v3=0.0, F_c1=0
 
 def quantize(q: float, resolution: float) -> float:
     """Round a position [m] to the nearest encoder count of ``resolution`` [m] (0 = exact)."""
-    return native.load()[1].tapmp_quantize(q, resolution)
+    return cmodel.load()[1].tapmp_quantize(q, resolution)
 
 
 def noise_sample(seed: int, sample: float, motor: int) -> float:
     """Standard normal number for (seed in [0, 2^31), sample index, motor 0..2): counter-based,
     so the sequence depends on nothing but these three (Box-Muller on two SplitMix64 outputs,
     Steele, Lea, Flood 2014). A sample index outside [0, 2^53) counts as 0."""
-    return native.load()[1].tapmp_noise_sample(seed, sample, motor)
+    return cmodel.load()[1].tapmp_noise_sample(seed, sample, motor)
 
 
 def _attraction(force: float, gap: float, d12: float, d23: float) -> tuple[float, float]:
@@ -109,7 +109,7 @@ def _settings(cfg: PlantConfig, **others):
     from the settings table, the rest at their defaults; ModelInputError for the first setting
     outside its range (tapmp_plant_settings_check)."""
     from .interface import PLANT
-    return native.check_settings(PLANT, {**others, **cfg._asdict()})
+    return cmodel.check_settings(PLANT, {**others, **cfg._asdict()})
 
 
 class PlantModel:
@@ -126,7 +126,7 @@ class PlantModel:
         given = dict(zip(("X0", "Z0", "B0", "dX0", "dZ0", "dB0"), (*pose0, *rate0)))
         s = _settings(config, **params._asdict(), **given)
         self.p = params
-        ffi, self._lib = native.load()
+        ffi, self._lib = cmodel.load()
         self._pl = ffi.new("tapmp_plant *")
         self._pl.p = s.p
         self._cfg = config

@@ -29,14 +29,14 @@ j_max_* [m/s^3, rad/s^3], all > 0 (a step uses none, a ramp only v_max).
 :func:`reference` is the C model's (tapmp_reference and tapmp_move_plan in
 tapmp/c/tapmp_model.c, what every FMU family runs); :func:`circle_reference`,
 :func:`move_plan` and :func:`move_reference` write the same equations readably in Python,
-the reference the C is tested against (tests/model/test_native_model.py).
+the reference the C is tested against (tests/model/test_cmodel.py).
 """
 
 import math
 from functools import lru_cache
 from typing import NamedTuple
 
-from . import native
+from . import cmodel
 from .params import DEG
 
 TWO_PI = 2.0 * math.pi
@@ -82,7 +82,7 @@ class TrajectoryParams(NamedTuple):
         """Return self after the range checks of the settings table (ModelInputError names the
         offender; the C model's generated tapmp_trajectory_settings_check, which every FMU runs too)."""
         from .interface import TRAJECTORY
-        native.check_settings(TRAJECTORY, self._asdict())
+        cmodel.check_settings(TRAJECTORY, self._asdict())
         return self
 
 
@@ -226,9 +226,9 @@ def _c_trajectory(tp: TrajectoryParams):
     """``tp`` as the C model's tapmp_trajectory (tapmp_trajectory_init: its move planned by
     tapmp_move_plan), from its settings struct filled by name."""
     from .interface import TRAJECTORY
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     c = ffi.new("tapmp_trajectory *")
-    lib.tapmp_trajectory_init(c, native.settings(TRAJECTORY, tp._asdict()))
+    lib.tapmp_trajectory_init(c, cmodel.settings(TRAJECTORY, tp._asdict()))
     return c
 
 
@@ -238,7 +238,7 @@ def reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
     Returns (X_d, Z_d, B_d, dX_d, dZ_d, dB_d, ddX_d, ddZ_d, ddB_d) in m, rad and
     their first and second time derivatives.
     """
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     ref = ffi.new("double[9]")
     lib.tapmp_reference(t, _c_trajectory(tp), ref)
     return tuple(ref)

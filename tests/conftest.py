@@ -11,24 +11,16 @@ fails the test instead.
 import os
 import shutil
 import tempfile
-from ctypes import byref
 from pathlib import Path
 
 import pytest
-from fmpy import calloc, extract, free, read_model_description
-from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-from fmpy.logging import addLoggerProxy
 
 from orchestrator.engine.build import build_all
+from tests.support.fmus import LoadedFMU
+from tests.support.shared import shared
 
 # The compatibility rows (tests/interop/compatibility.py): its check after every test
-pytest_plugins = ("compatibility",)
-
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared"
-REQUIRE_SHARED = ("CI", "TAPMP_REQUIRE_SHARED")  # environment variables that make a missing file a failure
+pytest_plugins = ("tests.interop.compatibility",)
 
 
 def pytest_configure(config):
@@ -37,24 +29,6 @@ def pytest_configure(config):
     config.system_temp_before = set(os.listdir(config.system_temp))
     config.addinivalue_line("markers", "needs_shared(path, ...): the test needs ../shared/<path> (relative to the "
                                        "repository root); skipped without it, failed without it in CI")
-
-
-def shared_required() -> bool:
-    """True where a missing ../shared file fails a test instead of skipping it (CI)."""
-    return any(os.environ.get(name) for name in REQUIRE_SHARED)
-
-
-def shared(relative: str) -> Path:
-    """``../shared/<relative>`` (relative to the repository root) if it exists; else the test is
-    skipped with a reason naming it, or fails where :func:`shared_required`."""
-    path = SHARED / relative
-    if not path.exists():
-        reason = f"needs ../shared/{relative}"
-        if shared_required():
-            pytest.fail(f"{reason} (relative to the repository root {ROOT}), which is missing; "
-                        f"{' or '.join(REQUIRE_SHARED)} is set, so it is required", pytrace=False)
-        pytest.skip(reason)
-    return path
 
 
 # Markers every test of a folder carries (the markers themselves are registered in pyproject.toml;
@@ -142,8 +116,8 @@ def built(tmp_path_factory):
 @pytest.fixture(scope="session")
 def faulty_ssps(built, tmp_path_factory):
     """{fault: SSP path}: the real controller and trajectory with a plant FMU that misbehaves
-    from t = 0.5 ms on, one per fault of tests/faults.py's FAULTY ("status", "error_log", "info_log")."""
-    from faults import faulty_ssps as build
+    from t = 0.5 ms on, one per fault of tests/support/faults.py's FAULTY ("status", "error_log", "info_log")."""
+    from tests.support.faults import faulty_ssps as build
     return build(built, tmp_path_factory.mktemp("faulty"))
 
 
@@ -153,73 +127,6 @@ def native_built(tmp_path_factory):
     platform (zig cc) into a temporary folder laid out as build/native/."""
     from orchestrator.engine.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=True)
-
-
-class LoadedFMU:
-    """One FMU instance through fmpy, with its log messages collected."""
-
-    def __init__(self, path, tmp_path, name="inst"):
-        self.md = read_model_description(str(path))
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.types = {v.name: v.type for v in self.md.modelVariables}
-        self.messages = []
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(self.callbacks))
-        unzip = extract(str(path), unzipdir=str(tmp_path / f"{name}_unzip"))
-        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=unzip,
-                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.slave.instantiate(callbacks=self.callbacks, loggingOn=True)
-
-    def _log(self, env, instance, status, category, message):
-        self.messages.append((status, message.decode()))
-
-    def set(self, **values):
-        for k, v in values.items():
-            if self.types[k] == "Integer":
-                self.slave.setInteger([self.vr[k]], [int(v)])
-            else:
-                self.slave.setReal([self.vr[k]], [float(v)])
-
-    def get(self, *names):
-        return self.slave.getReal([self.vr[n] for n in names])
-
-    def init(self, t0=0.0, **params):
-        self.set(**params)
-        self.slave.setupExperiment(startTime=t0)
-        self.slave.enterInitializationMode()
-        self.slave.exitInitializationMode()
-
-    def statuses(self, **values):
-        """Set values, initialize and do one step; the fmi2Status of each call, in order
-        (fmpy raises FMICallException for a status above fmi2Warning)."""
-        calls = {"set": lambda: self.set(**values),
-                 "setupExperiment": lambda: self.slave.setupExperiment(startTime=0.0),
-                 "enterInitializationMode": self.slave.enterInitializationMode,
-                 "exitInitializationMode": self.slave.exitInitializationMode,
-                 "doStep": lambda: self.slave.doStep(0.0, 1e-4)}
-        return {name: call_status(call) for name, call in calls.items()}
-
-    def errors(self):
-        return [m for s, m in self.messages if s >= 3]
-
-    def close(self):
-        try:
-            self.slave.terminate()
-        except Exception:
-            pass
-        self.slave.freeInstance()
-
-
-def call_status(call) -> int:
-    """The fmi2Status of an fmpy call: 0 (or 1) if it returned, else the raised status."""
-    try:
-        call()
-    except FMICallException as err:
-        return err.status
-    return 0
 
 
 @pytest.fixture
@@ -234,33 +141,3 @@ def load_fmu(tmp_path):
     yield make
     for fmu in loaded:
         fmu.close()
-
-
-PAPER = ROOT / "scenarios" / "paper_simulation.toml"
-MOTOR_POSITIONS = tuple(f"plant.q{i}_true" for i in (1, 2, 3)) + tuple(f"plant.q{i}" for i in (1, 2, 3))
-COMMANDS = tuple(f"controller.F{i}" for i in (1, 2, 3))
-
-
-def paper_scenario(stop_time=0.2, *overrides):
-    """The paper's simulation scenario, shortened (0.2 s = 2,000 steps of 0.1 ms)."""
-    from orchestrator.experiments.scenario import load
-    return load(PAPER, [f"stop_time={stop_time}", *overrides])
-
-
-def orchestrator_rows(ssp, scenario, names, ordering="jacobi", **conventions):
-    """The orchestrator's values of ``names`` ("element.variable") at t_0 ... t_n, one row per
-    communication point; ``conventions`` are CoSimulation's clock / connection_start."""
-    import numpy as np
-
-    from orchestrator.engine.master import CoSimulation
-    from orchestrator.experiments.roles import ROLES
-    rows = []
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      **conventions, roles=ROLES) as sim:
-        index = [sim.columns.index(n) for n in names]
-        rows.append([sim.row()[i] for i in index])
-        for _ in range(scenario.n_steps):
-            sim.step()
-            row = sim.row()
-            rows.append([row[i] for i in index])
-    return np.array(rows)

@@ -12,28 +12,35 @@ ROOT = Path(__file__).resolve().parent.parent
 TESTS = ROOT / "tests"
 PKG = ROOT / "orchestrator"
 PACKAGES = ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator")
-# A layer may import from itself and from the layers before it, never from a later one.
-LAYERS = ("engine", "experiments", "studies")
+# A layer may import from itself and from the layers before it, never from a later one: the engine
+# (FMUs, SSP, the master), the tool (scenarios, runs, results, reports, for any controller), the
+# paper study (its tables, reproduction, calibration), the studies on Dask.
+LAYERS = ("engine", "tool", "paper", "studies")
 
 # {package: what it must not import}: the model knows no FMU and no master; the FMI runtime knows
 # only the model; the FMU adapters know the model and the runtime; the orchestrator's engine knows
-# no experiment, study or command line, experiments know no study or command line, studies no
-# command line. Standard library and third-party imports are free.
+# no scenario, paper, study or command line; the tool knows no paper, study or command line; the
+# paper study knows no study or command line; studies no command line. Standard library and
+# third-party imports are free.
 FORBIDDEN = {
     "tapmp": ("fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
     "fmu_common": ("fmu_plant", "fmu_controller", "orchestrator"),
     "fmu_plant": ("fmu_controller", "orchestrator"),
     "fmu_controller": ("fmu_plant", "orchestrator"),
-    "orchestrator.engine": ("orchestrator.experiments", "orchestrator.studies", "orchestrator.cli"),
-    "orchestrator.experiments": ("orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.engine": ("orchestrator.tool", "orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.tool": ("orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.paper": ("orchestrator.studies", "orchestrator.cli"),
     "orchestrator.studies": ("orchestrator.cli",),
 }
 
-# Test folders, named like the package's parts; "project" holds the checks of the repository as
-# a whole (docs, README commands, clean checkout, wheel, tests/run.sh, benchmarks).
-TEST_FOLDERS = ("model", "fmu", "engine", "experiments", "studies", "cli", "interop", "project")
-# What may sit at tests/'s root: the shared fixtures, the fault-injection helper, this file.
-TEST_ROOT_FILES = {"conftest.py", "faults.py", "test_layout.py"}
+# Test folders, named like the package's parts (tool and paper as orchestrator's); "cli" holds the
+# end-to-end runs of the tapmp command, "project" the checks of the repository as a whole (docs,
+# README commands, clean checkout, wheel, tests/run.sh, benchmarks), "support" the helpers the
+# tests share (imported as tests.support.<module>), no test.
+TEST_FOLDERS = ("model", "fmu", "engine", "tool", "paper", "studies", "cli", "interop", "project")
+HELPERS = "support"
+# What may sit at tests/'s root: the package marker, the shared fixtures, this file.
+TEST_ROOT_FILES = {"__init__.py", "conftest.py", "test_layout.py"}
 
 
 def _in(module: str, package: str) -> bool:
@@ -92,6 +99,11 @@ def test_each_layer_imports_only_the_layers_below_it(package):
 def test_the_orchestrator_has_one_folder_per_concern():
     for layer in LAYERS:
         assert (PKG / layer / "__init__.py").is_file()
+    # exactly the layers: no second home of the tool or the paper study under an older name
+    folders = sorted(p.name for p in PKG.iterdir() if p.is_dir() and p.name != "__pycache__")
+    assert folders == sorted(LAYERS)
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    assert sorted(p for p in setuptools if p.startswith("orchestrator.")) == sorted(f"orchestrator.{x}" for x in LAYERS)
     loose = sorted(p.name for p in PKG.glob("*.py"))
     # errors.py: the user-error type every layer raises, below all of them (it imports nothing)
     assert loose == ["__init__.py", "__main__.py", "cli.py", "errors.py"]
@@ -135,6 +147,8 @@ def _test_files():
 def test_every_test_file_is_in_the_folder_of_what_it_tests():
     misplaced = [str(p.relative_to(TESTS)) for p in _test_files()
                  if p.parent != TESTS and p.relative_to(TESTS).parts[0] not in TEST_FOLDERS]
+    gone = sorted(p.name for p in TESTS.iterdir() if p.is_dir() and p.name not in (*TEST_FOLDERS, HELPERS, "data", "__pycache__"))
+    assert not gone, f"test folders named after no part of the package: {gone}"
     at_root = sorted(p.name for p in TESTS.glob("*.py") if p.name not in TEST_ROOT_FILES)
     assert not misplaced, f"test files outside {', '.join(TEST_FOLDERS)}: {misplaced}"
     assert not at_root, f"move into one of tests/{{{','.join(TEST_FOLDERS)}}}/: {at_root}"
@@ -142,14 +156,25 @@ def test_every_test_file_is_in_the_folder_of_what_it_tests():
         assert any((TESTS / folder).rglob("test_*.py")), f"tests/{folder} holds no test"
 
 
-def test_test_module_names_are_unique_and_every_test_folder_is_on_the_pythonpath():
-    # pytest imports test files by their name (no __init__.py), so two of one name would clash;
-    # and a helper imported by name from another folder needs that folder on the path.
-    names = [p.name for p in TESTS.rglob("*.py")]
-    assert len(names) == len(set(names)), sorted({n for n in names if names.count(n) > 1})
-    folders = {p.parent.relative_to(ROOT).as_posix() for p in TESTS.rglob("*.py")}
+def test_the_tests_are_packages_and_no_test_folder_is_on_the_pythonpath():
+    # a test imports a helper by its package path (tests.support.faults), never by a bare name
+    # that only resolves because its folder is on sys.path
+    folders = {p.parent for p in TESTS.rglob("*.py") if "__pycache__" not in p.parts}
+    assert folders >= {TESTS / f for f in (*TEST_FOLDERS, HELPERS)}
+    not_packages = sorted(str(f.relative_to(ROOT)) for f in folders if not (f / "__init__.py").is_file())
+    assert not not_packages, f"test folders without __init__.py: {not_packages}"
     ini = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
-    assert set(ini["pythonpath"]) == folders
+    assert "pythonpath" not in ini
+    assert not any((TESTS / HELPERS).glob("test_*.py"))
+    bare = sorted({p.stem for p in TESTS.rglob("*.py")} - {"__init__", "conftest"})
+    flat = []
+    for path in sorted(TESTS.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = ([node.module] if isinstance(node, ast.ImportFrom) and not node.level
+                     else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            flat += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names
+                     if n and n.split(".")[0] in (*bare, "conftest")]
+    assert not flat, f"imports of a test module by its bare name: {flat}"
 
 
 def test_the_markers_are_registered_strictly():
@@ -185,13 +210,32 @@ def test_no_layer_below_the_command_line_names_it_in_code():
     assert not named, f"below the command line, code names orchestrator.cli: {named}"
 
 
-def test_the_compare_workflow_lives_in_the_experiments_layer():
+def _imported_by(package: str) -> set:
+    """Every project module imported anywhere in ``package`` (module- and function-level)."""
+    return {dep for module, deps in _imports().items() if _in(module, package) for dep in deps}
+
+
+def test_the_tool_never_imports_the_paper_study():
+    # a user who runs the tool for another controller needs none of the paper's modules: the
+    # paper's printed rows reach comparison.md as data its callers pass in (reference_rows)
+    tool_modules = [m for m in _imports() if _in(m, "orchestrator.tool")]
+    assert len(tool_modules) > 20  # the walk sees the tool's modules
+    assert not {d for d in _imported_by("orchestrator.tool") if _in(d, "orchestrator.paper")}
+    assert {d for d in _imported_by("orchestrator.paper") if _in(d, "orchestrator.tool")}  # the paper builds on it
+    paper = {p.stem for p in (PKG / "paper").glob("*.py")} - {"__init__"}
+    assert {"reproduction", "paper_tables", "paper_gains", "calibration", "null_models", "predictors",
+            "theorem1"} <= paper
+    assert not paper & {p.stem for p in (PKG / "tool").glob("*.py")}
+
+
+def test_the_compare_workflow_lives_in_the_tool():
     import inspect
     from orchestrator import cli
-    from orchestrator.experiments import compare, reproduction
+    from orchestrator.tool import compare
+    from orchestrator.paper import reproduction
     # the CLI and the reproduction call it downward; the reproduction is handed no compare function
     # (the CLI imports it where the command runs, so that --help loads no numerical package)
-    assert "from .experiments.compare import run_comparison" in inspect.getsource(cli)
+    assert "from .tool.compare import run_comparison" in inspect.getsource(cli)
     assert "def run_comparison" not in inspect.getsource(cli)
     assert reproduction.run_comparison is compare.run_comparison
     assert "compare" not in inspect.signature(reproduction.reproduce).parameters

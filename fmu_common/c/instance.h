@@ -3,7 +3,7 @@
  * fmi3_api.c map the FMI 2.0 and 3.0 functions onto it. The model operations declared at
  * the end are supplied by the model file: in C for the native FMUs (plant.c, controller.c
  * or trajectory.c), by calling into Python for the pythonfmu FMUs
- * (fmu_common/native/python_model.c), so both families follow the same rules.
+ * (fmu_common/pyfront/python_model.c), so both families follow the same rules.
  *
  * The variable table (names, causality, variability, type, start, min, max; the value
  * reference is the index) is generated from tapmp/interface.py into model_vars.h at

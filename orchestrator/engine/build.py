@@ -9,7 +9,7 @@ pythonfmu 0.7's binary cannot return fmi2Error (a Python exception becomes fmi2F
 corrupts the host interpreter), needs libpython already in the host process, and costs
 a Python call per getReal/setReal. So the FMUs ship their own binary instead: the native
 FMUs' runtime (``fmu_common/c``) with model operations that call Python
-(``fmu_common/native``), compiled here by the project's C compiler (zig cc from the ziglang
+(``fmu_common/pyfront``), compiled here by the project's C compiler (zig cc from the ziglang
 package, or $CC; tapmp/toolchain.py): see :func:`compile_binaries`.
 """
 
@@ -24,7 +24,7 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES, dependencies
 
-from tapmp import native, toolchain
+from tapmp import cmodel, toolchain
 from .families import default_build_dir
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
@@ -37,7 +37,7 @@ SCRIPTS = {
     TRAJECTORY: ROOT / "fmu_controller" / "TAPMP_Trajectory.py",
 }
 BUNDLED_PACKAGES = (ROOT / "tapmp", ROOT / "fmu_common")
-NATIVE = ROOT / "fmu_common" / "native"
+PYFRONT = ROOT / "fmu_common" / "pyfront"
 RUNTIME = ROOT / "fmu_common" / "c"
 PLATFORM = "linux64"
 BINDING = "tapmp_fmi2_python.so"     # name the front binary loads (fmi2_front.c BACKEND)
@@ -152,7 +152,7 @@ def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tupl
 
     Returns (front, {model: binding}). A binding is the native FMUs' runtime
     (fmu_common/c/instance.c, fmi2_api.c) with model operations that call Python
-    (fmu_common/native/python_model.c), built against this interpreter's headers and
+    (fmu_common/pyfront/python_model.c), built against this interpreter's headers and
     deliberately not linked to libpython: in a Python host it uses the host's, in a C host
     the front loads the recorded one first (RTLD_GLOBAL).
     """
@@ -163,7 +163,7 @@ def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tupl
     flags = ["-O2", "-Wall", "-fvisibility=hidden", "-g0"]
     front = dest / "front.so"
     # The front's fmi2 functions are its only exports (default visibility in fmi2Functions.h).
-    _compile([NATIVE / "fmi2_front.c"], front, flags=flags, includes=[fmi_headers, NATIVE],
+    _compile([PYFRONT / "fmi2_front.c"], front, flags=flags, includes=[fmi_headers, PYFRONT],
              libs=["dl", "pthread"], what="the pythonfmu FMUs' front binary")
     bindings = {}
     for model in models:
@@ -173,7 +173,7 @@ def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tupl
         (src / "python_unity.c").write_text(PYTHON_UNITY)
         bindings[model] = dest / f"{model}_{BINDING}"
         _compile([src / "python_unity.c"], bindings[model], flags=flags, extra=["-Wl,-z,nodelete", "-Wl,-z,lazy"],
-                 includes=[src, RUNTIME, NATIVE, fmi_headers, include], libs=["pthread"],
+                 includes=[src, RUNTIME, PYFRONT, fmi_headers, include], libs=["pthread"],
                  what=f"the pythonfmu {model}'s Python binding")
     return front, bindings
 
@@ -212,10 +212,10 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
         staged = []
         for pkg in BUNDLED_PACKAGES:
             dest = Path(tmp) / pkg.name
-            shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "native"))
+            shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "pyfront"))
             staged.append(dest)
         # the compiled C model goes with its sources: the FMU loads it, never compiles it
-        shutil.copyfile(native.library_path(), Path(tmp) / "tapmp" / "c" / native.bundled_name())
+        shutil.copyfile(cmodel.library_path(), Path(tmp) / "tapmp" / "c" / cmodel.bundled_name())
         fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=staged,
                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         if binaries is None:

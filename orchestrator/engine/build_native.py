@@ -34,7 +34,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
                              dependencies, dependency_attributes, settings_read_macro)
-from tapmp.native import SETTINGS_HEADER, settings_header
+from tapmp.cmodel import SETTINGS_HEADER, settings_header
 
 from tapmp import toolchain
 from .families import default_build_dir
@@ -618,7 +618,7 @@ def main(argv=None) -> int:
     import argparse
     import sys
 
-    from tapmp.native import NativeModelError
+    from tapmp.cmodel import CModelError
 
     p = argparse.ArgumentParser(prog="python -m orchestrator.engine.build_native",
                                 description="Build the native FMI 2.0 and 3.0 FMUs and their TAPMP.ssp "
@@ -636,7 +636,7 @@ def main(argv=None) -> int:
     try:
         platforms = args.platform or (None if not args.no_windows else (toolchain.HOST,))
         build_native(Path(args.out), platforms=platforms)
-    except (NativeBuildError, NativeModelError, ValueError) as err:
+    except (NativeBuildError, CModelError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     return 0

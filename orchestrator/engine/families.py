@@ -53,7 +53,6 @@ def data_dir(name: str) -> Path:
     return ROOT / name if in_checkout() else ROOT / "tapmp_data" / name
 
 
-BUILD = default_build_dir()
 SCENARIOS_DIR = data_dir("scenarios")
 
 

@@ -32,6 +32,7 @@ from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, ELEMENT, INITIAL_ST
 from tapmp.params import SERVO_STEP
 
 from .model_description import to_bytes
+from .ssp import qname
 
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref"
 LS_NS = "http://fmi-standard.org/fmi-ls-manifest"
@@ -44,11 +45,7 @@ RELATIVE_TOLERANCE = 1e-10  # of the reference experiment (.opt): for a Model Ex
 LICENSE_FILE = "documentation/licenses/license.txt"
 
 
-def _q(ns: str, tag: str) -> str:
-    return f"{{{ns}}}{tag}"
-
-
-def _format(kind: str, value) -> str:
+def value_text(kind: str, value) -> str:
     """A value as SSV/CSV text that reads back to the same number (repr: shortest round trip)."""
     if kind == "Integer":
         return str(int(value))
@@ -61,25 +58,25 @@ def parameter_set(name: str, values: dict, declared: dict, units: dict, element:
     """One SSV document: ParameterSet ``name`` with ``values`` ({variable: value}) typed and
     with units as ``declared`` ({variable: (SSV type, unit)}) by the element's FMU; ValueError
     names a variable the FMU does not declare."""
-    root = ET.Element(_q(SSV, "ParameterSet"), version="1.0", name=name)
-    params = ET.SubElement(root, _q(SSV, "Parameters"))
+    root = ET.Element(qname(SSV, "ParameterSet"), version="1.0", name=name)
+    params = ET.SubElement(root, qname(SSV, "Parameters"))
     used = []
     for var, value in values.items():
         if var not in declared:
             raise ValueError(f"{element}.{var} = {value!r} cannot be exported: the {element} FMU has no "
                              f"parameter {var}; allowed are {', '.join(sorted(declared))}")
         kind, unit = declared[var]
-        p = ET.SubElement(params, _q(SSV, "Parameter"), name=var)
-        attrs = {"value": _format(kind, value)}
+        p = ET.SubElement(params, qname(SSV, "Parameter"), name=var)
+        attrs = {"value": value_text(kind, value)}
         if kind == "Real" and unit in units:
             attrs["unit"] = unit
             used.append(unit)
-        ET.SubElement(p, _q(SSV, kind), attrs)
+        ET.SubElement(p, qname(SSV, kind), attrs)
     if used:
-        table = ET.SubElement(root, _q(SSV, "Units"))
+        table = ET.SubElement(root, qname(SSV, "Units"))
         for unit in sorted(set(used)):
-            u = ET.SubElement(table, _q(SSC, "Unit"), name=unit)
-            ET.SubElement(u, _q(SSC, "BaseUnit"), {k: str(e) for k, e in units[unit].items()})
+            u = ET.SubElement(table, qname(SSC, "Unit"), name=unit)
+            ET.SubElement(u, qname(SSC, "BaseUnit"), {k: str(e) for k, e in units[unit].items()})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
@@ -184,9 +181,9 @@ def manifest(model: str) -> bytes:
     """extra/org.fmi-standard.fmi-ls-ref/fmi-ls-manifest.xml of ``model`` (FMI-LS-REF 1.0.0-alpha.1)."""
     ET.register_namespace("fmi-ls", LS_NS)
     root = ET.Element("fmiReferences", {
-        _q(LS_NS, "fmi-ls-name"): "org.fmi-standard.fmi-ls-ref",
-        _q(LS_NS, "fmi-ls-version"): "1.0.0-alpha.1",
-        _q(LS_NS, "fmi-ls-description"): "Layered Standard providing information on related files included in an FMU."})
+        qname(LS_NS, "fmi-ls-name"): "org.fmi-standard.fmi-ls-ref",
+        qname(LS_NS, "fmi-ls-version"): "1.0.0-alpha.1",
+        qname(LS_NS, "fmi-ls-description"): "Layered Standard providing information on related files included in an FMU."})
     label = ("scenario:paper_simulation", "the paper's simulation (Section 5.2), scenarios/paper_simulation.toml")
 
     def related(kind, source, role, description):
@@ -406,7 +403,7 @@ def documentation_html(model: str, family: str, platforms=None) -> bytes:
     e = html.escape
     rows = []
     for v in VARIABLES[model]:
-        start = "" if v.causality == "output" else e(_format("Integer" if v.type == "Integer" else "Real", v.start))
+        start = "" if v.causality == "output" else e(value_text("Integer" if v.type == "Integer" else "Real", v.start))
         rows.append(f"<tr><td><code>{e(v.name)}</code></td><td>{e(v.causality)}</td><td>{e(v.unit)}</td>"
                     f"<td>{start}</td><td>{_range(v)}</td><td>{e(v.description)}</td></tr>")
     eqs = "".join(f"<tr><th>{e(name)}</th><td><code>{e(text)}</code></td></tr>" for name, text in _equations(model))

@@ -2,7 +2,7 @@
 
 :class:`LoadedSystem` is what a co-simulation opens before it instantiates anything: the SSP read
 (``ssd.read_ssp``), its elements checked, their FMUs extracted into a temporary folder of this
-process (``tempdirs.make_folder``) and loaded by fmpy, one :class:`~orchestrator.engine.units.Unit`
+process (``tempdirs.make_folder``) and loaded by fmpy, one :class:`~orchestrator.engine.instance.Unit`
 per element. A co-simulation on its own loads a system, runs, and closes it (every instance freed,
 the folder removed).
 
@@ -33,7 +33,7 @@ from .archive import ExtractBudget, ExtractLimitError
 from .errors import CoSimulationError
 from .ssd import check_elements, extract_fmus, read_ssp
 from .tempdirs import make_folder
-from .units import Unit
+from .instance import Unit
 
 
 # fmpy's logger proxy (it formats the FMI 2.0 logger's variadic arguments, which ctypes cannot

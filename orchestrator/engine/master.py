@@ -24,7 +24,7 @@ An algebraic loop (a cycle of connections through direct feedthrough only) is re
 Reading the SSP (parse, check the elements, extract the FMUs, bind the parameter tables) is
 ``orchestrator.engine.ssd``. Parameters address elements by SSP name; the caller's ``roles``
 ({role: modelName}) also address the one element whose FMU is that model, whatever the SSP calls
-it (the TAPMP roles plant, controller, trajectory: orchestrator.experiments.roles). Recorded
+it (the TAPMP roles plant, controller, trajectory: orchestrator.tool.roles). Recorded
 columns are ``element.output``, with such an element written by its role, so a system records
 the same columns under any element names.
 
@@ -64,7 +64,7 @@ from .schedule import (CONNECTION_STARTS, ORDERINGS, Connection, ScheduleError, 
                        gauss_seidel_order, initialization_order)
 from .loaded import LoadedFMUs, LoadedSystem
 from .ssd import ParameterAddressError, column_prefixes, resolve_parameters
-from .units import Unit
+from .instance import Unit
 
 STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
@@ -72,7 +72,7 @@ _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
 class OutputCheck:
     """The per-step check of the recorded outputs that the caller supplies (``check`` of
-    :class:`CoSimulation`; TAPMP's platform envelope: orchestrator.experiments.envelope).
+    :class:`CoSimulation`; TAPMP's platform envelope: orchestrator.tool.envelope).
 
     :attr:`bounds` is data, so that the compiled core checks it too: (column, limit) pairs,
     |value| <= limit in the column's unit after every step. :meth:`breach` and

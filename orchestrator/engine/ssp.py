@@ -25,15 +25,16 @@ OMS_ANNOTATION = "org.openmodelica"
 SERVO_STEP = 1e-4     # [s] the communication step of the built SSPs, the FMUs' DefaultExperiment stepSize
 
 
-def _q(ns: str, tag: str) -> str:
+def qname(ns: str, tag: str) -> str:
+    """ElementTree's qualified name of ``tag`` in the XML namespace ``ns``: "{ns}tag"."""
     return f"{{{ns}}}{tag}"
 
 
 def _oms_annotation(parent: ET.Element) -> ET.Element:
     """An ``ssc:Annotation`` of OMSimulator (type org.openmodelica) under ``parent``; its
     ``oms:Annotations`` element is returned."""
-    annotation = ET.SubElement(parent, _q(SSC, "Annotation"), type=OMS_ANNOTATION)
-    return ET.SubElement(annotation, _q(OMS, "Annotations"))
+    annotation = ET.SubElement(parent, qname(SSC, "Annotation"), type=OMS_ANNOTATION)
+    return ET.SubElement(annotation, qname(OMS, "Annotations"))
 
 
 def default_experiment(start_time: float, stop_time: float, step: float, result_file: str) -> ET.Element:
@@ -43,13 +44,13 @@ def default_experiment(start_time: float, stop_time: float, step: float, result_
 
     OMSimulator reads only the first ``ssc:Annotation`` here, so its own comes first.
     """
-    exp = ET.Element(_q(SSD, "DefaultExperiment"), startTime=repr(float(start_time)), stopTime=repr(float(stop_time)))
-    annotations = ET.SubElement(exp, _q(SSD, "Annotations"))
-    ET.SubElement(_oms_annotation(annotations), _q(OMS, "SimulationInformation"), resultFile=result_file,
+    exp = ET.Element(qname(SSD, "DefaultExperiment"), startTime=repr(float(start_time)), stopTime=repr(float(stop_time)))
+    annotations = ET.SubElement(exp, qname(SSD, "Annotations"))
+    ET.SubElement(_oms_annotation(annotations), qname(OMS, "SimulationInformation"), resultFile=result_file,
                   loggingInterval="0", bufferSize="1")
-    osp = ET.SubElement(annotations, _q(SSC, "Annotation"), type=OSP_ANNOTATION)
-    algorithm = ET.SubElement(osp, _q(OSP, "Algorithm"))
-    ET.SubElement(algorithm, _q(OSP, "FixedStepAlgorithm"), baseStepSize=repr(float(step)))
+    osp = ET.SubElement(annotations, qname(SSC, "Annotation"), type=OSP_ANNOTATION)
+    algorithm = ET.SubElement(osp, qname(OSP, "Algorithm"))
+    ET.SubElement(algorithm, qname(OSP, "FixedStepAlgorithm"), baseStepSize=repr(float(step)))
     return exp
 
 
@@ -57,46 +58,46 @@ def set_system_step(system: ET.Element, step: float) -> None:
     """Give the ``ssd:System`` OMSimulator's fixed-step master with ``step`` [s] in its vendor
     annotation (OMSimulator derives the system's kind from it and refuses a system without it),
     replacing an earlier one; the annotations go last in the System (SSD schema sequence)."""
-    for old in system.findall(_q(SSD, "Annotations")):
-        for annotation in old.findall(_q(SSC, "Annotation")):
+    for old in system.findall(qname(SSD, "Annotations")):
+        for annotation in old.findall(qname(SSC, "Annotation")):
             if annotation.get("type") == OMS_ANNOTATION:
                 old.remove(annotation)
         if not len(old):
             system.remove(old)
-    annotations = system.find(_q(SSD, "Annotations"))
+    annotations = system.find(qname(SSD, "Annotations"))
     if annotations is None:
-        annotations = ET.SubElement(system, _q(SSD, "Annotations"))
-    info = ET.SubElement(_oms_annotation(annotations), _q(OMS, "SimulationInformation"))
-    ET.SubElement(info, _q(OMS, "FixedStepMaster"), description="oms-ma", stepSize=repr(float(step)))
+        annotations = ET.SubElement(system, qname(SSD, "Annotations"))
+    info = ET.SubElement(_oms_annotation(annotations), qname(OMS, "SimulationInformation"))
+    ET.SubElement(info, qname(OMS, "FixedStepMaster"), description="oms-ma", stepSize=repr(float(step)))
 
 
 def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP) -> bytes:
     """The SystemStructure.ssd document of the three-FMU closed loop, run from 0 to
     ``stop_time`` [s] at the fixed communication step ``step`` [s] (given for OMSimulator and
     libcosim in their vendor annotations)."""
-    root = ET.Element(_q(SSD, "SystemStructureDescription"), version="1.0", name="TAPMP")
-    system = ET.SubElement(root, _q(SSD, "System"), name="TAPMP",
+    root = ET.Element(qname(SSD, "SystemStructureDescription"), version="1.0", name="TAPMP")
+    system = ET.SubElement(root, qname(SSD, "System"), name="TAPMP",
                            description="TAPMP closed loop: trajectory -> controller -> plant -> controller")
-    elements = ET.SubElement(system, _q(SSD, "Elements"))
+    elements = ET.SubElement(system, qname(SSD, "Elements"))
     used_units = set()
     for model in FMU_NAMES:
-        comp = ET.SubElement(elements, _q(SSD, "Component"), name=ELEMENT[model],
+        comp = ET.SubElement(elements, qname(SSD, "Component"), name=ELEMENT[model],
                              type="application/x-fmu-sharedlibrary", source=f"resources/{model}.fmu")
-        connectors = ET.SubElement(comp, _q(SSD, "Connectors"))
+        connectors = ET.SubElement(comp, qname(SSD, "Connectors"))
         for v in VARIABLES[model]:
             if v.causality not in ("input", "output"):
                 continue
-            c = ET.SubElement(connectors, _q(SSD, "Connector"), name=v.name, kind=v.causality)
-            ET.SubElement(c, _q(SSC, "Real"), unit=v.unit)
+            c = ET.SubElement(connectors, qname(SSD, "Connector"), name=v.name, kind=v.causality)
+            ET.SubElement(c, qname(SSC, "Real"), unit=v.unit)
             used_units.add(v.unit)
-    conns = ET.SubElement(system, _q(SSD, "Connections"))
+    conns = ET.SubElement(system, qname(SSD, "Connections"))
     for src, src_var, dst, dst_var in CONNECTIONS:
-        ET.SubElement(conns, _q(SSD, "Connection"), startElement=ELEMENT[src], startConnector=src_var,
+        ET.SubElement(conns, qname(SSD, "Connection"), startElement=ELEMENT[src], startConnector=src_var,
                       endElement=ELEMENT[dst], endConnector=dst_var)
-    units = ET.SubElement(root, _q(SSD, "Units"))
+    units = ET.SubElement(root, qname(SSD, "Units"))
     for name in sorted(used_units):
-        u = ET.SubElement(units, _q(SSC, "Unit"), name=name)
-        ET.SubElement(u, _q(SSC, "BaseUnit"), {k: str(e) for k, e in UNITS[name].items()})
+        u = ET.SubElement(units, qname(SSC, "Unit"), name=name)
+        ET.SubElement(u, qname(SSC, "BaseUnit"), {k: str(e) for k, e in UNITS[name].items()})
     set_system_step(system, step)
     root.append(default_experiment(0.0, stop_time, step, f"{root.get('name')}_res.csv"))
     ET.indent(root)

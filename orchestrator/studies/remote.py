@@ -41,8 +41,8 @@ ZLIB_LEVEL = 6  # zlib's default: a 0.5 s case's run.json + metrics.json shrink 
 
 def identity() -> dict:
     """What a worker must share with the client: the installed tapmp-cosim version and the hash of
-    the model's C sources (tapmp.native.source_hash), with the process's host and pid."""
-    from tapmp.native import source_hash
+    the model's C sources (tapmp.cmodel.source_hash), with the process's host and pid."""
+    from tapmp.cmodel import source_hash
     try:
         version = metadata.version("tapmp-cosim")
     except metadata.PackageNotFoundError:
@@ -173,7 +173,7 @@ def this_plugin(name: str) -> StudyPlugin | None:
 def gain_values_of(paths) -> dict:
     """{path: the preset of load_gain_file, or the error text} for each gain preset file path,
     read here (on the client) so that workers get values, not paths."""
-    from ..experiments.scenario import ScenarioError, load_gain_file
+    from ..tool.scenario import ScenarioError, load_gain_file
     out = {}
     for path in paths:
         if path and path not in out:
@@ -187,7 +187,7 @@ def gain_values_of(paths) -> dict:
 def pack_folder(folder: Path) -> dict:
     """{file name: zlib-compressed bytes} of every file a case wrote into ``folder`` (its lock file
     aside), to send to the client."""
-    from ..experiments.folders import LOCK_FILE
+    from ..tool.folders import LOCK_FILE
     folder = Path(folder)
     if not folder.is_dir():
         return {}
@@ -202,7 +202,7 @@ def unpack_folder(files: dict, folder: Path, ssp: str) -> int:
     bytes from its cache). Returns the bytes received (compressed)."""
     import json
 
-    from ..experiments.folders import atomic_file, output_lock, prepare_output
+    from ..tool.folders import atomic_file, output_lock, prepare_output
     if not files:
         return 0
     with output_lock(folder):

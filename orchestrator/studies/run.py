@@ -9,7 +9,7 @@ import time
 from contextlib import nullcontext
 from pathlib import Path
 
-from ..experiments.folders import output_lock, write_json
+from ..tool.folders import output_lock, write_json
 from .study import (MAX_CASES, STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, Shipping, Study, StudyError,
                     StudyTable, cases, fingerprint, prepare)
 from .study_plots import plot_study

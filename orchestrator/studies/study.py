@@ -9,7 +9,7 @@ scenario and what varies:
   grid point, so the laws of a robustness study see the same plants);
 * ``[tune]``: minimize the objective over the gains of each law (orchestrator.studies.tuning).
 
-Every case runs through the real FMUs (orchestrator.experiments.results.run_scenario) in a Dask
+Every case runs through the real FMUs (orchestrator.tool.results.run_scenario) in a Dask
 worker process, into its own folder ``OUTPUT/cases/CASE``. Workers get only plain data
 (the base scenario as a dict, the changes, paths); each loads the FMUs itself. Rows
 (parameters, metrics, status, wall time) are appended to ``OUTPUT/study.csv`` as cases
@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..experiments.config import require
-from ..experiments.scenario import Scenario
+from ..tool.config import require
+from ..tool.scenario import Scenario
 from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, this_plugin,
                      unpack_folder)
 from .study_file import Study, StudyError, apply_changes, base_value, load_study
@@ -143,9 +143,9 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     """
     from ..engine.errors import DivergenceError
     from ..engine.loaded import process_fmus
-    from ..experiments.results import run_scenario
-    from ..experiments.stops import stop_requested
-    from ..experiments.stability import cached_check
+    from ..tool.results import run_scenario
+    from ..tool.stops import stop_requested
+    from ..tool.stability import cached_check
 
     start = time.perf_counter()
     row = {"status": "failed", "error": "", "worker": f"{os.uname().nodename}:{os.getpid()}"}
@@ -199,8 +199,8 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
 def replace_fields(scenario: Scenario, **fields) -> Scenario:
     """A copy of ``scenario`` with top-level fields replaced and validated again, keeping the
     gains_file's values it has (Scenario.with_changes would read the file again)."""
-    from ..experiments.config import build
-    from ..experiments.scenario import ScenarioError
+    from ..tool.config import build
+    from ..tool.scenario import ScenarioError
     return build(dataclasses.replace, ScenarioError, scenario, **fields)
 
 
@@ -215,8 +215,8 @@ def case_scenario(base: dict, changes: dict, gain_files: dict) -> Scenario:
     (ScenarioError "case: ..." names the key), reading no file: a gains_file the changes name
     takes its values from ``gain_files`` ({path: preset, or the error text of reading it}), the
     base's own from base["gain_file_values"]."""
-    from ..experiments.config import build
-    from ..experiments.scenario import ScenarioError
+    from ..tool.config import build
+    from ..tool.scenario import ScenarioError
     fields = dict(base)
     for key, value in changes.items():
         section, dot, name = key.partition(".")
@@ -241,7 +241,7 @@ def case_flag(spectral_radius: float | None, saturation_fraction_max: float | No
     """The study.csv flag of a case: "unstable" (or "marginal") by the stability verdict of its
     spectral radius, "saturated" if a motor's force command is at the limit in more than
     SATURATION_FLAG of the samples; joined with "+", "" for neither (or unknown)."""
-    from ..experiments.stability import verdict_for
+    from ..tool.stability import verdict_for
     flags = []
     if spectral_radius is not None and verdict_for(spectral_radius) != "stable":
         flags.append(verdict_for(spectral_radius))
@@ -499,7 +499,7 @@ class CaseRunner:
         meanwhile."""
         from dask.distributed import wait
 
-        from ..experiments.stops import request_stop
+        from ..tool.stops import request_stop
         try:
             if self.client.nthreads():
                 self.client.run(request_stop, self.token, signum, on_error="ignore")

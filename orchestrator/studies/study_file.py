@@ -1,6 +1,6 @@
 """The study file (see orchestrator.studies.study): [study], [set], [grid], [monte_carlo] and
 [tune] as pydantic models whose rules give the one-line messages of
-orchestrator.experiments.config; load_study validates a file, then looks for its base scenario
+orchestrator.tool.config; load_study validates a file, then looks for its base scenario
 and checks it with the study's changes (the only steps that read files)."""
 
 import math
@@ -15,8 +15,8 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from tapmp.errors import allowed_are, suggestion
 from tapmp.params import GAIN_NAMES
 
-from ..experiments.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
-from ..experiments.scenario import SECTION_PARAMS, Scenario, ScenarioError, load
+from ..tool.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
+from ..tool.scenario import SECTION_PARAMS, Scenario, ScenarioError, load
 
 DISTRIBUTIONS = ("uniform", "loguniform", "normal")
 _SECTIONS = ("plant", "controller", "trajectory")

@@ -5,9 +5,9 @@ scipy.optimize.differential_evolution searches the base-10 logarithm of the tune
 ``workers`` as one batch; ``TuneObjective.map`` runs the batch as cases on the Dask
 workers (through the real FMUs, orchestrator.studies.study.run_case) and records every
 evaluation as a row of study.csv. A candidate that the stability pre-check
-(orchestrator.experiments.stability) finds not stable is rejected without running (status
+(orchestrator.tool.stability) finds not stable is rejected without running (status
 "rejected"); so is a stable candidate whose peak sensitivity Ms on any mode (common, the two
-differential modes; orchestrator.experiments.robustness.mode_peaks, the loop of `tapmp analyze`)
+differential modes; orchestrator.tool.robustness.mode_peaks, the loop of `tapmp analyze`)
 exceeds the [tune] table's ms_bound (default 2, the usual 6 dB guideline): the objective is
 minimized subject to that robustness bound, so two tuned laws are compared at a stated, equal
 robustness ceiling. Rejected and failed candidates score PENALTY_UM, and a law none of whose
@@ -34,8 +34,8 @@ from scipy.optimize import differential_evolution
 
 from tapmp.params import GAIN_NAMES
 
-from ..experiments.config import require
-from ..experiments.scenario import load_gain_file
+from ..tool.config import require
+from ..tool.scenario import load_gain_file
 from .study import PENALTY_UM, STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, case_value, fingerprint, prepare
 from .study_file import StudyError, apply_changes
 
@@ -54,8 +54,8 @@ class TuneObjective:
     def beyond_bound(self, case: dict) -> str:
         """Why the candidate is beyond ms_bound ("" if it is not, or if its loop is not stable:
         the stability pre-check of run_case rejects that one)."""
-        from ..experiments.robustness import mode_peaks
-        from ..experiments.stability import check
+        from ..tool.robustness import mode_peaks
+        from ..tool.stability import check
         if self.ms_bound is None or self.scenario is None:
             return ""
         sc = apply_changes(self.scenario, case["changes"], "tune")
@@ -116,7 +116,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
     """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png
     into out/tuning, or into the table's write_to folder if ``write_docs``. ``ship``: how the
     cases reach the workers (study.Shipping; default the local cluster's)."""
-    from ..experiments.folders import write_json
+    from ..tool.folders import write_json
 
     spec = study.tune
     fp = fingerprint(study, [])
@@ -209,7 +209,8 @@ def _compare(study, ssp, client, out, table, results, spec, progress, ship=None)
 
 def _comparison_md(path: Path, study, short, results, compare, spec, command) -> str:
     """comparison.md: starting vs tuned gains per law, and SC-DC vs APD-DC with both laws tuned."""
-    from ..experiments.report import comparison_tables
+    from ..paper.paper_tables import reference_rows
+    from ..tool.report import comparison_tables
     from .study import objective
 
     base = compare["base"]
@@ -254,7 +255,7 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
     if all(tuned.values()) and len(tuned) == 2:
         lines += ["", "## SC-DC vs APD-DC, both laws tuned", "",
                   "Laid out like `tapmp compare` (paper Tables 1-3): both rows use their own tuned gains.", "",
-                  comparison_tables(base.name, tuned)]
+                  comparison_tables(tuned, reference_rows(base.name))]
     text = "\n".join(lines) + "\n"
     path.write_text(text)
     return text

@@ -1,6 +1,6 @@
 /* The FMI-free closed loop in C: trajectory -> controller -> plant stepped N macro steps in one
  * call, the same calls in the same order as tapmp.closed_loop.simulate (the readable Python
- * reference), so both give the same doubles. Python runs it through cffi (tapmp/native.py reads
+ * reference), so both give the same doubles. Python runs it through cffi (tapmp/cmodel.py reads
  * these declarations from this file, as it reads tapmp_model.h). */
 #ifndef TAPMP_LOOP_H
 #define TAPMP_LOOP_H

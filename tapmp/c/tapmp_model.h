@@ -5,10 +5,10 @@
  *
  * This is the one implementation of the equations: the native FMUs compile it in, and the
  * Python package (hence the pythonfmu FMUs and the FMI-free loop) calls it through cffi
- * (tapmp/native.py reads the declarations below from this file). The Python modules
+ * (tapmp/cmodel.py reads the declarations below from this file). The Python modules
  * kinematics.py, dynamics.py, plant.py (derivatives), control.py and trajectory.py write the
  * same equations readably with the paper's numbers, evaluated in the same order;
- * tests/model/test_native_model.py checks every function on random states against them. */
+ * tests/model/test_cmodel.py checks every function on random states against them. */
 #ifndef TAPMP_MODEL_H
 #define TAPMP_MODEL_H
 
@@ -103,7 +103,7 @@ typedef struct {
 /* Every setting of each model: one member per parameter of its FMU, named by the column `field`
  * of the settings table (tapmp/interface.py). From that table are generated the FMUs' reading of
  * their variables into these structs (MODEL_READ_SETTINGS in model_vars.h), the Python side's
- * filling by name (tapmp.native.settings) and the range checks below (tapmp_settings.h). */
+ * filling by name (tapmp.cmodel.settings) and the range checks below (tapmp_settings.h). */
 typedef struct {
     tapmp_params p;
     tapmp_plant_config c;

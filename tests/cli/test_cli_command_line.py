@@ -19,6 +19,7 @@ def _produced_by(folder: Path) -> str:
     return line.removeprefix("Produced by `").removesuffix("`.")
 
 
+@pytest.mark.slow  # a whole comparison: every baseline, its robustness analysis and figures (15-30 s)
 def test_main_from_code_records_its_argv_with_the_top_level_options(built, tmp_path, monkeypatch, capsys):
     # sys.argv is not what main parses here: the old record "tapmp compare " + sys.argv[2:] was wrong twice
     monkeypatch.setattr(sys, "argv", ["pytest", "-q", "tests/test_cli_command_line.py"])
@@ -63,7 +64,7 @@ def test_a_programming_error_keeps_its_traceback(error, monkeypatch, capsys):
     # a bug inside the stability check (a plain ValueError or a TypeError) is not a user error
     def broken(scenario):
         raise error
-    monkeypatch.setattr("orchestrator.experiments.stability.check", broken)
+    monkeypatch.setattr("orchestrator.tool.stability.check", broken)
     with pytest.raises(type(error), match=str(error).split("(")[0]):
         main(["check", PAPER])
     assert "error:" not in capsys.readouterr().err
@@ -82,8 +83,8 @@ def test_a_worker_keeps_bad_input_one_line_and_a_plain_value_error_a_programming
     # a run in a worker process comes back to the parent by its message: the project's own
     # ValueErrors (bad input) as UsageError, a plain ValueError as ValueError (not one line)
     from orchestrator.errors import UsageError
-    from orchestrator.experiments import pool
-    from orchestrator.experiments.scenario import ScenarioError
+    from orchestrator.tool import pool
+    from orchestrator.tool.scenario import ScenarioError
 
     for err, expected in ((ScenarioError("step = -1.0 is invalid: allowed is a number > 0"), UsageError),
                           (ValueError("math domain error"), ValueError)):

@@ -33,8 +33,8 @@ def tapmp(*args, tmp_path, timeout=300):
 ])
 def test_check_prints_the_verdict_and_spectral_radius_and_exits_0_only_when_stable(tmp_path, sets, code,
                                                                                     verdict, rho):
-    from orchestrator.experiments.scenario import load
-    from orchestrator.experiments.stability import check
+    from orchestrator.tool.scenario import load
+    from orchestrator.tool.stability import check
     res = tapmp("check", PAPER, *[a for s in sets for a in ("--set", s)], "--eigenvalues", tmp_path=tmp_path)
     assert res.returncode == code, res.stderr
     lines = res.stdout.splitlines()
@@ -89,7 +89,7 @@ def test_workers_below_one_are_refused_alike_by_study_and_reproduce(built, tmp_p
 
 
 def test_reproduce_writes_the_page_with_the_numbers_of_its_runs(built, tmp_path):
-    from orchestrator.experiments.baselines import BASELINES
+    from orchestrator.tool.baselines import BASELINES
     scenarios = tmp_path / "scenarios"
     scenarios.mkdir()
     for name in ("paper_simulation", "paper_experiment"):

@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-from conftest import PAPER, ROOT
+from tests.support.runs import PAPER
+from tests.support.shared import ROOT
 
 pytestmark = pytest.mark.slow  # every case runs the CLI in a child process
 

@@ -10,7 +10,7 @@ import pytest
 
 from orchestrator import cli
 from orchestrator.engine.families import data_dir
-from orchestrator.experiments.scenario import RESULT_FORMATS
+from orchestrator.tool.scenario import RESULT_FORMATS
 
 pytestmark = pytest.mark.slow  # child processes
 
@@ -35,6 +35,13 @@ def test_help_and_a_refused_option_load_no_numerical_library(tmp_path, argv):
     loaded = _modules_loaded_by(argv, tmp_path)
     assert "orchestrator" in loaded and "argparse" in loaded
     assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
+
+
+def test_a_run_loads_no_dask(tmp_path):
+    # the error types the CLI reports as one line include the studies' (StudyError): naming them
+    # must not import the study runner and Dask (about 0.6 s of every `tapmp run`)
+    loaded = _modules_loaded_by(["run", str(tmp_path / "missing.toml")], tmp_path)
+    assert "orchestrator" in loaded and not loaded & {"dask", "distributed"}, sorted(loaded & {"dask", "distributed"})
 
 
 def test_the_help_lists_every_subcommand_and_the_shipped_names(tmp_path):
@@ -98,9 +105,9 @@ def test_a_shipped_study_is_found_by_name_like_a_shipped_scenario(tmp_path):
 
 def test_check_prints_a_growth_factor_just_above_1_with_the_digits_that_show_it(tmp_path):
     # Theorem 1's counterexample at a 1 us step: the worst mode grows by about 2e-5 per step
-    from test_theorem1 import COUNTER
-    from orchestrator.experiments.scenario import load
-    from orchestrator.experiments.stability import check
+    from tests.paper.test_theorem1 import COUNTER
+    from orchestrator.tool.scenario import load
+    from orchestrator.tool.stability import check
     scenario = tmp_path / "theorem1.toml"
     scenario.write_text('name = "theorem1"\nstop_time = 0.01\nstep = 1e-6\n[gain_overrides]\n'
                         + "".join(f"{k} = {v[0]!r}\n" for k, v in COUNTER.items()))

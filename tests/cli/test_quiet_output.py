@@ -9,9 +9,9 @@ import sys
 
 import pytest
 
-from conftest import PAPER
-from orchestrator.experiments.baselines import BASELINES
-from orchestrator.experiments.progress import Progress
+from tests.support.runs import PAPER
+from orchestrator.tool.baselines import BASELINES
+from orchestrator.tool.progress import Progress
 
 pytestmark = pytest.mark.slow  # tapmp compare in a child process
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.experiments.roles import ROLES, SCENARIO_TABLES
-from orchestrator.experiments.scenario import TABLES
+from orchestrator.tool.roles import ROLES, SCENARIO_TABLES
+from orchestrator.tool.scenario import TABLES
 from tapmp.errors import allowed_are, suggestion
 
 pytestmark = pytest.mark.slow  # every case runs the CLI in a child process

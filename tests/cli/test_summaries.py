@@ -54,3 +54,10 @@ def test_compare_prints_the_steady_error_per_mode_of_every_run(native_built, tmp
         means = _modes(json.loads((out / name / "metrics.json").read_text()))
         assert rows[name][-3:] == [f"{v:+.4f}" for v in means]
     assert not any(line.startswith("move (") for line in printed)  # no move in this scenario
+    # one direction in both summaries: SC-DC's reduction against each run, the same numbers as the
+    # summary table of comparison.md, row for row (SC-DC against itself: 0)
+    md = (out / "comparison.md").read_text().split("## SC-DC against each run")[1].split("\n\n")[1].splitlines()[2:]
+    md_reductions = [[c.strip() for c in line.split("|")[4:6]] for line in md]
+    printed_rows = [line.split() for line in printed[header + 1:header + 1 + len(runs)]]
+    assert [[r[3].rstrip("%"), r[4].rstrip("%")] for r in printed_rows] == md_reductions
+    assert rows["sc-dc"][3:5] == ["+0.0%", "+0.0%"]

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.engine import stepper
-from tapmp import native
+from tapmp import cmodel
 from tapmp.toolchain import compile_c
 
 pytestmark = pytest.mark.slow  # child processes, a C compile
@@ -47,8 +47,8 @@ def planted_library(tmp_path_factory):
 def names(cache: Path) -> dict:
     """{"model" | "stepper": the path in ``cache`` each library is loaded from}."""
     env = {**os.environ, "TAPMP_CACHE": str(cache)}
-    code = ("from tapmp import native; from orchestrator.engine import stepper; "
-            "print(native.cached_library_path()); print(stepper.library_path())")
+    code = ("from tapmp import cmodel; from orchestrator.engine import stepper; "
+            "print(cmodel.cached_library_path()); print(stepper.library_path())")
     model, core = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                                  check=True).stdout.split()
     return {"model": Path(model), "stepper": Path(core)}
@@ -69,7 +69,7 @@ def own_libraries(cache: Path) -> dict:
     this user, copied from the default cache; returns their paths."""
     cache.mkdir(mode=0o700)
     paths = names(cache)
-    shutil.copyfile(native.library_path(), paths["model"])
+    shutil.copyfile(cmodel.library_path(), paths["model"])
     shutil.copyfile(stepper.build(), paths["stepper"])
     for p in paths.values():
         p.chmod(0o755)

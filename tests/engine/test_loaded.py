@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import paper_scenario
+from tests.support.runs import paper_scenario
 from orchestrator.engine.loaded import LoadedFMUs
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.experiments.envelope import envelope
-from orchestrator.experiments.roles import ROLES, SCENARIO_TABLES
+from orchestrator.tool.envelope import envelope
+from orchestrator.tool.roles import ROLES, SCENARIO_TABLES
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -18,7 +18,7 @@ import subprocess
 import zipfile
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import lief
 
 lief.logging.disable()  # its notes on optional sections it skips
@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY
-from test_native_hosts import HEADERS, compile_host, host_args, outputs, parse, run_linux_host, unzip
+from tests.fmu.test_native_hosts import HEADERS, compile_host, host_args, outputs, parse, run_linux_host, unzip
 
 pytestmark = pytest.mark.slow  # aarch64 binaries under qemu, every platform's binaries
 

@@ -12,7 +12,7 @@ import pytest
 from fmpy.ssp.ssd import read_ssd
 
 from orchestrator.cli import main
-from orchestrator.engine import units
+from orchestrator.engine import instance
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES
 
@@ -104,8 +104,8 @@ def test_bad_ssp_is_rejected_by_the_loader_naming_the_file_before_any_fmu_runs(b
     path, message = broken[case]
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where the loader extracts the SSP
     instantiated = []
-    real = units.FMU2Slave.instantiate
-    monkeypatch.setattr(units.FMU2Slave, "instantiate",
+    real = instance.FMU2Slave.instantiate
+    monkeypatch.setattr(instance.FMU2Slave, "instantiate",
                         lambda self, *a, **k: instantiated.append(self) or real(self, *a, **k))
     with pytest.raises(CoSimulationError, match=message) as info:
         with CoSimulation(path, {}):

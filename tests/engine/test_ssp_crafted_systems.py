@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from faults import faulty_plant_fmu, faulty_ssp
+from tests.support.faults import faulty_plant_fmu, faulty_ssp
 
 pytestmark = pytest.mark.slow  # every case runs tapmp run in a child process
 
@@ -177,8 +177,8 @@ WARNING_STEP = """
 
 def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
     from orchestrator.engine.master import CoSimulation
-    from orchestrator.experiments.roles import ROLES
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.roles import ROLES
+    from orchestrator.tool.scenario import load
 
     plant = faulty_plant_fmu(tmp_path, WARNING_STEP, "The real plant, logging a warning (not an error) on every "
                                                       "step from t = 0.5 ms.")

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 from orchestrator.engine import stepper
-from tapmp import native
+from tapmp import cmodel
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.envelope import envelope
-from orchestrator.experiments.reading import read_results
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.stops import request_stop
-from conftest import PAPER, paper_scenario
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.envelope import envelope
+from orchestrator.tool.reading import read_results
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.stops import request_stop
+from tests.support.runs import PAPER, paper_scenario
 
 
 def rows_of(ssp, scenario, stepper_kind, ordering, clock="exact", blocks=(7, 300, 193)):
@@ -141,11 +141,11 @@ def test_the_core_is_built_once_into_the_cache_folder(tmp_path, monkeypatch):
 def test_a_core_that_cannot_be_built_is_one_line_and_the_run_steps_in_python(tmp_path, built, monkeypatch):
     """No compiler: `tapmp run` says so in one line and completes with the Python loop (the C
     model's library is there, as after any build: only the stepping core is missing)."""
-    library = native.library_path()
+    library = cmodel.library_path()
     monkeypatch.setenv("TAPMP_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
     (tmp_path / "cache").mkdir()
-    shutil.copyfile(library, native.cached_library_path())
+    shutil.copyfile(library, cmodel.cached_library_path())
     env = dict(os.environ, TAPMP_CACHE=str(tmp_path / "cache"), CC=str(tmp_path / "no-such-cc"),
                TMPDIR=str(tmp_path))
     env.pop("TAPMP_STEPPER", None)
@@ -171,7 +171,7 @@ def test_a_bad_stepper_is_refused_naming_the_allowed_values(built, monkeypatch):
 def test_csv_rows_read_back_to_the_same_doubles_at_every_magnitude():
     """Shortest round-trip text for every magnitude and sign, subnormals and the extremes
     included; a block with a non-finite value is written with Python's repr."""
-    from orchestrator.experiments.writers import format_csv_rows
+    from orchestrator.tool.writers import format_csv_rows
     rng = np.random.default_rng(7)
     block = rng.standard_normal((300, 12)) * np.logspace(-310, 300, 12)
     block[0, :6] = [0.0, -0.0, 5e-324, 1.7976931348623157e308, 1e-05, 0.1]

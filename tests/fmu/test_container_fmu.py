@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from fmpy import read_model_description
 
 from orchestrator.engine.container import CONTAINER

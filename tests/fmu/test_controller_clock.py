@@ -11,8 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from conftest import call_status, paper_scenario
-from fmu_host import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, REF, Host
+from tests.support.fmus import call_status
+from tests.support.runs import paper_scenario
+from tests.support.fmu_host import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, REF, Host
 from tapmp.control import SAMPLE_TOLERANCE, ControllerModel, Gains, sample_index
 from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
@@ -253,8 +254,8 @@ def test_scenario_step_is_the_sample_period(native_built):
     once per step: the native closed loop at 50 us equals the Python model's FMI-free loop
     (tapmp.closed_loop.simulate, same parameters) within 1e-12 N, and T_s in [controller] is
     refused."""
-    from conftest import COMMANDS, orchestrator_rows
-    from orchestrator.experiments.scenario import ScenarioError
+    from tests.support.runs import COMMANDS, orchestrator_rows
+    from orchestrator.tool.scenario import ScenarioError
     from tapmp.closed_loop import simulate
 
     sc = paper_scenario(0.02, "step=5e-5")

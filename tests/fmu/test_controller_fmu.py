@@ -3,7 +3,7 @@
 import math
 
 import pytest
-from conftest import call_status
+from tests.support.fmus import call_status
 
 from tapmp.control import ControllerModel, Gains
 from tapmp.interface import CONTROLLER, TRAJECTORY
@@ -165,7 +165,7 @@ PID_GAINS = dict(kp_c=500.0, kv_c=0.5, ki_c=3000.0, kp_d=2000.0, kv_d=0.8, ki_d=
 @pytest.mark.parametrize("family", ["python", "native"])
 def test_controller_fmu_law_2_is_pid_dc_in_both_families(built, native_built, load_fmu, family):
     """law = 2 with the six modal gains set: the FMU's commands and errors follow the plain
-    PID-DC controller (tapmp.control.pid_command, integral of e) over 200 samples."""
+    PID-DC controller (tapmp.control.ControllerModel with law PIDDC, integral of e) over 200 samples."""
     from tapmp.control import PIDDC, ModalGains
     path = built[CONTROLLER] if family == "python" else native_built["fmi2"][CONTROLLER]
     fmu = load_fmu(path)

@@ -15,8 +15,8 @@ from xml.etree import ElementTree as ET
 import pytest
 from fmpy import read_model_description
 
-from fmu_host import Host
-from fmil_gaps import fmil_messages, terminal_messages
+from tests.support.fmu_host import Host
+from tests.support.fmil_gaps import fmil_messages, terminal_messages
 from orchestrator.engine.build_native import ME_STATES, state_derivative_dependencies
 from orchestrator.engine.container import CONTAINER, container_dependencies
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, dependencies

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
 from orchestrator.engine import families
 from orchestrator.cli import main
 
@@ -69,7 +69,7 @@ def test_the_paper_scenario_only_restates_every_fmus_defaults():
     defaults are the paper's simulation, the plant starting on the reference."""
     import struct
 
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     from tapmp.interface import ELEMENT, INITIAL_STATE, VARIABLES
     from tapmp.trajectory import TrajectoryParams, reference
 
@@ -89,7 +89,7 @@ def test_native_fmus_wired_with_their_defaults_run_the_paper_scenario_bit_for_bi
     """The master on the native SSP with no parameter set gives the same doubles as the paper
     scenario with its parameters, in both orderings."""
     from orchestrator.engine.master import CoSimulation
-    from orchestrator.experiments.roles import ROLES
+    from orchestrator.tool.roles import ROLES
 
     scenario = paper_scenario(0.05)
     names = MOTOR_POSITIONS + COMMANDS

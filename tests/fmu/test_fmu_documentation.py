@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PAPER, ROOT, shared
+from tests.support.runs import PAPER
+from tests.support.shared import ROOT, shared
 
 from orchestrator.engine import fmu_extras
 from orchestrator.engine.fmu_extras import LS_REF, SCENARIO
@@ -104,7 +105,7 @@ def test_the_parameter_set_is_the_paper_scenario_and_every_fmu_parameter(host_bu
     scenarios/paper_simulation.toml gives (parsed by FMPy's SSV reader)."""
     from fmpy.ssp.ssd import read_ssv
 
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     scenario = load(PAPER).parameters()
     for family, model in CASES:
         path = Path(host_built[family][model]).with_suffix(".ssv")
@@ -119,7 +120,7 @@ def test_the_parameter_set_is_the_paper_scenario_and_every_fmu_parameter(host_bu
 def test_the_stimulus_is_what_the_fmus_receive_in_the_paper_closed_loop():
     """closed_loop_stimulus from the defaults equals tapmp.closed_loop on the paper scenario's
     own models: the plant's commands are the ones the Gauss-Seidel loop applies."""
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     from tapmp.closed_loop import simulate
 
     plant, ctrl, traj = load(PAPER).plain_models()

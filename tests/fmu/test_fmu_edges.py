@@ -14,7 +14,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from conftest import call_status
+from tests.support.fmus import call_status
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
 
 FAMILIES = ("python", "native")

@@ -25,7 +25,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
+from tests.support.ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT
 
 pytestmark = pytest.mark.slow  # sanitizer builds of every FMU, call sequences under AddressSanitizer
@@ -63,7 +63,7 @@ def test_the_risky_call_sequences_run_clean_under_the_sanitizers(native_built, f
 @pytest.mark.parametrize("family", FAMILIES)
 def test_the_c_hosts_built_with_sanitizers_step_sanitized_fmus_like_fmpy_steps_the_shipped(
         native_built, family, model, tmp_path):
-    from test_native_hosts import fmpy_run, host_args, parse, unzip
+    from tests.fmu.test_native_hosts import fmpy_run, host_args, parse, unzip
     fmu = native_built[family][model]
     fmu_dir = unzip(fmu, tmp_path / "fmu")
     src = extract_sources(fmu, tmp_path / "src")
@@ -84,7 +84,7 @@ def test_the_c_hosts_built_with_sanitizers_step_sanitized_fmus_like_fmpy_steps_t
 
 @pytest.mark.parametrize("family", FAMILIES)
 def test_the_closed_loop_of_the_three_linked_fmus_runs_clean_under_the_sanitizers(native_built, family, tmp_path):
-    from test_source_fmus import build_static_loop
+    from tests.fmu.test_source_fmus import build_static_loop
     steps = 2000
     plain = build_static_loop(native_built[family], family, tmp_path / "plain")
     sanitized = build_static_loop(native_built[family], family, tmp_path / "sanitized", flags=SANITIZE)

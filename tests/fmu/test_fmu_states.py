@@ -8,8 +8,8 @@ import math
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from fmu_host import Host
-from fmu_states import NATIVE_HIDDEN, SerializedState
+from tests.support.fmu_host import Host
+from tests.support.fmu_states import NATIVE_HIDDEN, SerializedState
 
 FAMILIES = ("python", "fmi2", "fmi3")
 PLANT, CONTROLLER = "TAPMP_Plant", "TAPMP_Controller"

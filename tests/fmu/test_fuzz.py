@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from ctools import compile_c, extract_sources
+from tests.support.ctools import compile_c, extract_sources
 from tapmp.interface import FMU_NAMES
 
 pytestmark = pytest.mark.slow  # libFuzzer runs each target for TAPMP_FUZZ_SECONDS (60 s by default)
@@ -54,7 +54,7 @@ def fuzz_targets(native_built, tmp_path_factory):
 def state_seeds(native_built, tmp_path_factory):
     """{model: folder} of real serialized states of each FMI 2.0 FMU (fmpy): in Initialization
     Mode, after initialization, after some steps with inputs, and terminated."""
-    from fmu_host import Host
+    from tests.support.fmu_host import Host
     root = tmp_path_factory.mktemp("state_seeds")
     seeds = {}
     for model in FMU_NAMES:

@@ -22,7 +22,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-import compatibility
+from tests.interop import compatibility
 import fmpy
 import lief
 import numpy as np

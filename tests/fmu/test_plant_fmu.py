@@ -4,7 +4,7 @@ import math
 import zipfile
 
 import pytest
-from conftest import call_status
+from tests.support.fmus import call_status
 
 from tapmp.interface import PLANT
 from tapmp.params import PAPER_MODEL

@@ -5,7 +5,7 @@ are not (the quantization is really applied to q_i only)."""
 
 import numpy as np
 import pytest
-from conftest import orchestrator_rows, paper_scenario
+from tests.support.runs import orchestrator_rows, paper_scenario
 
 from tapmp.interface import PLANT_VARS
 

@@ -3,7 +3,7 @@
 * ThreadSanitizer: a C host (c_host/threads_host.c) runs two threads, each with instances of its
   own of one native FMU (FMI 2.0 and 3.0), creating and freeing instances and states all the
   time; the runtime's registry of live instances, which both change and read, reports no race.
-* AddressSanitizer: uri_to_path (fmu_common/native/uri.h, the pythonfmu FMUs'
+* AddressSanitizer: uri_to_path (fmu_common/pyfront/uri.h, the pythonfmu FMUs'
   fmuResourceLocation) refuses a '%' without two hex digits after it, at the end and in the
   middle, and never reads past the terminating zero (c_host/uri_host.c).
 """
@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
+from tests.support.ctools import SANITIZE, SANITIZER_ENV, compile_c, extract_sources
 from tapmp.interface import FMU_NAMES
 
 pytestmark = pytest.mark.slow  # sanitizer builds and child processes
 
 ROOT = Path(__file__).resolve().parents[2]
 C_HOST = ROOT / "tests" / "fmu" / "c_host"
-NATIVE_DIR = ROOT / "fmu_common" / "native"
+PYFRONT_DIR = ROOT / "fmu_common" / "pyfront"
 TSAN_EXIT = 66  # ThreadSanitizer's exit code after a report
 ENV = {"PATH": os.environ["PATH"], **SANITIZER_ENV, "TSAN_OPTIONS": f"halt_on_error=0:exitcode={TSAN_EXIT}"}
 
@@ -55,7 +55,7 @@ URIS = {
 
 def test_uri_to_path_refuses_short_escapes_and_never_reads_past_the_end(tmp_path):
     exe = tmp_path / "uri_host"
-    proc = compile_c(["-std=c99", "-Wall", "-Wextra", *SANITIZE, f"-I{NATIVE_DIR}", "-o", exe,
+    proc = compile_c(["-std=c99", "-Wall", "-Wextra", *SANITIZE, f"-I{PYFRONT_DIR}", "-o", exe,
                       C_HOST / "uri_host.c"])
     assert proc.returncode == 0, proc.stderr
     run = subprocess.run([str(exe), *URIS], capture_output=True, text=True, timeout=60, env=ENV)

@@ -10,7 +10,7 @@ import pytest
 from fmpy import simulate_fmu
 
 from orchestrator.cli import main
-from tapmp import native, toolchain
+from tapmp import cmodel, toolchain
 from tapmp.errors import ModelInputError
 from tapmp.interface import TRAJECTORY, VARIABLES, allowed_text
 from tapmp.trajectory import TrajectoryParams
@@ -57,7 +57,7 @@ def fmu_errors(path, start_values) -> list[str]:
 @pytest.mark.parametrize("model, v", SETTINGS, ids=[f"{m}.{v.name}" for m, v in SETTINGS])
 def test_a_setting_outside_its_range_is_refused_alike_by_the_model_and_every_family(families, model, v):
     with pytest.raises(ModelInputError) as err:
-        native.check_settings(model, {v.name: outside(v)})
+        cmodel.check_settings(model, {v.name: outside(v)})
     assert str(err.value) == refusal(v)
     for family, fmus in families.items():
         errors = fmu_errors(fmus[model], {v.name: outside(v)})

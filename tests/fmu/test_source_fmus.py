@@ -30,8 +30,8 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import read_build_description
 
-from ctools import compile_c, extract_sources
-from fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
+from tests.support.ctools import compile_c, extract_sources
+from tests.support.fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
 from tapmp.interface import CONNECTIONS, CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 
 ROOT = Path(__file__).resolve().parents[2]

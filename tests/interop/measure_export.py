@@ -22,10 +22,11 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE), str(HERE.parent)]  # this folder's tests and tests/conftest.py
-from conftest import COMMANDS, MOTOR_POSITIONS, ROOT, orchestrator_rows, paper_scenario  # noqa: E402
-from test_export import (run_container, run_ecos_executable, run_ecos_exported,  # noqa: E402
-                         run_fmpy_ssp_exported, run_libcosim_exported)
+sys.path[:0] = [str(HERE.parent.parent)]  # the repository root: the tests package
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario  # noqa: E402
+from tests.support.shared import ROOT  # noqa: E402
+from tests.interop.test_export import (run_container, run_ecos_executable, run_ecos_exported,  # noqa: E402
+                                       run_fmpy_ssp_exported, run_libcosim_exported)
 
 from orchestrator.engine.families import family_ssp  # noqa: E402
 

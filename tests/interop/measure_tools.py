@@ -23,13 +23,14 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE), str(HERE.parent)]  # this folder's tests and tests/conftest.py
-from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, ROOT, SHARED, orchestrator_rows, paper_scenario  # noqa: E402
+sys.path[:0] = [str(HERE.parent.parent)]  # the repository root: the tests package
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario  # noqa: E402
+from tests.support.shared import ROOT, SHARED  # noqa: E402
 from fmpy import simulate_fmu  # noqa: E402
-from measure_export import fmt, gaps  # noqa: E402
-from test_fmusim import FMUSIM, START  # noqa: E402
-from test_omsimulator import (FIXED_POINT, OMS, at_communication_points, read_mat,  # noqa: E402
-                              runnable)
+from tests.interop.measure_export import fmt, gaps  # noqa: E402
+from tests.interop.test_fmusim import FMUSIM, START  # noqa: E402
+from tests.interop.test_omsimulator import (FIXED_POINT, OMS, at_communication_points, read_mat,  # noqa: E402
+                                            runnable)
 
 from orchestrator.cli import main as tapmp  # noqa: E402
 from tapmp.interface import FMU_NAMES  # noqa: E402

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-import compatibility
+from tests.interop import compatibility
 import pytest
 
 

@@ -8,7 +8,7 @@ import re
 import zipfile
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import fmpy
 import numpy as np
 import pytest

@@ -11,10 +11,10 @@ ordering = "jacobi" and clock = "accumulated" (connections propagated, the defau
 import os
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from ecospy import EcosSimulation
 
 NAMES = MOTOR_POSITIONS + COMMANDS

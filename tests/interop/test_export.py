@@ -18,16 +18,16 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
 
 from orchestrator.cli import main
 from orchestrator.engine import families
 from orchestrator.engine.container import CONTAINER
 from orchestrator.engine.ssp import OSP
-from orchestrator.experiments.export import SSD_MEMBER
+from orchestrator.tool.export import SSD_MEMBER
 from tapmp.interface import INITIAL_STATE as DEFAULT_STATE
 
 DEFAULT_DX0 = DEFAULT_STATE[3]  # m/s: the plant's default, the paper reference's start (25 mm/s)
@@ -135,7 +135,7 @@ def test_role_tables_are_bound_to_renamed_elements_and_libcosim_runs_them(built,
     """On an SSP whose elements are named otherwise (ref, ctl, axis) the scenario's [trajectory],
     [controller] and [plant] tables go to the elements whose FMUs are those models, as in the
     master; libcosim then gives the original system's results bit for bit."""
-    from test_master_any_ssp import RENAME, rewrite_ssp
+    from tests.engine.master.test_master_any_ssp import RENAME, rewrite_ssp
     renamed = rewrite_ssp(built["ssp"], tmp_path / "renamed.ssp", rename=RENAME)
     out = tmp_path / "renamed_export.ssp"
     assert main(["export", str(PAPER), "--out", str(out), "--ssp", str(renamed), "--set", "stop_time=0.05"]) == 0

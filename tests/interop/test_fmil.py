@@ -6,18 +6,18 @@ What FMIL reads back of the dependencies: tests/fmu/test_dependencies.py.
 
 FMIL 3.0.4 knows only part of the FMI 3.0 terminalsAndIcons schema: what it says about the native
 FMI 3.0 FMUs' valid terminalsAndIcons.xml is expected exactly, and nothing else
-(tests/fmu/fmil_gaps.py).
+(tests/support/fmil_gaps.py).
 """
 
 import re
 import subprocess
 from collections import Counter
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import shared
-from fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
+from tests.support.shared import shared
+from tests.support.fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
 from fmpy import simulate_fmu
 
 from orchestrator.engine.container import CONTAINER

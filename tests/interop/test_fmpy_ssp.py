@@ -11,10 +11,10 @@ The orchestrator with connection_start = "zero" and clock = "accumulated" reprod
 bit for bit; with its defaults the zero start moves the motors by up to ~0.1 um.
 """
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from fmpy.ssp.simulation import simulate_ssp
 from fmpy.ssp.ssd import Parameter, ParameterSet
 

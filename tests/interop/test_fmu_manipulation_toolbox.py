@@ -22,10 +22,10 @@ import sys
 import zipfile
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import orchestrator_rows, paper_scenario
+from tests.support.runs import orchestrator_rows, paper_scenario
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.ssp.ssd import read_ssd

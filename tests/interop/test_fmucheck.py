@@ -3,11 +3,11 @@ TAPMP_ClosedLoop.fmu (the three pythonfmu FMUs inside fmpy's container runtime; 
 themselves are checked in tests/fmu/test_native_hosts.py): no warning or error, and the values it
 records are fmpy's (fmuCheck writes 17 significant digits)."""
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
 from fmpy import simulate_fmu
-from test_native_hosts import run_fmu_check
+from tests.fmu.test_native_hosts import run_fmu_check
 
 from orchestrator.engine.container import CONTAINER
 

@@ -9,10 +9,10 @@ significant digits, so its results equal fmpy's simulate_fmu to the last printed
 import subprocess
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import shared
+from tests.support.shared import shared
 from fmpy import simulate_fmu
 
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT

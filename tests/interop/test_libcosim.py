@@ -11,10 +11,10 @@ h_k = t_{k+1} - t_k, which differ from k * 1e-4 in the last bit for ~30 % of k; 
 orchestrator's clock = "nanoseconds" reproduces that.
 """
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from libcosimpy.CosimEnums import CosimVariableType
 from libcosimpy.CosimExecution import CosimExecution
 from libcosimpy.CosimLogging import CosimLogLevel, log_output_level

@@ -17,12 +17,12 @@ CVODE 16 x, OMSimulator's CVODE 127 x, on dB). A state agrees if
 import subprocess
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import shared
+from tests.support.shared import shared
 from fmpy import simulate_fmu
-from test_omsimulator import omsimulator, read_mat, run_omsimulator  # noqa: F401 (omsimulator: its fixture)
+from tests.interop.test_omsimulator import omsimulator, read_mat, run_omsimulator  # noqa: F401 (omsimulator: its fixture)
 
 from tapmp.interface import PLANT
 

@@ -7,13 +7,13 @@
 * FMPy's simulate_fmu simulates each native FMI 3.0 FMU on its own.
 """
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
-from conftest import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from fmpy import simulate_fmu
-from test_ecos import run_ecos
-from test_libcosim import run_libcosim
+from tests.interop.test_ecos import run_ecos
+from tests.interop.test_libcosim import run_libcosim
 
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 

@@ -20,11 +20,12 @@ import subprocess
 import types
 from pathlib import Path
 
-import compatibility
+from tests.interop import compatibility
 import numpy as np
 import pytest
 import scipy.io
-from conftest import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario, shared
+from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
+from tests.support.shared import shared
 from fmpy import simulate_fmu
 
 from orchestrator.cli import main

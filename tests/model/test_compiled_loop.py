@@ -6,7 +6,7 @@ paper's gains at 1 us; the same error at the same step, and the models left in t
 import numpy as np
 import pytest
 
-from orchestrator.experiments.paper_gains import paper_scenario
+from orchestrator.paper.paper_gains import paper_scenario
 from tapmp.closed_loop import COLUMNS, run, simulate
 from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, ControllerModel, Gains
 from tapmp.errors import KinematicDomainError, ModelInputError

@@ -8,8 +8,8 @@ from hypothesis import strategies as st
 
 import numpy as np
 
-from tapmp.control import (APDDC, PIDDC, SCDC, ControllerModel, Gains, ModalGains, apd_command, feedforward,
-                           pid_command, scdc_command, sync_deviation, sync_errors)
+from tapmp.control import APDDC, PIDDC, SCDC, ControllerModel, Gains, ModalGains, sync_deviation
+from tests.support.control_reference import apd_command, feedforward, pid_command, scdc_command, sync_errors
 from tapmp.errors import ModelInputError
 from tapmp.kinematics import inverse, joint_velocity
 from tapmp.params import DEFAULT_MODAL_GAINS, PAPER_MODEL, gain_preset, scdc_modal_image

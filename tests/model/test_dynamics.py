@@ -7,14 +7,21 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tapmp.dynamics import (coriolis_eq13, coriolis_matrix, energy, mass_matrix, mass_matrix_eq13,
-                            task_acceleration)
+from tapmp.dynamics import coriolis_matrix, energy, mass_matrix, mass_matrix_eq13, task_acceleration
 from tapmp.errors import ModelInputError
 from tapmp.kinematics import jacobian
 from tapmp.params import PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel
 
 angles = st.floats(-1.5, 1.5)
+
+
+def coriolis_eq13(B: float, dB: float, p: ModelParams):
+    """The paper's closed-form C of Eq. 13 (assumes m_1 = m_3), the reference coriolis_matrix is
+    checked against."""
+    L, m1, c, s = p.L_1, p.m_1, math.cos(B), math.sin(B)
+    k = 2.0 * math.sqrt(3.0) * m1 * L * dB / 3.0
+    return ((0.0, 0.0, -k * s), (0.0, 0.0, k * c), (0.0, 0.0, 4.0 * m1 * L * L * dB * c * s / 3.0))
 
 
 @given(angles)

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.scenario import ScenarioError, load
+from tests.support.shared import ROOT
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.scenario import ScenarioError, load
 from tapmp.errors import ModelInputError
 from tapmp.params import PAPER_MODEL
 from tapmp.plant import IDEAL, PlantConfig, PlantModel, noise_sample

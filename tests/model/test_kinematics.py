@@ -8,11 +8,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tapmp.errors import KinematicDomainError
-from tapmp.kinematics import (S3, forward, inverse, jacobian, joint_velocity, solve_transpose,
-                              task_velocity, transpose_times)
+from tapmp.kinematics import (S3, forward, inverse, jacobian, joint_velocity, rotation_column, solve_transpose,
+                              task_velocity)
 
 L1 = 0.09
 poses = st.tuples(st.floats(-0.05, 0.05), st.floats(-0.05, 0.05), st.floats(-1.4, 1.4))
+
+
+def transpose_times(B: float, F1: float, F2: float, F3: float, L1: float) -> tuple[float, float, float]:
+    """J(x)^T F written out (Eq. 14): motor forces [N] -> generalized forces (u_X [N], u_Z [N],
+    u_B [N m]), the reference solve_transpose inverts."""
+    a1, a3 = rotation_column(B, L1)
+    return F1 + F2 + F3, S3 * (F1 - F3), a1 * F1 + a3 * F3
 
 
 @given(poses)

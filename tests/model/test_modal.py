@@ -5,9 +5,10 @@ import random
 
 import pytest
 
-from tapmp.control import Gains, apd_command, scdc_command, sync_deviation, sync_errors
-from tapmp.modal import (LAPLACIAN, MODES, apd_matrices, force_view, main, modal_gains, modal_table,
-                         pid_command, scdc_matrices)
+from tapmp.control import Gains, sync_deviation
+from tests.support.control_reference import apd_command, scdc_command, sync_errors
+from tapmp.modal import (LAPLACIAN, MODES, apd_matrices, force_view, modal_gains, modal_table, pid_command,
+                         scdc_matrices)
 from tapmp.params import GAIN_PRESETS
 
 
@@ -106,10 +107,15 @@ def test_non_uniform_gains_report_projection_and_coupling():
     assert sc[0].I == 0.0 and sc[0].coupling_I > 1e3
 
 
-def test_modal_table_and_command():
+def test_modal_table_and_command(capsys):
+    from orchestrator.cli import main
     text = modal_table(["default"])
     assert "| `default` | SC-DC | common (1,1,1)/sqrt3 | 324 | 0.36 | 0 | 7.902e+06 |" in text
     assert "| `default` | SC-DC | diff. Z (1,0,-1)/sqrt2 | 1278 | 0.36 | 4.86e+04 |" in text
     with pytest.raises(ValueError, match="'nope' is unknown"):
         modal_table(["nope"])
-    assert main(["nope"]) == 2
+    assert main(["modal", "nope"]) == 2
+    assert capsys.readouterr().err == ("error: preset = 'nope' is invalid: allowed are default, paper_simulation, "
+                                       "paper_experiment\n")
+    assert main(["modal", "default"]) == 0
+    assert capsys.readouterr().out == modal_table(["default"]) + "\n"

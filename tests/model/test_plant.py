@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tapmp import native
+from tapmp import cmodel
 from tapmp.errors import ModelInputError
 from tapmp.params import PAPER_MODEL
 from tapmp.plant import IDEAL, PlantConfig, PlantModel, quantize
@@ -72,7 +72,7 @@ def test_fused_right_hand_side_is_bit_identical_to_the_composed_one(X, Z, B, dX,
     plant = PlantModel(PAPER_MODEL, cfg, (0.001, -0.002, 0.01))
     lim = plant.cfg.force_limit
     held = [min(max(f, -lim), lim) for f in F]  # step() saturates the held command once
-    ffi, lib = native.load()
+    ffi, lib = cmodel.load()
     ds = ffi.new("double[6]")
     lib.tapmp_plant_rhs(plant._pl, [X, Z, B, dX, dZ, dB], held, ds)
     assert tuple(ds) == tuple(plant.derivatives([X, Z, B, dX, dZ, dB], *F))

@@ -10,15 +10,15 @@ from fmpy import extract, simulate_fmu
 from fmpy.fmi1 import FMICallException
 
 from orchestrator.cli import main
-from orchestrator.experiments import metrics
-from orchestrator.experiments.metrics import MoveSpec, compute
-from orchestrator.experiments.scenario import ScenarioError, load
+from orchestrator.tool import metrics
+from orchestrator.tool.metrics import MoveSpec, compute
+from orchestrator.tool.scenario import ScenarioError, load
 from tapmp.errors import ModelInputError
 from tapmp.interface import TRAJECTORY
 from tapmp.kinematics import inverse
 from tapmp.trajectory import TrajectoryParams, move_duration, move_plan, reference
 
-from conftest import ROOT
+from tests.support.shared import ROOT
 
 P2P = ROOT / "scenarios" / "point_to_point.toml"
 DEG = math.pi / 180.0

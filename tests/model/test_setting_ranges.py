@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from tapmp import native
+from tapmp import cmodel
 from tapmp.control import ControllerModel, Gains, ModalGains
 from tapmp.errors import KinematicDomainError, ModelInputError
 from tapmp.interface import PLANT, SETTINGS_STRUCT, VARIABLES
@@ -88,12 +88,12 @@ def test_the_settings_struct_is_filled_by_field_name_from_the_table():
         if v.causality != "parameter":
             continue
         marker = int(v.max) if v.type == "Integer" else v.max
-        s = native.settings(PLANT, {v.name: marker})
+        s = cmodel.settings(PLANT, {v.name: marker})
         member = s
         for part in v.field.replace("]", "").replace("[", ".").split("."):
             member = member[int(part)] if part.isdigit() else getattr(member, part)
         assert member == marker, v.name
-    assert native.load()[0].typeof(native.settings(PLANT, {})).cname == f"{SETTINGS_STRUCT[PLANT]} *"
+    assert cmodel.load()[0].typeof(cmodel.settings(PLANT, {})).cname == f"{SETTINGS_STRUCT[PLANT]} *"
 
 
 def test_settings_inside_every_range_pass_unchanged():

@@ -15,7 +15,7 @@ Shorter horizons, where the full one takes minutes (the commands are otherwise a
   `--paper-gains-stop-time 0.001`;
 * `tapmp study FILE`: FILE's copy beside it with `stop_time = 0.05` in its [set] table and at
   most 4 Monte Carlo samples;
-* `python -m orchestrator.experiments.calibration`: `--horizon 0.05 --max-nfev 1`;
+* `tapmp calibrate`: `--horizon 0.05 --max-nfev 1`;
 * the quick start's `python3 -m venv .venv && .venv/bin/pip install -e '.[tools]' && bash build_fmus.sh
   --host &&` prefix is what the clone's set-up already did (every platform, the `test` extra, which
   holds the `tools` extra).
@@ -114,7 +114,7 @@ def shorten(cmd: str, repo: Path) -> str:
         text = re.sub(r"^samples = \d+$", "samples = 4", text, flags=re.M)
         (repo / copy).write_text(text)
         body = body.replace(m.group(0), f".venv/bin/tapmp study {copy.as_posix()}")
-    elif "orchestrator.experiments.calibration" in body:
+    elif re.search(r"\.venv/bin/tapmp calibrate ", body):
         body += f" --horizon {SHORT} --max-nfev 1"
     return body + comment
 

@@ -10,7 +10,7 @@ from orchestrator.cli import parser as build_parser
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 _LINK = re.compile(r"\]\(([^)\s]+)\)")
-_TAPMP = re.compile(r"\.venv/bin/tapmp (\w+)((?: [^\s`|]+)*)")
+_TAPMP = re.compile(r"\.venv/bin/tapmp ([\w-]+)((?: [^\s`|]+)*)")
 
 
 def _anchors(page: Path) -> set:

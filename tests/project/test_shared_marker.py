@@ -1,7 +1,9 @@
 """The ``needs_shared`` marker of tests/conftest.py, run for real: pytest on a copy of the
-conftest in a scratch repository whose ``../shared`` has or lacks the file a test needs."""
+conftest and the tests' support package in a scratch repository whose ``../shared`` has or lacks
+the file a test needs."""
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -13,7 +15,7 @@ pytestmark = pytest.mark.slow  # pytest in child processes on a scratch reposito
 ROOT = Path(__file__).resolve().parents[2]
 TEST = '''
 import pytest
-from conftest import shared
+from tests.support.shared import shared
 
 
 @pytest.mark.needs_shared("tools/OMSimulator/bin/OMSimulator")
@@ -32,9 +34,11 @@ def run_pytest(tmp_path: Path, present=(), **env) -> tuple[int, str]:
     tests.mkdir(parents=True)
     # the conftest without its compatibility plugin, which checks rows of the repository's docs
     text = (ROOT / "tests" / "conftest.py").read_text()
-    plugin = 'pytest_plugins = ("compatibility",)\n'
+    plugin = 'pytest_plugins = ("tests.interop.compatibility",)\n'
     assert text.count(plugin) == 1
     (tests / "conftest.py").write_text(text.replace(plugin, ""))
+    (tests / "__init__.py").write_text("")
+    shutil.copytree(ROOT / "tests" / "support", tests / "support", ignore=shutil.ignore_patterns("__pycache__"))
     (tests / "test_scratch.py").write_text(TEST)
     for relative in present:
         (tmp_path / "shared" / relative).parent.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from test_toolchain import EXPECTED_BINARIES, shim_path
+from tests.model.test_toolchain import EXPECTED_BINARIES, shim_path
 
 pytestmark = pytest.mark.slow  # builds a wheel and installs it into a fresh venv
 
@@ -44,9 +44,9 @@ def test_the_wheel_builds_runs_and_exports_from_an_empty_folder(tmp_path):
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())
     assert {"tapmp/c/tapmp_model.c", "fmu_plant/plant.c", "fmu_controller/TAPMP_Controller.py",
-            "fmu_common/native/fmi2_front.c", "tapmp_data/scenarios/paper_simulation.toml",
+            "fmu_common/pyfront/fmi2_front.c", "tapmp_data/scenarios/paper_simulation.toml",
             "tapmp_data/studies/tune.toml", "tapmp_data/docs/tuning/sc-dc.toml",
-            "orchestrator/experiments/paper_tables.toml"} <= names
+            "orchestrator/paper/paper_tables.toml"} <= names
     print("wheel size", wheel.stat().st_size, "bytes")
 
     venv = tmp_path / "venv"

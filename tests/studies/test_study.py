@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.scenario import ScenarioError, load, load_gain_file
+from orchestrator.tool.scenario import ScenarioError, load, load_gain_file
 from orchestrator.studies.run import run_study
 from orchestrator.studies.study import (StudyError, cases, close_client, load_study, open_client,
                                         read_study_csv)
@@ -198,7 +198,7 @@ def test_gains_file_errors_name_the_file_and_what_is_allowed(tmp_path):
 
 
 def test_a_study_whose_cases_fail_exits_1_after_every_row_counting_each_status(faulty_ssps, tmp_path, capsys):
-    # the plant FMU of this SSP fails its doStep from t = 0.5 ms on (tests/faults.py): every case fails
+    # the plant FMU of this SSP fails its doStep from t = 0.5 ms on (tests/support/faults.py): every case fails
     path = write_study(tmp_path, '[set]\nstop_time = 0.002\n[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
     code = main(["study", path, "--ssp", faulty_ssps["status"], "--workers", "1", "--no-progress"])
     out = capsys.readouterr().out.splitlines()

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.engine.loaded import close_process_fmus, process_fmus
-from orchestrator.experiments.results import run_scenario
+from orchestrator.tool.results import run_scenario
 from orchestrator.studies.study import case_scenario, load_study, run_case, scenario_data
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.experiments.robustness import mode_peaks
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.robustness import mode_peaks
+from orchestrator.tool.scenario import load
 from orchestrator.studies.run import run_study
 from orchestrator.studies.study import StudyError, close_client, load_study, open_client, read_study_csv
 

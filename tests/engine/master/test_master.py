@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.results import run_scenario
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.results import run_scenario
+from orchestrator.tool.scenario import load
 from tapmp.closed_loop import simulate
-from faults import faulty_plant_fmu, faulty_ssp
+from tests.support.faults import faulty_plant_fmu, faulty_ssp
 
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"
@@ -138,7 +138,7 @@ class NanProbe(Fmi2Slave):
 
 @pytest.mark.slow
 def test_a_non_finite_output_of_any_fmu_stops_the_run(built, tmp_path):
-    from test_master_any_ssp import _build, rewrite_ssp
+    from tests.engine.master.test_master_any_ssp import _build, rewrite_ssp
     probe = _build(tmp_path, NAN_PROBE, "NanProbe")
     ssp = rewrite_ssp(built["ssp"], tmp_path / "probed.ssp", add=[("probe", probe, [("y", "output")])])
     with pytest.raises(DivergenceError, match=r"probe.y = nan at t = 0.0006 s is not finite") as info:

@@ -12,8 +12,8 @@ from orchestrator.cli import main
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.engine.schedule import (Connection, ScheduleError, check_algebraic_loops, gauss_seidel_order,
                                           initialization_order)
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.scenario import load
 
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_simulation.toml"

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.scenario import load
 from pathlib import Path
 
 pytestmark = pytest.mark.slow  # builds the FMI 3.0 FMUs and runs closed loops

@@ -1,5 +1,5 @@
 """The master's failure paths, for both orderings, through the real
-CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on (tests/faults.py,
+CoSimulation on an SSP with a real plant FMU that misbehaves from t = 0.5 ms on (tests/support/faults.py,
 the ``faulty_ssps`` fixture):
 
 * ``status``: doStep returns fmi2Error and logs nothing;
@@ -12,13 +12,13 @@ chain from) naming the element, the call and the time."""
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from orchestrator.experiments.roles import ROLES
-from conftest import PAPER
+from orchestrator.tool.roles import ROLES
+from tests.support.runs import PAPER
 
 
 def run(ssp, ordering, steps=20):
     """Step the paper scenario's system ``steps`` times; returns the closed CoSimulation."""
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     sc = load(PAPER)
     with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, roles=ROLES) as sim:
         for _ in range(steps):

@@ -5,10 +5,10 @@ the same macro step, from the measurement at t_k. Read back from the plant FMU's
 
 import numpy as np
 import pytest
-from conftest import paper_scenario
+from tests.support.runs import paper_scenario
 
 from orchestrator.engine.master import CoSimulation
-from orchestrator.experiments.roles import ROLES
+from orchestrator.tool.roles import ROLES
 
 FORCES = [f"controller.F{i}" for i in (1, 2, 3)]
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, DivergenceError, OutputCheck
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.envelope import Envelope
-from conftest import paper_scenario
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.envelope import Envelope
+from tests.support.runs import paper_scenario
 
 
 class ReferenceBound(OutputCheck):

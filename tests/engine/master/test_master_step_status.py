@@ -12,16 +12,16 @@ import math
 
 import pytest
 
-from conftest import PAPER
-from faults import faulty_plant_fmu, faulty_ssp
+from tests.support.runs import PAPER
+from tests.support.faults import faulty_plant_fmu, faulty_ssp
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from orchestrator.experiments.roles import ROLES
+from orchestrator.tool.roles import ROLES
 
 ORDERINGS = {"gauss-seidel": ["plant", "controller", "trajectory"], "jacobi": None}  # the plant steps first
 
 
 def scenario():
-    from orchestrator.experiments.scenario import load
+    from orchestrator.tool.scenario import load
     return load(PAPER)
 
 

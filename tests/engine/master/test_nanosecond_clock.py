@@ -9,10 +9,10 @@ import pytest
 
 from orchestrator.engine.clocks import Clock
 from orchestrator.engine.master import CoSimulation, CoSimulationError
-from orchestrator.experiments.roles import ROLES
-from orchestrator.experiments.scenario import load
+from orchestrator.tool.roles import ROLES
+from orchestrator.tool.scenario import load
 
-from conftest import PAPER
+from tests.support.runs import PAPER
 
 
 def test_the_clock_knows_its_last_representable_step():

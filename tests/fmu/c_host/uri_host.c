@@ -1,4 +1,4 @@
-/* uri_to_path (fmu_common/native/uri.h, the pythonfmu FMUs' fmuResourceLocation) on the URIs
+/* uri_to_path (fmu_common/pyfront/uri.h, the pythonfmu FMUs' fmuResourceLocation) on the URIs
  * given as arguments, each copied into a heap block of exactly its length, so that
  * AddressSanitizer reports any read past the terminating zero. Prints one line per URI:
  * "<uri> -> <path>" or "<uri> -> refused". Built and run by tests/fmu/test_fmu_threads.py. */

@@ -7,19 +7,10 @@
  * clang -fsanitize=fuzzer,address,undefined. */
 #include "all.c"
 #include "fuzz_input.h"
+#include "fuzz_fmi2_logger.h"
 
 #define SLOTS 3
 #define STATES 4
-
-static void fuzz_logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                        fmi2String category, fmi2String message, ...)
-{
-    va_list ap;
-    (void)env, (void)instance, (void)status, (void)category;
-    va_start(ap, message);
-    fuzz_format(message, ap);
-    va_end(ap);
-}
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

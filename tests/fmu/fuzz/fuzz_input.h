@@ -80,7 +80,8 @@ static char *fuzz_string(fuzz_input *in, char *buf, size_t size, const char *goo
     return buf;
 }
 
-/* Logged messages are formatted, so a bad format or argument shows up, and dropped. */
+/* Logged messages are formatted, so a bad format or argument shows up, and dropped (the
+ * FMI 2.0 targets' logger calls it: fuzz_fmi2_logger.h; FMI 3.0 messages come formatted). */
 static void fuzz_format(const char *fmt, va_list ap)
 {
     char buf[4096];

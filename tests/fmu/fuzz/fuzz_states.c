@@ -6,18 +6,9 @@
  * A call that returns Discard, Error or Fatal ends the run: refusing is always allowed. */
 #include "all.c"
 #include "fuzz_input.h"
+#include "fuzz_fmi2_logger.h"
 
 #define STEPS 5
-
-static void fuzz_logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                        fmi2String category, fmi2String message, ...)
-{
-    va_list ap;
-    (void)env, (void)instance, (void)status, (void)category;
-    va_start(ap, message);
-    fuzz_format(message, ap);
-    va_end(ap);
-}
 
 /* Every output finite and inside [min, max] of the variable table, else a finding. */
 static void check_outputs(fmi2Component c, const char *when)
