@@ -3,7 +3,8 @@
 #  - build/: TAPMP_Plant.fmu, TAPMP_Controller.fmu, TAPMP_Trajectory.fmu (pythonfmu), TAPMP.ssp
 #    and the closed-loop container TAPMP_ClosedLoop.fmu;
 #  - build/native/fmi2/ and build/native/fmi3/: the self-contained native FMUs (C sources
-#    inside, binaries for Linux, Windows and macOS on x86-64 and ARM) and a TAPMP.ssp each.
+#    inside, binaries for Linux, Windows and macOS on x86-64 and ARM) and a TAPMP.ssp each; fmi3 also
+#    the clocked controller TAPMP_ControllerClocked.fmu and its loop TAPMP_Clocked.ssp.
 # Every binary is compiled by zig cc from PyPI's ziglang package (installed with the package):
 # no gcc, no mingw-w64. The one thing pip cannot provide is Python's C headers (Python.h, for
 # the pythonfmu family's binary): if this Python has none, Debian's python3-dev is installed

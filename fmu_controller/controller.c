@@ -1,8 +1,8 @@
-/* Native TAPMP_Controller FMU: maps the FMU variables to the SC-DC / APD-DC / PID-DC controller of
- * tapmp_model.c, as fmu_controller/TAPMP_Controller.py maps them to
- * tapmp.control.ControllerModel. On doStep(t, h) at a sample instant t0 + k T_s not sampled
- * yet it samples its inputs, computes the command and holds it; at any other communication
- * point the outputs hold (tapmp.control.ControllerModel.communication_point). */
+/* Native TAPMP_Controller FMU (and its clocked variant TAPMP_ControllerClocked, MODEL_CLOCK): maps the
+ * FMU variables to the SC-DC / APD-DC / PID-DC controller of tapmp_model.c, as
+ * fmu_controller/TAPMP_Controller.py maps them to tapmp.control.ControllerModel. On doStep(t, h) at a
+ * sample instant t0 + k T_s not sampled yet it samples its inputs, computes the command and holds it; at
+ * any other communication point the outputs hold (tapmp.control.ControllerModel.communication_point). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -71,6 +71,27 @@ static void warn(tapmp_instance *inst, void (*text_of)(const tapmp_clock *, doub
     if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
 }
 
+#ifdef MODEL_CLOCK
+/* The clocked controller's one warning when a step from t by h [s] passes a tick of the input clock that the
+ * host did not activate (an importer that does not schedule input clocks): the outputs hold, as they do
+ * until the next tick the host activates. */
+static void clock_missed(tapmp_instance *inst, double t, double h)
+{
+    tapmp_clock *clock = &inst->m.clock;
+    double due = clock->t0 + (clock->has_sample ? clock->k_last + 1.0 : 0.0) * clock->T_s;
+    if (clock->warned || !(t + h > due + TAPMP_SAMPLE_TOLERANCE * clock->T_s)) return;
+    clock->warned = 1;
+    char text[TAPMP_MESSAGE_MAX], a[40], b[40];
+    snprintf(text, sizeof text, "the input clock " MODEL_CLOCK_NAME " (interval T_s = %g s) did not tick at t = %s "
+             "s: the controller holds its command until the host activates the clock (fmi3SetClock in Event Mode, "
+             "then fmi3UpdateDiscreteStates) at an instant t0 + k T_s; doStep reached t = %s s", clock->T_s,
+             tapmp_repr(due, a), tapmp_repr(t + h, b));
+    if (inst->log) inst->log(inst, ST_WARNING, "logStatusWarning", text);
+}
+
+double model_clock_interval(const tapmp_instance *inst) { return inst->reals[VR_T_s]; }
+#endif
+
 /* tapmp.control.ControllerModel.communication_point; with eventModeUsed the outputs hold in every
  * step: the controller samples in Event Mode (model_event_update). */
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
@@ -81,6 +102,9 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
     read_settings(inst, &inst->m);  /* new tunable values take effect here; the loop state carries over */
     if (inst->event_mode_used) {
         memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);
+#ifdef MODEL_CLOCK
+        clock_missed(inst, t, h);
+#endif
         return 1;
     }
     if (!tapmp_clock_at(clock, t, &k, &steps, &missed)) {
@@ -100,9 +124,14 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
 /* tapmp.control.ControllerModel.next_event_time: the next sample instant not sampled yet, t0 + k T_s. */
 int model_next_event(const tapmp_instance *inst, double *time)
 {
+#ifdef MODEL_CLOCK
+    (void)inst, (void)time;
+    return 0;  /* no time events of its own: the host activates the input clock at the sample instants */
+#else
     const tapmp_clock *clock = &inst->m.clock;
     *time = clock->t0 + (clock->has_sample ? clock->k_last + 1.0 : 0.0) * clock->T_s;
     return 1;
+#endif
 }
 
 /* tapmp.control.ControllerModel.event: in Event Mode at a sample instant not sampled yet the
@@ -114,6 +143,20 @@ int model_event_update(tapmp_instance *inst, double out[], char *msg, size_t siz
     tapmp_clock *clock = &inst->m.clock;
     double t = inst->time, k, steps, missed;
     read_settings(inst, &inst->m);
+#ifdef MODEL_CLOCK
+    /* the clocked controller samples exactly when its clock ticks, and only then */
+    if (!inst->clock_active) {
+        memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
+        return 1;
+    }
+    if (!tapmp_sample_index(t, clock->t0, clock->T_s, &k)) {
+        char v[40], allowed[160], t0[40], ts[40];
+        snprintf(allowed, sizeof allowed, "an instant t0 + k T_s (t0 = %s s, T_s = %s s)", tapmp_repr(clock->t0, t0),
+                 tapmp_repr(clock->T_s, ts));
+        tapmp_invalid_text(msg, size, "time of the tick of " MODEL_CLOCK_NAME, tapmp_repr(t, v), allowed, 0, 0);
+        return 0;
+    }
+#endif
     if (!tapmp_clock_at(clock, t, &k, &steps, &missed)) {
         memcpy(out, inst->reals + MODEL_OUT_FIRST, MODEL_N_OUT * sizeof *out);  /* hold */
         return 1;

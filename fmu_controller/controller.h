@@ -15,4 +15,12 @@ typedef struct {
 #define MODEL_OUT_FIRST VR_F1
 /* FMI 3.0 with eventModeUsed: every sample instant t0 + k T_s is a time event (controller.c) */
 #define MODEL_HAS_EVENTS
+/* The clocked controller (TAPMP_ControllerClocked; its model_vars.h defines TAPMP_CLOCKED): the sample
+ * instants are the ticks of a periodic input clock of interval T_s that the host activates, not time
+ * events of the FMU's own (controller.c) */
+#ifdef TAPMP_CLOCKED
+#define MODEL_CLOCK
+#define MODEL_CLOCK_VR (N_VARS + 1) /* after the independent variable time (N_VARS) */
+#define MODEL_CLOCK_NAME "sample_clock"
+#endif
 #endif

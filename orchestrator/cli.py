@@ -384,7 +384,7 @@ def cmd_compare(args) -> int:
     from .paper.paper_tables import reference_rows
     from .tool.compare import run_comparison
     _, results, _, _ = run_comparison(scenario, _ssp(args, scenario), out, args.overwrite, not args.no_progress,
-                                      command, jobs, show, not args.no_figures,
+                                      command, jobs, show, not args.no_figures, noise=not args.no_noise,
                                       reference=reference_rows(scenario.name))
     print(f"{scenario.name}: mean over the three motors; SC-DC's reduction against each run, positive = SC-DC has "
           "the smaller error")
@@ -837,6 +837,9 @@ def parser() -> argparse.ArgumentParser:
                    "in comparison.md")
     c.add_argument("--no-figures", action="store_true", help="write no figures (the runs and comparison.md only; "
                    "draw them later with `tapmp plot FOLDER`)")
+    c.add_argument("--no-noise", action="store_true", help="leave out the noise runs (SC-DC, APD-DC and the "
+                   "matched baselines again at 20 and 100 nm rms measurement noise, seeded; 10 more runs) and "
+                   "comparison.md's noise table")
     c.set_defaults(func=cmd_compare)
     rp = sub.add_parser("reproduce", help="write the paper-reproduction page (results/paper-reproduction.md)",
                         description="Run `compare` (SC-DC, APD-DC and the fair baselines) on both paper scenarios "

@@ -2,9 +2,12 @@
  * version-neutral instance (instance.c). Variables are Float64 and Int32; the independent
  * variable `time` has the value reference N_VARS. A model with time events (MODEL_HAS_EVENTS: the
  * controller) has Event Mode (hasEventMode, mightReturnEarlyFromDoStep); the others refuse
- * eventModeUsed. Model Exchange, Scheduled Execution, clocks and derivatives are not provided:
+ * eventModeUsed. A model with a periodic input clock (MODEL_CLOCK: the clocked controller) has the clock
+ * functions and requires eventModeUsed. Model Exchange, Scheduled Execution, other clocks and derivatives are
+ * not provided:
  * those calls return fmi3Error with a message (their capability flags are false in the
  * modelDescription). */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -72,6 +75,14 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     if (eventModeUsed) {
         log_no_instance(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: eventModeUsed = true "
                         "is invalid: allowed is false (hasEventMode is false for " MODEL_IDENTIFIER_STRING ")");
+        return NULL;
+    }
+#endif
+#ifdef MODEL_CLOCK
+    if (!eventModeUsed) {  /* FMI 3.0.2: an FMU with clocks is run in Event Mode, where its clocks tick */
+        log_no_instance(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: eventModeUsed = false is "
+                        "invalid: allowed is true (" MODEL_IDENTIFIER_STRING " has the input clock " MODEL_CLOCK_NAME
+                        ", which ticks only in Event Mode)");
         return NULL;
     }
 #endif
@@ -193,6 +204,138 @@ fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t n
     return n ? unsupported(c, "SetBinary", "this FMU has no Binary variables (n must be 0)") : fmi3OK;
 }
 
+#ifdef MODEL_CLOCK
+/* The periodic input clock (instance.c, tapmp_set_clock ...): fmi3Clock is a bool, the runtime takes ints. */
+#define CLOCK_MAX 64  /* values per call: the FMU has one clock, a host passes it once or a few times */
+static int clock_count(tapmp_instance *inst, const char *call, size_t n)
+{
+    if (n <= CLOCK_MAX) return ST_OK;
+    return tapmp_fail(inst, "fmi3%s: nValueReferences = %zu is invalid: allowed is at most %d (this FMU has one "
+                      "clock, " MODEL_CLOCK_NAME ")", call, n, CLOCK_MAX);
+}
+
+fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Clock v[])
+{
+    INSTANCE(c);
+    int values[CLOCK_MAX];
+    int status = clock_count(inst, "GetClock", n);
+    if (status == ST_OK) status = tapmp_get_clock(inst, vr, n, v ? values : NULL);
+    for (size_t i = 0; status == ST_OK && i < n; i++) v[i] = values[i] ? fmi3ClockActive : fmi3ClockInactive;
+    return (fmi3Status)status;
+}
+
+fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Clock v[])
+{
+    INSTANCE(c);
+    int values[CLOCK_MAX];
+    int status = clock_count(inst, "SetClock", n);
+    if (status != ST_OK) return (fmi3Status)status;
+    for (size_t i = 0; v && i < n; i++) values[i] = v[i] != fmi3ClockInactive;
+    return (fmi3Status)tapmp_set_clock(inst, vr, n, v ? values : NULL);
+}
+
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 interval[],
+                                  fmi3IntervalQualifier qualifier[])
+{
+    INSTANCE(c);
+    int q[CLOCK_MAX];
+    int status = clock_count(inst, "GetIntervalDecimal", n);
+    if (status == ST_OK) status = tapmp_get_interval(inst, vr, n, interval, q);
+    for (size_t i = 0; status == ST_OK && qualifier && i < n; i++)
+        qualifier[i] = q[i] == 2 ? fmi3IntervalChanged : fmi3IntervalUnchanged;
+    return (fmi3Status)status;
+}
+
+/* The interval as counter / resolution [s]: T_s = 1 / resolution when that is exact (0.0001 s = 1/10000),
+ * else the error: a fraction would round the period the controller uses. */
+static int interval_fraction(tapmp_instance *inst, double T, fmi3UInt64 *counter, fmi3UInt64 *resolution)
+{
+    double r = nearbyint(1.0 / T);
+    if (r >= 1.0 && r < 1e15 && 1.0 / r == T) {
+        *counter = 1;
+        *resolution = (fmi3UInt64)r;
+        return ST_OK;
+    }
+    char v[40];
+    return tapmp_invalid(inst, "T_s (as a fraction)", tapmp_repr(T, v), "a period 1/n s, n an integer, for "
+                         "fmi3GetIntervalFraction (fmi3GetIntervalDecimal gives any T_s)", 0);
+}
+
+fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counter[],
+                                   fmi3UInt64 resolution[], fmi3IntervalQualifier qualifier[])
+{
+    INSTANCE(c);
+    double interval[CLOCK_MAX];
+    int q[CLOCK_MAX];
+    int status = clock_count(inst, "GetIntervalFraction", n);
+    if (status == ST_OK && n && (!counter || !resolution))
+        status = tapmp_fail(inst, "fmi3GetIntervalFraction: counters and resolutions must not be NULL");
+    if (status == ST_OK) status = tapmp_get_interval(inst, vr, n, interval, q);
+    for (size_t i = 0; status == ST_OK && i < n; i++) {
+        status = interval_fraction(inst, interval[i], &counter[i], &resolution[i]);
+        if (qualifier) qualifier[i] = q[i] == 2 ? fmi3IntervalChanged : fmi3IntervalUnchanged;
+    }
+    return (fmi3Status)status;
+}
+
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n,
+                                  const fmi3Float64 interval[])
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_set_interval(inst, vr, n, interval);
+}
+
+fmi3Status fmi3SetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n,
+                                   const fmi3UInt64 counter[], const fmi3UInt64 resolution[])
+{
+    INSTANCE(c);
+    double interval[CLOCK_MAX];
+    int status = clock_count(inst, "SetIntervalFraction", n);
+    if (status == ST_OK && n && (!counter || !resolution))
+        status = tapmp_fail(inst, "fmi3SetIntervalFraction: counters and resolutions must not be NULL");
+    for (size_t i = 0; status == ST_OK && i < n; i++)
+        interval[i] = resolution[i] ? (double)counter[i] / (double)resolution[i] : INFINITY;
+    return (fmi3Status)(status == ST_OK ? tapmp_set_interval(inst, vr, n, interval) : status);
+}
+
+fmi3Status fmi3GetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 shift[])
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_get_shift(inst, vr, n, shift);
+}
+
+fmi3Status fmi3GetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counter[],
+                                fmi3UInt64 resolution[])
+{
+    INSTANCE(c);
+    double shift[CLOCK_MAX];
+    int status = clock_count(inst, "GetShiftFraction", n);
+    if (status == ST_OK && n && (!counter || !resolution))
+        status = tapmp_fail(inst, "fmi3GetShiftFraction: counters and resolutions must not be NULL");
+    if (status == ST_OK) status = tapmp_get_shift(inst, vr, n, shift);
+    for (size_t i = 0; status == ST_OK && i < n; i++) counter[i] = 0, resolution[i] = 1;
+    return (fmi3Status)status;
+}
+
+fmi3Status fmi3SetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 shift[])
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_set_shift(inst, vr, n, shift);
+}
+
+fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counter[],
+                                const fmi3UInt64 resolution[])
+{
+    INSTANCE(c);
+    double shift[CLOCK_MAX];
+    int status = clock_count(inst, "SetShiftFraction", n);
+    if (status == ST_OK && n && (!counter || !resolution))
+        status = tapmp_fail(inst, "fmi3SetShiftFraction: counters and resolutions must not be NULL");
+    for (size_t i = 0; status == ST_OK && i < n; i++)
+        shift[i] = resolution[i] ? (double)counter[i] / (double)resolution[i] : INFINITY;
+    return (fmi3Status)(status == ST_OK ? tapmp_set_shift(inst, vr, n, shift) : status);
+}
+#else
 fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Clock v[])
 {
     (void)vr, (void)v;
@@ -204,6 +347,7 @@ fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n,
     (void)vr, (void)v;
     return n ? unsupported(c, "SetClock", "this FMU has no clocks") : fmi3OK;
 }
+#endif
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference vr, size_t *n)
 {
@@ -323,6 +467,7 @@ NOT_PROVIDED(GetAdjointDerivative, NO_DERIVATIVES,
              (fmi3Instance c, const fmi3ValueReference u[], size_t nu, const fmi3ValueReference k[], size_t nk,
               const fmi3Float64 seed[], size_t ns, fmi3Float64 sens[], size_t nsens),
              (void)u, (void)nu, (void)k, (void)nk, (void)seed, (void)ns, (void)sens, (void)nsens)
+#ifndef MODEL_CLOCK
 NOT_PROVIDED(GetIntervalDecimal, NO_CLOCKS,
              (fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 i[], fmi3IntervalQualifier q[]),
              (void)vr, (void)n, (void)i, (void)q)
@@ -346,6 +491,7 @@ NOT_PROVIDED(SetShiftDecimal, NO_CLOCKS,
 NOT_PROVIDED(SetShiftFraction, NO_CLOCKS,
              (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[], const fmi3UInt64 r[]),
              (void)vr, (void)n, (void)c_, (void)r)
+#endif
 NOT_PROVIDED0(EvaluateDiscreteStates, NO_ME)
 NOT_PROVIDED0(EnterContinuousTimeMode, NO_ME)
 NOT_PROVIDED(CompletedIntegratorStep, NO_ME, (fmi3Instance c, fmi3Boolean a, fmi3Boolean *b, fmi3Boolean *d),

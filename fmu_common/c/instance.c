@@ -436,6 +436,7 @@ int tapmp_update_discrete_states(tapmp_instance *inst, int *values_changed, int 
         changed |= memcmp(&out[i], &inst->reals[MODEL_OUT_FIRST + i], sizeof out[i]) != 0;
     }
     memcpy(inst->reals + MODEL_OUT_FIRST, out, sizeof out);
+    inst->clock_active = 0;  /* the clock's tick is handled: clocks are inactive again until the next SetClock */
     *values_changed = changed;
     *next_defined = model_next_event(inst, next_time);
     if (!*next_defined) *next_time = 0.0;
@@ -483,6 +484,102 @@ int tapmp_do_step_events(tapmp_instance *inst, double t, double h, int *event_ne
     return status;
 }
 
+/* --- the periodic input clock (FMI 3.0, MODEL_CLOCK) ------------------------------------ */
+#ifdef MODEL_CLOCK
+/* Every vr is the clock's, and the arrays are there when n > 0; else the error naming the first other. */
+static int check_clock_refs(tapmp_instance *inst, const char *call, const unsigned vr[], size_t n, const void *v)
+{
+    char value[40], allowed[160];
+    if (n && (!vr || !v))
+        return tapmp_fail(inst, "%s%s: valueReferences and values must not be NULL for nValueReferences = %zu",
+                          inst->fmi, call, n);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == MODEL_CLOCK_VR) continue;
+        snprintf(value, sizeof value, "%u", vr[i]);
+        snprintf(allowed, sizeof allowed, "%d, the clock %s (%s%s takes clocks only)", MODEL_CLOCK_VR,
+                 MODEL_CLOCK_NAME, inst->fmi, call);
+        char name[64];
+        snprintf(name, sizeof name, "%s valueReference", call);
+        return tapmp_invalid(inst, name, value, allowed, 0);
+    }
+    return ST_OK;
+}
+
+int tapmp_set_clock(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[])
+{
+    int status = check_clock_refs(inst, "SetClock", vr, n, v);
+    if (status != ST_OK || n == 0) return status;
+    if (inst->mode != MODE_EVENT)  /* an input clock ticks only in Event Mode (FMI 3.0, Clocks) */
+        return tapmp_mode_error(inst, "SetClock", "Event Mode (the clock " MODEL_CLOCK_NAME " ticks at an event)");
+    if (inst->failed)
+        return tapmp_fail(inst, "%sSetClock refused after an earlier error: %s", inst->fmi, inst->error);
+    for (size_t i = 0; i < n; i++) inst->clock_active = v[i] != 0;
+    return ST_OK;
+}
+
+int tapmp_get_clock(tapmp_instance *inst, const unsigned vr[], size_t n, int v[])
+{
+    int status = check_clock_refs(inst, "GetClock", vr, n, v);
+    if (status != ST_OK) return status;
+    for (size_t i = 0; i < n; i++) v[i] = inst->mode == MODE_EVENT && inst->clock_active;
+    return ST_OK;
+}
+
+int tapmp_get_interval(tapmp_instance *inst, const unsigned vr[], size_t n, double interval[], int qualifier[])
+{
+    int status = check_clock_refs(inst, "GetIntervalDecimal", vr, n, interval);
+    if (status != ST_OK) return status;
+    for (size_t i = 0; i < n; i++) {
+        interval[i] = model_clock_interval(inst);
+        if (qualifier) qualifier[i] = inst->interval_reported && MODE_RUNNING(inst->mode) ? 1 : 2;
+    }
+    if (n && MODE_RUNNING(inst->mode)) inst->interval_reported = 1;
+    return ST_OK;
+}
+
+int tapmp_set_interval(tapmp_instance *inst, const unsigned vr[], size_t n, const double interval[])
+{
+    char value[40], period[40], allowed[200];
+    int status = check_clock_refs(inst, "SetIntervalDecimal", vr, n, interval);
+    if (status != ST_OK || n == 0) return status;
+    if (inst->mode != MODE_INSTANTIATED && inst->mode != MODE_INITIALIZATION)
+        return tapmp_mode_error(inst, "SetIntervalDecimal", "Instantiated or Initialization Mode (the interval of "
+                                "the clock " MODEL_CLOCK_NAME " is fixed once the model runs)");
+    double T = model_clock_interval(inst);
+    for (size_t i = 0; i < n; i++) {
+        /* the interval is the parameter T_s: the clock cannot tick at another period than the one the
+         * controller's law uses (its velocity estimate and integral take T_s) */
+        if (interval[i] == T || fabs(interval[i] - T) <= 1e-12 * T) continue;
+        snprintf(allowed, sizeof allowed, "the sample period T_s = %s s (set the parameter T_s for another "
+                 "period)", tapmp_repr(T, period));
+        return tapmp_invalid(inst, "interval of " MODEL_CLOCK_NAME, tapmp_repr(interval[i], value), allowed, 0);
+    }
+    return ST_OK;
+}
+
+int tapmp_get_shift(tapmp_instance *inst, const unsigned vr[], size_t n, double shift[])
+{
+    int status = check_clock_refs(inst, "GetShiftDecimal", vr, n, shift);
+    if (status != ST_OK) return status;
+    for (size_t i = 0; i < n; i++) shift[i] = 0.0;
+    return ST_OK;
+}
+
+int tapmp_set_shift(tapmp_instance *inst, const unsigned vr[], size_t n, const double shift[])
+{
+    char value[40];
+    int status = check_clock_refs(inst, "SetShiftDecimal", vr, n, shift);
+    if (status != ST_OK || n == 0) return status;
+    if (inst->mode != MODE_INSTANTIATED && inst->mode != MODE_INITIALIZATION)
+        return tapmp_mode_error(inst, "SetShiftDecimal", "Instantiated or Initialization Mode");
+    for (size_t i = 0; i < n; i++)
+        if (shift[i] != 0.0)
+            return tapmp_invalid(inst, "shift of " MODEL_CLOCK_NAME, tapmp_repr(shift[i], value),
+                                 "0 (the controller samples at t0 + k T_s, t0 the start time)", 0);
+    return ST_OK;
+}
+#endif
+
 int tapmp_terminate(tapmp_instance *inst)
 {
     if (!MODE_RUNNING(inst->mode) && !inst->failed)
@@ -495,6 +592,7 @@ int tapmp_reset(tapmp_instance *inst)
 {
     inst->mode = MODE_INSTANTIATED;
     inst->time = 0.0;
+    inst->clock_active = inst->interval_reported = 0;
     inst->failed = inst->retune = inst->has_model = inst->dirty = 0;
     inst->error[0] = 0;
     memset(&inst->m, 0, sizeof inst->m);

@@ -54,6 +54,8 @@ typedef struct tapmp_instance {
     size_t n_states, max_states;
     int event_mode_used;       /* FMI 3.0 co-simulation: the host handles the model's events in Event Mode */
     int early_return_allowed;  /* FMI 3.0 co-simulation: doStep may return early at an event */
+    int clock_active;          /* MODEL_CLOCK: the input clock was activated in this Event Mode (fmi3SetClock) */
+    int interval_reported;     /* MODEL_CLOCK: fmi3GetInterval* has reported the interval once */
     /* everything below is the FMU state */
     tapmp_mode mode;
     double time;            /* current communication point [s] */
@@ -115,6 +117,23 @@ TAPMP_LINKAGE int tapmp_enter_step_mode(tapmp_instance *inst);
  * it asks for event handling; *last_time [s] is the time reached. Without eventModeUsed: tapmp_do_step. */
 TAPMP_LINKAGE int tapmp_do_step_events(tapmp_instance *inst, double t, double h, int *event_needed,
                                        int *early_return, double *last_time);
+/* The model's periodic input clock (FMI 3.0; MODEL_CLOCK defined in the model's header: the clocked
+ * controller). Its value reference is MODEL_CLOCK_VR, its interval model_clock_interval() [s] (a fixed
+ * parameter), its shift 0 (ticks at t0 + k interval). Set: only in Event Mode, and only the clock; an
+ * activation holds until fmi3UpdateDiscreteStates, where the model samples (model_event_update sees
+ * inst->clock_active), and ends there. Interval: read any time after instantiation; set only before
+ * Step Mode and only to the interval the model has. Shift: 0, settable only to 0. */
+#ifdef MODEL_CLOCK
+TAPMP_LINKAGE int tapmp_set_clock(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[]);
+TAPMP_LINKAGE int tapmp_get_clock(tapmp_instance *inst, const unsigned vr[], size_t n, int v[]);
+/* qualifier[i]: 2 (changed: first report), 1 (unchanged since the last report) */
+TAPMP_LINKAGE int tapmp_get_interval(tapmp_instance *inst, const unsigned vr[], size_t n, double interval[],
+                                     int qualifier[]);
+TAPMP_LINKAGE int tapmp_set_interval(tapmp_instance *inst, const unsigned vr[], size_t n, const double interval[]);
+TAPMP_LINKAGE int tapmp_get_shift(tapmp_instance *inst, const unsigned vr[], size_t n, double shift[]);
+TAPMP_LINKAGE int tapmp_set_shift(tapmp_instance *inst, const unsigned vr[], size_t n, const double shift[]);
+TAPMP_LINKAGE double model_clock_interval(const tapmp_instance *inst);
+#endif
 /* Get and set: `nv` is the number of values in v (FMI 3.0's nValues; FMI 2.0 passes n).
  * Every variable is a scalar, so nv must equal n; vr and v may be NULL only for n = 0. */
 TAPMP_LINKAGE int tapmp_get_real(tapmp_instance *inst, const unsigned vr[], size_t n, double v[], size_t nv);

@@ -12,11 +12,12 @@ variabilities, units, descriptions, start values and value references of the pyt
 FMUs, and an SSP accepts either family.
 
 Layout (``build/native/<fmi2|fmi3>/``): TAPMP_Plant.fmu, TAPMP_Controller.fmu,
-TAPMP_Trajectory.fmu and TAPMP.ssp. Inside each FMU: modelDescription.xml, sources/ (every
-C file and header of the FMU, but not the standard's FMI headers, which the importer brings;
-one file to compile, all.c, which includes the others, so that only the fmi* functions have
-external linkage; FMI 2.0 lists it in <SourceFiles>, both versions in
-sources/buildDescription.xml with libm), and binaries/ for every platform of PLATFORM_DIRS:
+TAPMP_Trajectory.fmu and TAPMP.ssp; FMI 3.0 also TAPMP_ControllerClocked.fmu, the controller with a
+periodic input clock (:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it.
+Inside each FMU: modelDescription.xml, sources/ (every C file and header of the FMU, but not the
+standard's FMI headers, which the importer brings; one file to compile, all.c, which includes the
+others, so that only the fmi* functions have external linkage; FMI 2.0 lists it in <SourceFiles>,
+both versions in sources/buildDescription.xml with libm), and binaries/ for every platform of PLATFORM_DIRS:
 FMI 2.0 linux64, aarch64-linux, win64, win32 and darwin64 (one universal x86_64 + arm64 dylib);
 FMI 3.0 x86_64-linux, aarch64-linux, x86_64-windows, x86-windows, x86_64-darwin and aarch64-darwin.
 """
@@ -358,6 +359,129 @@ def model_description_fmi3(model: str) -> bytes:
     return to_bytes(root)
 
 
+# The clocked controller: the native FMI 3.0 controller as a separate model identifier, with a periodic
+# input clock of interval T_s that clocks its sampled outputs. A separate FMU rather than a variant of
+# TAPMP_Controller.fmu: an FMU with clocks must be run with eventModeUsed (FMI 3.0.2), so the one FMU could
+# no longer be run without Event Mode, as every importer runs TAPMP_Controller today.
+CLOCKED = "TAPMP_ControllerClocked"
+CLOCK_NAME = "sample_clock"   # fmu_controller/controller.h: MODEL_CLOCK_NAME
+CLOCKED_DESCRIPTION = (DESCRIPTIONS[CONTROLLER] + "; samples at every tick of its periodic input clock "
+                       f"{CLOCK_NAME} (interval T_s, activated by the host in Event Mode) and holds its outputs "
+                       "between ticks")
+
+
+def clocked_token() -> str:
+    """The instantiation token of the clocked controller: its own, so that neither controller's binary
+    accepts the other's modelDescription."""
+    h = hashlib.sha256((CLOCKED + instantiation_token(CONTROLLER)).encode())
+    h.update(API["fmi3"].read_bytes())
+    return "{" + str(uuid.UUID(bytes=h.digest()[:16], version=5)) + "}"
+
+
+def clocked_source_files() -> dict[str, bytes]:
+    """sources/ of the clocked controller: the controller's, with a model_vars.h that names it and defines
+    TAPMP_CLOCKED (controller.h: the input clock) and its own unity file and build description."""
+    files = source_files(CONTROLLER, "fmi3")
+    header = model_vars_header(CONTROLLER)
+    include = f'#include "{MODEL_FILES[CONTROLLER][1].name}"'
+    header = (header.replace(include, "#define TAPMP_CLOCKED\n" + include, 1)
+              .replace(f'"{CONTROLLER}"', f'"{CLOCKED}"', 1)
+              .replace(instantiation_token(CONTROLLER), clocked_token(), 1))
+    files["model_vars.h"] = header.encode()
+    files[UNITY] = unity_source(CONTROLLER, "fmi3").replace(CONTROLLER, CLOCKED, 1).encode()
+    files["buildDescription.xml"] = build_description(CLOCKED)
+    return files
+
+
+def clock_interval() -> float:
+    """The clock's interval in the modelDescription [s]: the start value of the parameter T_s."""
+    return next(float(v.start) for v in VARIABLES[CONTROLLER] if v.name == "T_s")
+
+
+def model_description_clocked() -> bytes:
+    """modelDescription.xml of the clocked controller: the FMI 3.0 controller's, under its own model
+    identifier and token, with the input clock ``sample_clock`` (intervalVariability ``fixed``: its interval
+    is the fixed parameter T_s, so a host that sets T_s before initialization changes it, and it never
+    changes afterwards) and every output clocked by it (variability discrete: an output changes only when
+    the clock ticks). The inputs stay continuous: the controller samples the plant's continuous signals,
+    and an importer may set them at any time between ticks."""
+    root = ET.fromstring(model_description_fmi3(CONTROLLER))
+    root.set("modelName", CLOCKED)
+    root.set("instantiationToken", clocked_token())
+    root.set("description", CLOCKED_DESCRIPTION)
+    cs = root.find("CoSimulation")
+    cs.set("modelIdentifier", CLOCKED)
+    variables = root.find("ModelVariables")
+    table = VARIABLES[CONTROLLER]
+    clock_vr = len(table) + 1
+    clock = ET.Element("Clock", {
+        "name": CLOCK_NAME, "valueReference": str(clock_vr), "causality": "input", "variability": "discrete",
+        "description": "the controller's sample clock: periodic, interval T_s, first tick at the start time; the "
+                       "host activates it (fmi3SetClock in Event Mode) at every tick",
+        "intervalVariability": "fixed", "intervalDecimal": repr(clock_interval()), "shiftDecimal": "0.0"})
+    variables.insert(1, clock)  # after time
+    for var in variables:
+        if var.get("causality") == "output":
+            var.set("variability", "discrete")
+            var.set("clocks", str(clock_vr))
+    structure = root.find("ModelStructure")
+    for unknown in structure.findall("InitialUnknown"):  # clocked variables are no initial unknowns
+        structure.remove(unknown)
+    return to_bytes(root)
+
+
+def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None = None) -> Path:
+    """Build TAPMP_ControllerClocked.fmu (FMI 3.0) into ``out_dir``; atomic. ``platforms`` as for
+    :func:`build_native_fmu` (default: all); ``built`` ({platform: bytes}) the binaries compiled already."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fmu = out_dir / f"{CLOCKED}.fmu"
+    platforms = check_platforms(ALL_PLATFORMS if platforms is None else platforms)
+    files = clocked_source_files()
+    with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
+        src = staged_sources(files, CLOCKED, "fmi3")
+        built = dict(built or {})
+        for p in platforms:
+            if p not in built:
+                built[p] = _compile_one(Path(tmp), src, CLOCKED, "fmi3", p)
+    binaries = _members({p: built[p] for p in platforms}, CLOCKED, "fmi3")
+    from .fmu_extras import LICENSE_FILE, license_text
+    # the license only: a reference experiment (FMI-LS-REF) needs an importer that ticks the clock, which
+    # fmusim, its replayer, does not; the controller's documentation is TAPMP_Controller.fmu's
+    extra = {LICENSE_FILE: license_text()}
+    partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
+    try:
+        with zipfile.ZipFile(partial, "w") as z:
+            _zip_write(z, "modelDescription.xml", model_description_clocked())
+            for name, data in sorted(files.items()):
+                _zip_write(z, f"sources/{name}", data)
+            for name, data in binaries.items():
+                _zip_write(z, name, data)
+            for name, data in extra.items():
+                _zip_write(z, name, data)
+        partial.replace(fmu)
+    finally:
+        partial.unlink(missing_ok=True)
+    return fmu
+
+
+def write_clocked_ssp(path: Path, fmus: dict) -> Path:
+    """The TAPMP system's SSP with the clocked controller in the controller element (``fmus``: {model name or
+    CLOCKED: path}, as :func:`build_native` returns them); atomic. Run it with event_mode (the clock ticks
+    only in Event Mode)."""
+    from .ssp import system_structure
+    path = Path(path)
+    ssd = system_structure().replace(f'source="resources/{CONTROLLER}.fmu"'.encode(),
+                                     f'source="resources/{CLOCKED}.fmu"'.encode(), 1)
+    tmp = path.with_suffix(".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        for model in (PLANT, TRAJECTORY, CLOCKED):
+            z.write(fmus[model], f"resources/{model}.fmu")
+    tmp.replace(path)
+    return path
+
+
 def build_description(model: str) -> bytes:
     """sources/buildDescription.xml of the native ``model``, the same in FMI 2.0 and 3.0 (FMI
     2.0.4 and later take the FMI 3.0 build description; it has precedence over <SourceFiles>).
@@ -589,6 +713,8 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     platforms = check_platforms(platforms)
     units = {(model, family): staged_sources(source_files(model, family), model, family)
              for family in families for model in FMU_NAMES}
+    if "fmi3" in families:  # the clocked controller, beside the FMI 3.0 FMUs (not in the SSP)
+        units[(CLOCKED, "fmi3")] = staged_sources(clocked_source_files(), CLOCKED, "fmi3")
     log(f"native: compiling {len(units)} FMUs ({', '.join(families)}) for {len(platforms)} platform(s): "
         f"{', '.join(platforms)}")
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
@@ -609,6 +735,11 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
             log(f"built {paths[model]}")
         paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths)
         log(f"wrote {paths['ssp']}")
+        if family == "fmi3":
+            paths[CLOCKED] = build_clocked_controller(folder, platforms, built[(CLOCKED, family)])
+            log(f"built {paths[CLOCKED]}")
+            paths["clocked_ssp"] = write_clocked_ssp(folder / "TAPMP_Clocked.ssp", paths)
+            log(f"wrote {paths['clocked_ssp']}")
         out[family] = paths
     return out
 

@@ -5,7 +5,7 @@ arrays and lists on every call). The compiled stepping core reads the same array
 """
 
 import math
-from ctypes import byref, c_bool, c_double, c_uint
+from ctypes import byref, c_bool, c_double, c_int, c_uint
 from pathlib import Path
 
 from fmpy import read_model_description
@@ -75,6 +75,12 @@ class Unit:
         self.event_mode = False       # instantiated with eventModeUsed (and earlyReturnAllowed)
         self.next_event = math.inf    # its next time event [s] (nextEventTime), inf if none
         self.n_events = 0             # events handled (fmi3UpdateDiscreteStates rounds that settled)
+        # FMI 3.0 input clocks, periodic with a constant or fixed interval: the master ticks them
+        # (start_clocks, tick_due, tick); any other clock is refused by the master (clock_kinds_refused)
+        self.clocks = [v for v in self.md.modelVariables if v.type == "Clock" and v.causality == "input"]
+        self.clock_vrs = [v.valueReference for v in self.clocks]
+        self.clock_t0 = self.clock_interval = math.nan
+        self.clock_k = 0              # the index of the next tick, at clock_t0 + clock_k * clock_interval
         dll = self.slave.dll
         if self.fmi3:
             self._get_real, self._set_real, self._do_step3 = dll.fmi3GetFloat64, dll.fmi3SetFloat64, dll.fmi3DoStep
@@ -114,6 +120,8 @@ class Unit:
         self._copies = ()
         self.next_event = math.inf
         self.n_events = 0
+        self.clock_t0 = self.clock_interval = math.nan
+        self.clock_k = 0
         if self.fmi3:
             for flag in self._flags:
                 flag.value = False
@@ -175,11 +183,45 @@ class Unit:
         for _ in range(100):
             again, _terminate, _, _, defined, next_time = self.slave.updateDiscreteStates()
             self.next_event = next_time if defined else math.inf
+            if self.clocks:  # the next tick of the clocks, as the FMU's grid t0 + k T_s computes it
+                self.next_event = min(self.next_event, self.clock_t0 + self.clock_k * self.clock_interval)
             if not again:
                 self.n_events += 1
                 return
         raise CoSimulationError(f"{self.name}: fmi3UpdateDiscreteStates still needs another update after 100 "
                                 "rounds: allowed is an FMU whose discrete states settle", self.name)
+
+    def clock_kinds_refused(self) -> list[str]:
+        """The names of the input clocks the master cannot tick: every one that is not periodic with a
+        constant or fixed interval (those tick at t0 + shift + k interval)."""
+        return [v.name for v in self.clocks if v.intervalVariability not in ("constant", "fixed")]
+
+    def start_clocks(self, t0: float) -> None:
+        """After initialization: the clocks' interval and shift [s] (fmi3GetIntervalDecimal, fmi3GetShiftDecimal;
+        one interval for all: the master ticks them together), the first tick at t0 + shift."""
+        n = len(self.clock_vrs)
+        vrs = (c_uint * n)(*self.clock_vrs)
+        intervals, qualifiers, shifts = (c_double * n)(), (c_int * n)(), (c_double * n)()
+        self.slave.getIntervalDecimal(vrs, intervals, qualifiers)
+        self.slave.getShiftDecimal(vrs, shifts)
+        if len(set(intervals)) != 1 or len(set(shifts)) != 1 or not (intervals[0] > 0.0):
+            raise CoSimulationError(f"{self.name}: input clocks {', '.join(v.name for v in self.clocks)} with "
+                                    f"intervals {list(intervals)} s and shifts {list(shifts)} s: allowed are clocks "
+                                    "that tick together (one interval > 0, one shift)", self.name)
+        self.clock_t0 = t0 + shifts[0] if shifts[0] else t0  # t0 itself, as the FMU's own grid t0 + k T_s
+        self.clock_interval = intervals[0]
+        self.clock_k = 0
+        self.next_event = self.clock_t0
+
+    def tick_due(self, t: float, tol: float) -> bool:
+        """Whether the clocks tick at t [s] (within tol [s]): t is the next tick."""
+        return bool(self.clocks) and abs(t - self.next_event) <= tol
+
+    def tick(self) -> None:
+        """In Event Mode at a tick: activate every clock (fmi3SetClock); the next tick becomes :attr:`next_event`
+        once the update is done (:meth:`update_discrete_states`)."""
+        self.slave.setClock(self.clock_vrs, [True] * len(self.clock_vrs))
+        self.clock_k += 1
 
     def set_parameter(self, name: str, value) -> None:
         var = self.vars.get(name)

@@ -44,8 +44,12 @@ the event, and there the event FMUs, in the step order, enter Event Mode, take t
 outputs at that time, update (fmi3UpdateDiscreteStates) and publish their outputs, which the others
 take from then on. An event at the end of a macro step is handled at the start of the next one, so
 the row at a communication point holds the outputs before it (the command of the previous sample).
-So the controller samples at every instant t0 + k T_s whatever the macro step. The FMI 3.0 FMUs
-without Event Mode and the FMI 2.0 ones step as before. An early return at a time the FMU did not
+So the controller samples at every instant t0 + k T_s whatever the macro step. An FMU with periodic
+input clocks (the clocked controller, TAPMP_ControllerClocked) is handled the same way with its ticks as
+the events: the master reads the interval and shift after initialization (fmi3GetIntervalDecimal,
+fmi3GetShiftDecimal), cuts the macro step at every tick t0 + shift + k interval and there activates the
+clocks (fmi3SetClock) in Event Mode before the inputs and the update; such an FMU requires event_mode.
+The FMI 3.0 FMUs without Event Mode and the FMI 2.0 ones step as before. An early return at a time the FMU did not
 announce is refused: the others have stepped past it already.
 """
 
@@ -217,6 +221,7 @@ class CoSimulation:
             raise CoSimulationError(f"event_mode = true is invalid for SSP file {self.ssp_path}: no FMU in it has "
                                     "Event Mode: allowed is an SSP with an FMI 3.0 FMU with hasEventMode=\"true\" "
                                     "(the native FMI 3.0 controller, build/native/fmi3/TAPMP.ssp)")
+        self._check_clocks()
         for name in self.init_order:
             unit = self.units[name]
             if not unit.instantiated:  # else reset by ``loaded``: in the state right after instantiation
@@ -238,6 +243,8 @@ class CoSimulation:
                 self._call(unit, unit.apply_inputs, "setReal")
             self._call(unit, unit.slave.exitInitializationMode, "exitInitializationMode")
             if unit.event_mode:  # it left initialization into Event Mode: the event at the start time
+                if unit.clocks:
+                    self._start_clocks(unit)
                 self._call(unit, unit.update_discrete_states, "updateDiscreteStates", self.t0)
                 self._call(unit, unit.slave.enterStepMode, "enterStepMode", self.t0)
             if propagate:  # else the outputs (and so the connections) stay 0 until the first step
@@ -325,7 +332,8 @@ class CoSimulation:
     def _check_open_inputs(self, driven: dict) -> None:
         """Refuse an FMU input that no connection drives unless ``open_inputs`` names it, and
         an ``open_inputs`` entry that is no input of the system or that a connection drives."""
-        inputs = [f"{u.name}.{n}" for u in self.units.values() for n, v in u.vars.items() if v.causality == "input"]
+        inputs = [f"{u.name}.{n}" for u in self.units.values() for n, v in u.vars.items()
+                  if v.causality == "input" and v.type != "Clock"]  # the master ticks input clocks itself
         for entry in self.open_inputs:
             if entry not in inputs:
                 raise CoSimulationError(f"open_inputs: {entry!r} is not an input of the system in SSP file "
@@ -459,15 +467,46 @@ class CoSimulation:
     def _handle_events(self, t: float) -> None:
         """The event FMUs whose last doStep asked for event handling, in the step order: enter Event
         Mode, inputs from the outputs at t [s], update, outputs, back to Step Mode."""
+        tol = max(1e-12, 8.0 * (math.nextafter(abs(t), math.inf) - abs(t)))  # as _step_events's
         for unit in self._event_units:
-            if not unit.event_needed():
+            tick = unit.tick_due(t, tol)
+            if not (unit.event_needed() or tick):
                 continue
             unit._flags[0].value = False  # handled
             self._call(unit, unit.slave.enterEventMode, "enterEventMode", t)
+            if tick:
+                self._call(unit, unit.tick, "setClock", t)
             self._call(unit, unit.apply_inputs, "setFloat64", t)
             self._call(unit, unit.update_discrete_states, "updateDiscreteStates", t)
             self._call(unit, unit.read_outputs, "getFloat64", t)
             self._call(unit, unit.slave.enterStepMode, "enterStepMode", t)
+
+    def _check_clocks(self) -> None:
+        """Refuse, before anything is instantiated, an FMU with input clocks that the run cannot tick: without
+        event_mode (FMI 3.0: clocks tick only in Event Mode), or clocks that are not periodic."""
+        for unit in self.units.values():
+            if not unit.clocks:
+                continue
+            names = ", ".join(v.name for v in unit.clocks)
+            if not self.event_mode:
+                raise CoSimulationError(
+                    f"event_mode = false is invalid for SSP file {self.ssp_path}: the FMU {unit.md.modelName} of "
+                    f"element {unit.name} has the input clock(s) {names}, which tick only in Event Mode: allowed "
+                    "is event_mode = true", unit.name)
+            refused = unit.clock_kinds_refused()
+            if refused:
+                raise CoSimulationError(
+                    f"SSP file {self.ssp_path}: the FMU {unit.md.modelName} of element {unit.name} has the input "
+                    f"clock(s) {', '.join(refused)}, which are not periodic: allowed are input clocks with "
+                    "intervalVariability constant or fixed (the master ticks them at t0 + shift + k interval)",
+                    unit.name)
+
+    def _start_clocks(self, unit: Unit) -> None:
+        """At the start time, in the Event Mode after initialization: the clocks' interval and shift, and the
+        tick at t0 if they tick there (shift 0)."""
+        self._call(unit, lambda: unit.start_clocks(self.t0), "getIntervalDecimal", self.t0)
+        if unit.tick_due(self.t0, 0.0):
+            self._call(unit, unit.tick, "setClock", self.t0)
 
     def advance(self, rows) -> int:
         """Step ``len(rows)`` times, storing :meth:`row` after each step into ``rows`` (a

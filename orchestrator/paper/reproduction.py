@@ -14,7 +14,7 @@ from pathlib import Path
 from tapmp.modal import modal_table
 
 from ..tool.baselines import scdc_modal
-from ..tool.compare import run_comparison
+from ..tool.compare import noise_intro, noise_table, read_noise, run_comparison
 from .paper_gains import paper_gains_table, run_paper_gains
 from .predictors import prediction_lines, run_extra
 from ..tool.robustness import MODES, mode_peaks
@@ -212,62 +212,6 @@ def _scenario_claims(name: str, results: dict, exact: bool, peaks: dict, gains=N
     return out
 
 
-NOISE_LEVELS = (20e-9, 100e-9)  # [m] rms of the measurement noise of the noise runs
-NOISE_SEED = 1
-NOISE_RUNS = ("sc-dc", "apd-dc", "apd-dc-mode-matched", "apd-dc-ms-matched", "pid-dc-full")
-
-
-def run_noise(scenarios: dict, ssp: Path, work: Path, say=lambda line: None) -> dict:
-    """The NOISE_RUNS of each scenario's compare runs again with seeded measurement noise (plant
-    noise_rms at each of NOISE_LEVELS [m], noise_seed NOISE_SEED), through the FMUs of ``ssp``.
-    scenarios: {name: (scenario, runs, results, checks)} as reproduce keeps them. Returns
-    {name: {run: {level [m]: metrics}}}, the level 0 being the compare run's own metrics."""
-    from .calibration import run_metrics
-    out = {}
-    for name, (_, runs, results, _) in scenarios.items():
-        say(f"{name}: the noise runs ({len(NOISE_RUNS)} runs at " + ", ".join(f"{1e9 * x:g}" for x in NOISE_LEVELS)
-            + " nm rms)")
-        entry = out[name] = {}
-        for run in NOISE_RUNS:
-            if run not in runs:
-                continue
-            sc = runs[run]
-            entry[run] = {0.0: results[run]}
-            for level in NOISE_LEVELS:
-                noisy = sc.with_changes(plant={**sc.plant, "noise_rms": level, "noise_seed": NOISE_SEED})
-                entry[run][level] = run_metrics(noisy, ssp, Path(work) / name / f"{run}-{1e9 * level:g}nm")
-    return out
-
-
-def noise_lines(noise: dict) -> list[str]:
-    """Markdown: per scenario and noise run, mean tracking and sync MAE [um] and force RMS above the
-    effort band [N] at each noise level, and SC-DC's sync reduction against the run at each level."""
-    levels = (0.0, *NOISE_LEVELS)
-    head = ", ".join(f"{1e9 * x:g}" for x in levels) + " nm"
-    lines = []
-    for name, entry in noise.items():
-        hz = entry["sc-dc"][0.0].get("force_rms_above_hz")
-        lines += [f"**`{name}`**", "",
-                  f"| run | tracking MAE [um] at {head} | sync MAE [um] at {head} | force RMS above "
-                  + (f"{hz:g} Hz" if hz else "the band") + f" [N], mean over the motors, at {head} "
-                  f"| SC-DC's sync reduction [%] at {head} |", "|---" * 5 + "|"]
-        sc = entry["sc-dc"]
-        for run, by in entry.items():
-            t = ", ".join(f"{_mean(by[x]['tracking_mae_um']):.4f}" for x in levels)
-            y = ", ".join(f"{_mean(by[x]['sync_mae_um']):.4f}" for x in levels)
-            f = ", ".join(f"{_mean(by[x]['force_hf_rms_n']):.3g}" if by[x].get("force_hf_rms_n") else "n/a"
-                          for x in levels)
-            r = ", ".join(f"{reduction(_mean(by[x]['sync_mae_um']), _mean(sc[x]['sync_mae_um'])):+.1f}" for x in levels)
-            lines.append(f"| `{run}` | {t} | {y} | {f} | {r} |")
-        if "apd-dc-ms-matched" in entry:
-            ms = entry["apd-dc-ms-matched"]
-            r0, r1 = (reduction(_mean(ms[x]["sync_mae_um"]), _mean(sc[x]["sync_mae_um"])) for x in (0.0, levels[-1]))
-            lines += ["", f"SC-DC's synchronization advantage over the robustness-matched PD is {r0:+.1f} % without "
-                      f"noise and {r1:+.1f} % at {1e9 * levels[-1]:g} nm rms."]
-        lines.append("")
-    return lines
-
-
 def _paper_gain_claims(rows: list[dict]) -> list[str]:
     """Generated sentences on the paper-gain runs: per case and reading, the finest step's result."""
     out = []
@@ -444,15 +388,12 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
                   "prediction is reported.", "",
                   "## Closing note: our reductions against the paper's, Tables 1-6", "",
                   *_reduction_note(comparisons, "the uncalibrated scenarios above"), ""]
-    if ssp is not None:
-        noise = run_noise({**comparisons, **calibrated}, ssp, Path(results_dir) / "noise", say)
-        parts += ["## Measurement noise: SC-DC, APD-DC and the matched baselines", "",
-                  f"The runs {', '.join(f'`{r}`' for r in NOISE_RUNS)} of each scenario again with white Gaussian "
-                  "noise on every measured position before quantization (docs/disturbances.md), rms "
-                  + " and ".join(f"{1e9 * x:g} nm" for x in NOISE_LEVELS) + f", seed {NOISE_SEED} (the same noise "
-                  "for every law); 0 nm is the compare run itself. Written by the command at the top of this page: each "
-                  "row is its compare run with the plant's `noise_rms` and `noise_seed` set, nothing else changed.", "",
-                  *noise_lines(noise)]
+    parts += ["## Measurement noise: SC-DC, APD-DC and the matched baselines", "",
+              f"{noise_intro()} Written by `tapmp compare` into each comparison's folder (its comparison.md has "
+              "the same table) and read back from the noise runs' metrics.json.", ""]
+    for name, (sc, _, results, _) in {**comparisons, **calibrated}.items():
+        parts += [f"**`{name}`**", "",
+                  *noise_table(read_noise(folders[name], results), float(sc.plant.get("noise_rms", 0.0))), ""]
     text = "\n".join(parts)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

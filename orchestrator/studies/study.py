@@ -41,7 +41,7 @@ from ..tool.config import require
 from ..tool.scenario import Scenario
 from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, this_plugin,
                      unpack_folder)
-from .study_file import Study, StudyError, apply_changes, base_value, load_study
+from .study_file import Study, StudyError, apply_changes, base_value, expand_baseline, load_study
 
 STUDY_CSV = "study.csv"
 STUDY_JSON = "study.json"
@@ -93,10 +93,11 @@ def cases(study: Study, limit: int = MAX_CASES) -> list[dict]:
         draws = [{n: float(columns[n][i]) for n in columns} for i in range(study.samples)]
     out = []
     for combo in combos:
+        point = expand_baseline(base, dict(zip(grid_keys, combo)))  # once per grid point: the same gains for every draw
+        scenario = apply_changes(base, point, "grid") if point else base
         for draw in (draws or [{}]):
             params = dict(zip(grid_keys, combo))
-            changes = dict(params)
-            scenario = apply_changes(base, changes, "grid") if changes else base
+            changes = dict(point)
             for f in study.factors:
                 value = draw[f.name]
                 params[f.name] = value

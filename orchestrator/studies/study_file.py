@@ -126,12 +126,16 @@ def base_value(scenario: Scenario, key: str):
     return getattr(scenario, key)
 
 
-STUDY_KEYS = ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file", "start_on_trajectory")
+STUDY_KEYS = ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file", "start_on_trajectory",
+              "baseline")
+BASELINE_KEY = "baseline"  # a grid key naming compare runs (orchestrator.tool.baselines), not a scenario field
 
 
 def check_key(key: str, where: str) -> None:
     """Raise StudyError unless ``key`` is a dotted scenario key a study may vary."""
     section, dot, name = key.partition(".")
+    if key == BASELINE_KEY and where != "grid":
+        raise StudyError(f"{where}: {key} is allowed only in [grid] (a list of compare run names)")
     if not dot:
         if key not in STUDY_KEYS:
             raise StudyError(f"{where}: {key} is not a scenario key a study may set: allowed are "
@@ -198,7 +202,29 @@ def _grid(table: dict) -> dict:
         check_key(key, "grid")
         require(isinstance(values, list) and len(values) >= 1,
                 f"grid.{key} = {values!r} is invalid: allowed is a non-empty list of values")
+    if BASELINE_KEY in table:
+        from ..tool.baselines import BY_NAME
+        for v in table[BASELINE_KEY]:
+            require(isinstance(v, str) and v in BY_NAME, f"grid.{BASELINE_KEY} = {v!r} is invalid: "
+                    + allowed_are(str(v), list(BY_NAME)))
+        require("law" not in table, f"grid: law and {BASELINE_KEY} cannot both vary: a baseline sets the law; "
+                f"allowed is one of them")
     return {key: list(values) for key, values in table.items()}
+
+
+def expand_baseline(scenario: Scenario, changes: dict) -> dict:
+    """``changes`` with a ``baseline`` key replaced by what makes ``scenario`` (with the other
+    changes) that compare run (orchestrator.tool.baselines.compare_runs): its law, gain
+    overrides and [controller] table, as whole-table changes. The baseline's gains come from
+    the scenario's nominal gains and controller model, so Monte Carlo draws applied later change
+    the plant, never the matched gains (a controller designed once, run on every sampled plant)."""
+    if BASELINE_KEY not in changes:
+        return dict(changes)
+    from ..tool.baselines import compare_runs
+    rest = {k: v for k, v in changes.items() if k != BASELINE_KEY}
+    at = apply_changes(scenario, rest, "grid") if rest else scenario
+    run = compare_runs(at)[changes[BASELINE_KEY]]
+    return {**rest, "law": run.law, "gain_overrides": dict(run.gain_overrides), "controller": dict(run.controller)}
 
 
 def _vary(tables) -> dict:

@@ -65,13 +65,76 @@ def _numeric(values) -> bool:
 
 
 def plot_study(out: Path, study, params: list) -> list:
-    """Figures of a grid / Monte Carlo study from its study.csv; returns the paths written."""
+    """Figures of a grid / Monte Carlo study from its study.csv, and a Monte Carlo study's
+    summary.md (monte_carlo_summary); returns the paths written."""
     paths = []
     for path, fig in study_figures(out, study).items():
         fig.savefig(path, dpi=110)
         plt.close(fig)
         paths.append(path)
+    text = monte_carlo_summary(out, study)
+    if text:
+        path = Path(out) / SUMMARY_MD
+        path.write_text(text)
+        paths.append(path)
     return paths
+
+
+SUMMARY_MD = "summary.md"
+
+
+def monte_carlo_summary(out: Path, study) -> str:
+    """Markdown table of a Monte Carlo study from out/study.csv, one row per grid point (e.g. per
+    law or baseline): cases completed of cases, and the median / 90th percentile / maximum over
+    the samples of the mean tracking and synchronization MAE [um]; "" for a study without samples."""
+    if not study.samples:
+        return ""
+    # in case order (study.csv has them in the order they finished): within a grid point, sample i is row i
+    rows = sorted((r for r in read_study_csv(Path(out) / STUDY_CSV) if r["case"].startswith("c")),
+                  key=lambda r: r["case"])
+    group_keys = list(study.grid)
+    groups = {}
+    for r in rows:
+        groups.setdefault(tuple(str(r[k]) for k in group_keys), []).append(r)
+    lines = [f"# {study.name}: {study.samples} samples (seed {study.seed}) of "
+             + ", ".join(f.name for f in study.factors), "",
+             f"| {', '.join(group_keys) or 'cases'} | cases completed | tracking MAE, median / 90th pct / max [um] "
+             "| sync MAE, median / 90th pct / max [um] |", "|---|---|---|---|"]
+    for g, rs in groups.items():
+        done = [r for r in rs if r["status"] == "completed" and all(isinstance(r.get(k), float) for k, _ in _MAE)]
+        cells = []
+        for key, _ in _MAE:
+            d = np.array([r[key] for r in done])
+            cells.append(" / ".join(f"{v:.3f}" for v in (np.median(d), np.percentile(d, 90), d.max()))
+                         if len(d) else "none completed")
+        lines.append(f"| {', '.join(g) or 'all'} | {len(done)} / {len(rs)} | {cells[0]} | {cells[1]} |")
+    if len(groups) > 1:
+        lines += ["", *_paired_lines(groups, group_keys, study.samples)]
+    return "\n".join(lines) + "\n"
+
+
+def _paired_lines(groups: dict, group_keys: list, samples: int) -> list[str]:
+    """Markdown: the first grid point against each other one, sample by sample (the same sampled
+    plant: the cases of a grid point are its samples in draw order): in how many samples its mean
+    MAE is the smaller, and the median of its reduction 100 (other - first) / other [%]."""
+    (first, base), *others = groups.items()
+    name = ", ".join(first)
+    lines = [f"Sample by sample (the same sampled plant), `{name}` against each other row: in how many samples "
+             f"its mean MAE is the smaller, and the median of its reduction 100 (other - {name}) / other over the "
+             "samples where both completed.", "",
+             f"| {', '.join(group_keys)} | tracking: {name} smaller in | tracking: median reduction [%] "
+             f"| sync: {name} smaller in | sync: median reduction [%] |", "|---|---|---|---|---|"]
+    for g, rs in others:
+        cells = []
+        for key, _ in _MAE:
+            pairs = [(a[key], b[key]) for a, b in zip(base[:samples], rs[:samples])
+                     if isinstance(a.get(key), float) and isinstance(b.get(key), float)
+                     and a["status"] == b["status"] == "completed"]
+            red = [100.0 * (b - a) / b for a, b in pairs if b > 0]
+            cells += [f"{sum(a < b for a, b in pairs)} of {len(pairs)}",
+                      f"{np.median(red):+.1f}" if red else "n/a"]
+        lines.append(f"| {', '.join(g)} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def study_figures(out: Path, study) -> dict:
@@ -104,18 +167,22 @@ def _label(group_keys, group) -> str:
 
 
 def _histograms(study, groups, group_keys):
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4 + 0.25 * len(groups)))
     for (key, title), ax in zip(_MAE, axes):
         data = {g: np.array([r[key] for r in rs]) for g, rs in groups.items()}
         lo = min(d.min() for d in data.values())
         hi = max(d.max() for d in data.values())
-        bins = np.linspace(lo, hi if hi > lo else lo + 1e-9, 25)
+        wide = lo > 0 and hi / lo > 5  # laws an order of magnitude apart: log bins keep each visible
+        bins = (np.geomspace(lo, hi, 30) if wide else np.linspace(lo, hi if hi > lo else lo + 1e-9, 25))
         for g, d in data.items():
-            ax.hist(d, bins=bins, alpha=0.55, label=f"{_label(group_keys, g)} (n = {len(d)}, "
+            # outlines, not filled bars: several laws overlap on the same bins
+            ax.hist(d, bins=bins, histtype="step", lw=1.6, label=f"{_label(group_keys, g)} (n = {len(d)}, "
                     f"median {np.median(d):.3f})")
+        if wide:
+            ax.set_xscale("log")
         ax.set_xlabel(title)
         ax.set_ylabel("cases [count]")
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16))  # below: the outlines stay visible
     fig.suptitle(f"{study.name}: {study.samples} samples of "
                  + ", ".join(f.name for f in study.factors) + f" (seed {study.seed})", fontsize=10)
     fig.tight_layout()

@@ -11,6 +11,7 @@ from pathlib import Path
 from .estimate import check_output_size
 from .folders import ResultsWriteError, check_output, output_lock, prepare_output, write_comparison_status
 from .progress import progress_bar, say
+from .scenario import MAX_INT
 from .results import one_line
 
 
@@ -59,21 +60,121 @@ def run_columns(folder: Path) -> list:
     return json.loads((Path(folder) / "run.json").read_text())["columns"]
 
 
+NOISE_LEVELS = (20e-9, 100e-9)  # [m] rms of the measurement noise of the noise runs
+NOISE_SEED = 1                  # the same noise sequence for every law, so the laws see the same measurements
+NOISE_RUNS = ("sc-dc", "apd-dc", "apd-dc-mode-matched", "apd-dc-ms-matched", "pid-dc-full")
+NOISE_FOLDER = "noise"          # out/noise/<run>-<level>nm: the noise runs of a comparison folder
+
+
+def _nm(level: float) -> str:
+    return f"{1e9 * level:g}"
+
+
+def noise_runs(runs: dict) -> dict:
+    """{folder name "<run>-<rms>nm": Scenario}: each NOISE_RUNS run of ``runs`` ({name: Scenario},
+    compare_runs) again at each NOISE_LEVELS rms [m] of white measurement noise (the plant's
+    noise_rms, noise_seed NOISE_SEED), nothing else changed but the recording: only the first and
+    last rows are kept on disk (the metrics are computed at every step all the same)."""
+    out = {}
+    for run in NOISE_RUNS:
+        if run in runs:
+            sc = runs[run]
+            for level in NOISE_LEVELS:
+                out[f"{run}-{_nm(level)}nm"] = sc.with_changes(
+                    plant={**sc.plant, "noise_rms": level, "noise_seed": NOISE_SEED},
+                    record_every=min(sc.n_steps, MAX_INT), format="csv")
+    return out
+
+
+def read_noise(out: Path, results: dict) -> dict:
+    """{run: {rms [m]: metrics}} of a comparison folder's noise runs, read from their metrics.json
+    (out/noise/<run>-<rms>nm); the rms 0 is the run's own metrics in ``results`` ({run: metrics}).
+    Runs without noise runs there are left out."""
+    noise = {}
+    for run in NOISE_RUNS:
+        files = [Path(out) / NOISE_FOLDER / f"{run}-{_nm(level)}nm" / "metrics.json" for level in NOISE_LEVELS]
+        if run in results and all(f.is_file() for f in files):
+            noise[run] = {0.0: results[run], **{level: json.loads(f.read_text())
+                                                 for level, f in zip(NOISE_LEVELS, files)}}
+    return noise
+
+
+def _mean(v) -> float:
+    return sum(v) / len(v)
+
+
+def _reduction(base: float, new: float) -> float:
+    return 100.0 * (base - new) / base if base else float("nan")
+
+
+def noise_table(noise: dict, own_rms: float = 0.0) -> list[str]:
+    """Markdown lines: per noise run ({run: {rms [m]: metrics}}, read_noise), mean tracking and sync
+    MAE [um] and force RMS above the effort band [N] at each rms, SC-DC's sync reduction against the
+    run at each rms [%], and one sentence on SC-DC's advantage over the robustness-matched PD.
+    own_rms [m]: the noise_rms of the compared scenario itself (its runs are the first column)."""
+    if "sc-dc" not in noise:  # no noise runs (compare --no-noise): no table
+        return []
+    levels = (0.0, *NOISE_LEVELS)
+    head = ", ".join(_nm(x) for x in (own_rms, *NOISE_LEVELS)) + " nm"
+    sc = noise["sc-dc"]
+    hz = sc[0.0].get("force_rms_above_hz")
+    lines = [f"| run | tracking MAE [um] at {head} | sync MAE [um] at {head} | force RMS above "
+             + (f"{hz:g} Hz" if hz else "the band") + f" [N], mean over the motors, at {head} "
+             f"| SC-DC's sync reduction [%] at {head} |", "|---" * 5 + "|"]
+    for run, by in noise.items():
+        t = ", ".join(f"{_mean(by[x]['tracking_mae_um']):.4f}" for x in levels)
+        y = ", ".join(f"{_mean(by[x]['sync_mae_um']):.4f}" for x in levels)
+        f = ", ".join(f"{_mean(by[x]['force_hf_rms_n']):.3g}" if by[x].get("force_hf_rms_n") else "n/a"
+                      for x in levels)
+        r = ", ".join(f"{_reduction(_mean(by[x]['sync_mae_um']), _mean(sc[x]['sync_mae_um'])):+.1f}" for x in levels)
+        lines.append(f"| `{run}` | {t} | {y} | {f} | {r} |")
+    if "apd-dc-ms-matched" in noise:
+        ms = noise["apd-dc-ms-matched"]
+        r0, r1 = (_reduction(_mean(ms[x]["sync_mae_um"]), _mean(sc[x]["sync_mae_um"])) for x in (0.0, levels[-1]))
+        lines += ["", f"SC-DC's synchronization advantage over the robustness-matched PD is {r0:+.1f} % "
+                  + ("without noise" if not own_rms else f"at {_nm(own_rms)} nm rms (the scenario's own)")
+                  + f" and {r1:+.1f} % at {_nm(levels[-1])} nm rms."]
+    return lines
+
+
+def noise_intro() -> str:
+    """The sentence that says what the noise runs are (comparison.md, docs/paper-reproduction.md)."""
+    return (f"The runs {', '.join(f'`{r}`' for r in NOISE_RUNS)} again with white Gaussian noise on every "
+            "measured position before quantization (docs/disturbances.md), rms "
+            + " and ".join(f"{_nm(x)} nm" for x in NOISE_LEVELS) + f", seed {NOISE_SEED} (the same noise for "
+            f"every law); the first value is the run itself, at its scenario's own noise_rms (0 nm unless the "
+            f"scenario sets one). Each noise run is its run with the plant's `noise_rms` and "
+            f"`noise_seed` set, nothing else changed (its folder: `{NOISE_FOLDER}/<run>-<rms>nm`).")
+
+
+def run_noise(runs: dict, ssp, out: Path, jobs: int, progress: bool, label: str) -> None:
+    """Run noise_runs(runs) on the SSP file ``ssp`` into out/noise/<name> on ``jobs`` processes."""
+    from .pool import run_many
+    tasks = noise_runs(runs)
+    say(f"{label}: the noise runs ({len(tasks)} runs at " + ", ".join(_nm(x) for x in NOISE_LEVELS)
+        + " nm rms)")
+    bars = (lambda name: progress_bar(f"{label} {name}", True)) if progress else None
+    run_many({name: (sc, ssp, Path(out) / NOISE_FOLDER / name) for name, sc in tasks.items()}, jobs, False, bars,
+             label)
+
+
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
                    show: list | None = None, figures: bool = True, written_by: str = "compare",
-                   reference: dict | None = None):
+                   noise: bool = True, reference: dict | None = None):
     """Run every compare run of ``scenario`` on the SSP file ``ssp`` into out/<run> (on ``jobs``
-    processes, a progress bar each if ``progress``), write out/comparison.md (naming ``command``)
-    and, if ``figures``, the figures (of the runs ``show``, default see plots.select_runs);
-    returns (runs, results, checks, comparison.md text). ``written_by``: the command, recorded in
-    comparison.json (`tapmp reproduce` replaces only the comparisons it wrote); ``reference``: rows
-    shown beside ours in comparison.md (report.comparison_tables)."""
+    processes, a progress bar each if ``progress``), and if ``noise`` the noise runs (noise_runs)
+    into out/noise/; write out/comparison.md (naming ``command``; with the noise table) and, if
+    ``figures``, the figures (of the runs ``show``, default see plots.select_runs); returns (runs,
+    results, checks, comparison.md text). ``written_by``: the command, recorded in comparison.json
+    (`tapmp reproduce` replaces only the comparisons it wrote); ``reference``: rows shown beside
+    ours in comparison.md (report.comparison_tables)."""
     from .baselines import compare_runs  # on first use: the command line starts without the models' algebra
     from .pool import run_many
     from .report import write_comparison
 
     runs = compare_runs(scenario)
-    check_output_size(runs.values(), out, scenario.name, jobs)  # before anything is written
+    # before anything is written
+    check_output_size([*runs.values(), *(noise_runs(runs).values() if noise else ())], out, scenario.name, jobs)
     checks = check_runs(runs)
     with comparison_folder(out, overwrite, scenario, runs, written_by):  # runs in subfolders; comparison.md, figures here
         say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
@@ -85,12 +186,26 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
                            scenario.name, first=drawing.needed if drawing else (),
                            on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
         results = {name: r["metrics"] for name, r in records.items()}
+        if noise:
+            run_noise(runs, ssp, out, jobs, progress, scenario.name)
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks, reference)
+        if noise:
+            text += "\n".join(["", "## Measurement noise: SC-DC, APD-DC and the matched baselines", "",
+                                noise_intro(), "",
+                                *noise_table(read_noise(out, results), float(scenario.plant.get("noise_rms", 0.0))),
+                                ""])
+            _write_text(out / "comparison.md", text)
         if not figures:
             return runs, results, checks, text
         say(f"{scenario.name}: figures")
         drawing.finish(jobs)
     return runs, results, checks, text
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = Path(path).with_suffix(".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
 
 
 class _FiguresDuringRuns:

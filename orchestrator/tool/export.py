@@ -97,7 +97,7 @@ def _default_experiment(root: ET.Element, scenario: Scenario) -> None:
     own = ET.SubElement(annotations, qname(SSC, "Annotation"), type=SCENARIO_ANNOTATION)
     ET.SubElement(own, qname(TAPMP_NS, "Scenario"), name=scenario.name, step=repr(scenario.step),
                   ordering=scenario.ordering, clock=scenario.clock, connectionStart=scenario.connection_start,
-                  law=scenario.law)
+                  eventMode="true" if scenario.event_mode else "false", law=scenario.law)
     # DefaultExperiment follows Units and precedes Annotations (SSD schema sequence)
     after = [i for i, child in enumerate(root) if child.tag != qname(SSD, "Annotations")]
     root.insert(after[-1] + 1 if after else 0, exp)

@@ -105,7 +105,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
             "scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
             "ordering": scenario.ordering, "record_every": scenario.record_every,
             "clock": scenario.clock, "connection_start": scenario.connection_start,
-            "versions": versions(), "status": "running"}
+            "event_mode": scenario.event_mode, "versions": versions(), "status": "running"}
     write_result(out / "run.json", info)
     start = time.perf_counter()
     stop = StopRequest()
@@ -116,7 +116,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
             remove_stale_folders()  # of processes killed before they could remove their own
             with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
                               scenario.ordering, check=envelope(scenario), clock=scenario.clock,
-                              connection_start=scenario.connection_start,
+                              connection_start=scenario.connection_start, event_mode=scenario.event_mode,
                               open_inputs=scenario.open_inputs, order=scenario.order, roles=ROLES,
                               other_tables=SCENARIO_TABLES, loaded=loaded) as sim:
                 info["guids"] = sim.guids

@@ -61,7 +61,7 @@ MISMATCH_RANGE = (0.01, 100.0)
 TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
        "start_time": float, "step": float, "ordering": str, "output": str,
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list}
+       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "event_mode": bool}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.tool.results)
 TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
@@ -243,6 +243,9 @@ class Scenario:
     start_on_trajectory: bool = True
     clock: Annotated[str, one_of(CLOCKS)] = "exact"
     connection_start: Annotated[str, one_of(CONNECTION_STARTS)] = "propagated"
+    # FMI 3.0 Event Mode: FMUs with hasEventMode get eventModeUsed; the master handles their time events and
+    # ticks their input clocks (orchestrator.engine.master)
+    event_mode: bool = False
     trajectory: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
     plant: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
     controller: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)

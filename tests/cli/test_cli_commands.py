@@ -122,7 +122,7 @@ def test_reproduce_writes_the_page_with_the_numbers_of_its_runs(built, tmp_path)
     text = page.read_text()
     for name in ("paper_simulation", "paper_experiment"):
         assert f"`scenarios/{name}.toml`" in text and "0.02 s at a 0.0001 s step" in text
-        runs = sorted(p.parent for p in results.glob(f"{name}/**/metrics.json"))
+        runs = sorted(p.parent for p in results.glob(f"{name}/compare/*/metrics.json"))  # not compare/noise/
         assert {p.name for p in runs} == {b.name for b in BASELINES}
         for run in runs:
             m = json.loads((run / "metrics.json").read_text())

@@ -195,7 +195,7 @@ def test_the_noise_runs_are_the_compare_runs_with_seeded_noise(page):
     sec = _section(text, "## Measurement noise")
     block = sec[sec.index("**`paper_simulation`**"):]
     row = _row(block, "`apd-dc-ms-matched`")
-    noisy = {r: json.loads((results / "noise" / "paper_simulation" / f"{r}-100nm" / "metrics.json").read_text())
+    noisy = {r: json.loads((results / "paper_simulation" / "compare" / "noise" / f"{r}-100nm" / "metrics.json").read_text())
              for r in ("sc-dc", "apd-dc-ms-matched")}
     clean = json.loads((results / "paper_simulation" / "compare" / "apd-dc-ms-matched" / "metrics.json").read_text())
     assert row[1].split(", ")[0] == f"{_mean(clean['sync_mae_um']):.4f}"
@@ -203,7 +203,7 @@ def test_the_noise_runs_are_the_compare_runs_with_seeded_noise(page):
     assert row[2].split(", ")[2] == f"{_mean(noisy['apd-dc-ms-matched']['force_hf_rms_n']):.3g}"
     r = reduction(_mean(noisy["apd-dc-ms-matched"]["sync_mae_um"]), _mean(noisy["sc-dc"]["sync_mae_um"]))
     assert row[3].split(", ")[2] == f"{r:+.1f}"
-    run = json.loads((results / "noise" / "paper_simulation" / "sc-dc-100nm" / "run.json").read_text())
+    run = json.loads((results / "paper_simulation" / "compare" / "noise" / "sc-dc-100nm" / "run.json").read_text())
     assert (run["scenario"]["plant"]["noise_rms"], run["scenario"]["plant"]["noise_seed"]) == (1e-7, 1)
     # noise changes what the loop sees: the noisy run differs from the clean one
     assert noisy["sc-dc"]["sync_mae_um"] != json.loads(
