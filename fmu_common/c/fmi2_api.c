@@ -17,13 +17,8 @@ typedef struct {
     fmi2ComponentEnvironment componentEnvironment;
 } fmi2_callbacks;
 
-/* Model Exchange's modes after Initialization Mode (the instance itself is in Step Mode). */
-enum { ME_NONE, ME_EVENT, ME_CONTINUOUS };
-
 typedef struct {
     fmi2_callbacks cb;
-    int me;            /* instantiated as fmi2ModelExchange */
-    int me_mode;       /* ME_EVENT or ME_CONTINUOUS once initialized */
 } fmi2_env;
 
 #ifdef MODEL_N_STATES
@@ -74,8 +69,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free(env);
         return NULL;
     }
-    env->me = fmuType == fmi2ModelExchange;
     tapmp_instance *inst = tapmp_new(instanceName, "fmi2", logger, env, loggingOn, fmuGUID);
+    if (inst) inst->model_exchange = fmuType == fmi2ModelExchange;
     if (inst && !model_instantiate(inst, fmuResourceLocation, visible)) {
         tapmp_free(inst);
         inst = NULL;
@@ -114,32 +109,21 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) { INSTANCE(c); return (f
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     INSTANCE(c);
-    fmi2_env *env = inst->env;
-    int status = tapmp_exit_initialization(inst);
 #ifdef MODEL_N_STATES
-    if (env->me && status <= ST_WARNING) {
-        char msg[TAPMP_MESSAGE_MAX];
-        if (!model_me_check(inst, msg, sizeof msg)) return (fmi2Status)tapmp_fail(inst, "%s", msg);
-        env->me_mode = ME_EVENT;  /* FMI 2.0: Model Exchange leaves initialization into Event Mode */
-    }
+    if (inst->model_exchange) return (fmi2Status)tapmp_me_exit_initialization(inst);
 #endif
-    (void)env;
-    return (fmi2Status)status;
+    return (fmi2Status)tapmp_exit_initialization(inst);
 }
 fmi2Status fmi2Terminate(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_terminate(inst); }
 fmi2Status fmi2Reset(fmi2Component c) { INSTANCE(c); return (fmi2Status)tapmp_reset(inst); }
-
-#ifdef MODEL_N_STATES
-static fmi2Status get_state_derivatives(tapmp_instance *inst, const fmi2ValueReference vr[], size_t n,
-                                        fmi2Real value[]);
-#endif
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[])
 {
     INSTANCE(c);
 #ifdef MODEL_N_STATES
     for (size_t i = 0; vr && value && i < n; i++)  /* the state derivatives der(X) ... follow the variables */
-        if (vr[i] >= N_VARS && vr[i] < N_VARS + MODEL_N_STATES) return get_state_derivatives(inst, vr, n, value);
+        if (vr[i] >= N_VARS && vr[i] < N_VARS + MODEL_N_STATES)
+            return (fmi2Status)tapmp_me_get_real(inst, N_VARS, vr, n, value, n);
 #endif
     return (fmi2Status)tapmp_get_real(inst, vr, n, value, n);
 }
@@ -262,7 +246,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
 {
     (void)noSetFMUStatePriorToCurrentPoint;
     INSTANCE(c);
-    if (((fmi2_env *)inst->env)->me)
+    if (inst->model_exchange)
         return unsupported(inst, "DoStep", "the instance is a Model Exchange instance (fmuType = fmi2ModelExchange)");
     return (fmi2Status)tapmp_do_step(inst, t, h);
 }
@@ -317,187 +301,71 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
 }
 
 #ifdef MODEL_N_STATES
-/* --- Model Exchange ------------------------------------------------------------------------
- * The host integrates the model's continuous state (model_me_* hooks of the model file). No
- * event indicators: the right-hand side is smooth in the state (the Coulomb friction is
- * tanh-smoothed; the force saturation acts on the inputs, which the host sets); the one
- * discontinuity in time, the external force step at disturbance_time, is a time event. */
-
-static const char *me_mode_name(const tapmp_instance *inst)
-{
-    static const char *names[] = {"Instantiated", "Initialization Mode", "", "Terminated"};
-    if (inst->mode == MODE_STEP) return ((fmi2_env *)inst->env)->me_mode == ME_CONTINUOUS ? "Continuous-Time Mode"
-                                                                                          : "Event Mode";
-    return names[inst->mode];
-}
-
-/* ST_OK if `call` may run now: a Model Exchange instance, no earlier error, in one of the modes
- * of `modes` (bits: 1 Initialization Mode, 2 Event Mode, 4 Continuous-Time Mode, named in
- * `allowed`); else the logged error. */
-static int me_allowed(tapmp_instance *inst, const char *call, int modes, const char *allowed)
-{
-    fmi2_env *env = inst->env;
-    if (!env->me)
-        return tapmp_fail(inst, "fmi2%s is not allowed: the instance was instantiated for Co-Simulation "
-                          "(fmuType = fmi2CoSimulation)", call);
-    if (inst->failed) return tapmp_fail(inst, "fmi2%s refused after an earlier error: %s", call, inst->error);
-    int bit = inst->mode == MODE_INITIALIZATION ? 1 : inst->mode != MODE_STEP ? 0
-              : env->me_mode == ME_CONTINUOUS ? 4 : 2;
-    if (!(modes & bit))
-        return tapmp_fail(inst, "fmi2%s is not allowed in %s: allowed in %s", call, me_mode_name(inst), allowed);
-    return ST_OK;
-}
-
-/* In Initialization Mode the model follows the values set since it was last built: a get of no
- * variable rebuilds it (instance.c's initial unknowns) before a state or derivative is read. */
-static void refresh(tapmp_instance *inst)
-{
-    if (inst->mode == MODE_INITIALIZATION) tapmp_get_real(inst, NULL, 0, NULL, 0);
-}
-
-#define AFTER_INIT 6
-#define ANY_ME_MODE 7
-#define AFTER_INIT_TEXT "Event Mode and Continuous-Time Mode"
-#define ANY_ME_MODE_TEXT "Initialization Mode, Event Mode and Continuous-Time Mode"
-
-static int me_array(tapmp_instance *inst, const char *call, const void *p, size_t n, size_t expected,
-                    const char *what)
-{
-    if (n != expected)
-        return tapmp_fail(inst, "fmi2%s: %s = %zu is invalid: allowed is %zu", call, what, n, expected);
-    if (n && !p)
-        return tapmp_fail(inst, "fmi2%s: the array = NULL is invalid: allowed is an array of %zu values", call, n);
-    return ST_OK;
-}
+/* --- Model Exchange: the version-neutral operations of instance.c (tapmp_me_*) -------------- */
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "SetTime", AFTER_INIT, AFTER_INIT_TEXT);
-    if (status != ST_OK) return (fmi2Status)status;
-    char v[40];
-    if (!isfinite(time)) return (fmi2Status)tapmp_invalid(inst, "time", tapmp_repr(time, v), "a finite number", 0);
-    inst->time = time;
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_set_time(inst, time);
 }
 
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "SetContinuousStates", AFTER_INIT, AFTER_INIT_TEXT);
-    if (status == ST_OK) status = me_array(inst, "SetContinuousStates", x, nx, MODEL_N_STATES, "nx");
-    if (status != ST_OK) return (fmi2Status)status;
-    char msg[TAPMP_MESSAGE_MAX];
-    if (!model_me_set_states(inst, x, msg, sizeof msg)) return (fmi2Status)tapmp_fail(inst, "%s", msg);
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_set_states(inst, x, nx);
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "GetContinuousStates", ANY_ME_MODE, ANY_ME_MODE_TEXT);
-    if (status == ST_OK) status = me_array(inst, "GetContinuousStates", x, nx, MODEL_N_STATES, "nx");
-    if (status != ST_OK) return (fmi2Status)status;
-    refresh(inst);
-    model_me_get_states(inst, x);
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_get_states(inst, "GetContinuousStates", x, nx);
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], size_t nx)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "GetDerivatives", ANY_ME_MODE, ANY_ME_MODE_TEXT);
-    if (status == ST_OK) status = me_array(inst, "GetDerivatives", dx, nx, MODEL_N_STATES, "nx");
-    if (status != ST_OK) return (fmi2Status)status;
-    double d[MODEL_N_STATES];
-    refresh(inst);
-    model_me_derivatives(inst, d);
-    for (int i = 0; i < MODEL_N_STATES; i++)
-        if (!isfinite(d[i])) {
-            char v[40];
-            return (fmi2Status)tapmp_fail(inst, "fmi2GetDerivatives: the derivative of state %d is %s at t = %.6g s: "
-                                          "allowed is a finite number (the forces or the state are out of range)",
-                                          i, tapmp_repr(d[i], v), inst->time);
-        }
-    memcpy(dx, d, sizeof d);
-    return fmi2OK;
-}
-
-/* der(X) ... der(dB) as variables (value references N_VARS ... N_VARS + 5), with the others; in
- * either interface, once the model is set up (Initialization Mode on). */
-static fmi2Status get_state_derivatives(tapmp_instance *inst, const fmi2ValueReference vr[], size_t n,
-                                        fmi2Real value[])
-{
-    int status;
-    if (inst->failed) return (fmi2Status)tapmp_fail(inst, "fmi2GetReal refused after an earlier error: %s", inst->error);
-    if (inst->mode != MODE_INITIALIZATION && inst->mode != MODE_STEP)
-        return (fmi2Status)tapmp_fail(inst, "fmi2GetReal of a state derivative is not allowed in %s: allowed from "
-                                      "Initialization Mode on", me_mode_name(inst));
-    double d[MODEL_N_STATES];
-    refresh(inst);
-    model_me_derivatives(inst, d);
-    for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= N_VARS && vr[i] < N_VARS + MODEL_N_STATES) {
-            value[i] = d[vr[i] - N_VARS];
-            continue;
-        }
-        status = tapmp_get_real(inst, vr + i, 1, value + i, 1);
-        if (status > ST_WARNING) return (fmi2Status)status;
-    }
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_get_derivatives(inst, "GetDerivatives", dx, nx);
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t ni)
 {
-    (void)z;
     INSTANCE(c);
-    int status = me_allowed(inst, "GetEventIndicators", ANY_ME_MODE, ANY_ME_MODE_TEXT);
-    if (status == ST_OK) status = me_array(inst, "GetEventIndicators", z, ni, 0, "ni");
-    return (fmi2Status)status;
+    return (fmi2Status)tapmp_me_event_indicators(inst, z, ni);
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "GetNominalsOfContinuousStates", ANY_ME_MODE, ANY_ME_MODE_TEXT);
-    if (status == ST_OK) status = me_array(inst, "GetNominalsOfContinuousStates", x_nominal, nx, MODEL_N_STATES, "nx");
-    if (status != ST_OK) return (fmi2Status)status;
-    for (size_t i = 0; i < nx; i++) x_nominal[i] = 1.0;  /* the declared nominal of every Real */
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_nominals(inst, x_nominal, nx);
 }
 
 fmi2Status fmi2EnterEventMode(fmi2Component c)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "EnterEventMode", AFTER_INIT, AFTER_INIT_TEXT);
-    if (status != ST_OK) return (fmi2Status)status;
-    ((fmi2_env *)inst->env)->me_mode = ME_EVENT;
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_enter_event_mode(inst);
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "NewDiscreteStates", 2, "Event Mode");
+    int defined = 0, status = tapmp_me_allowed(inst, "NewDiscreteStates", ME_EVENT);
+    double next = 0.0;
     if (status == ST_OK) status = tapmp_require_pointer(inst, info, "NewDiscreteStates", "fmi2eventInfo");
+    if (status == ST_OK) status = tapmp_me_update(inst, "NewDiscreteStates", &defined, &next);
     if (status != ST_OK) return (fmi2Status)status;
-    double next = model_me_next_event_time(inst);
     info->newDiscreteStatesNeeded = fmi2False;  /* no discrete state: the time event changes the forces only */
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
     info->valuesOfContinuousStatesChanged = fmi2False;
-    info->nextEventTimeDefined = isfinite(next) ? fmi2True : fmi2False;
-    info->nextEventTime = isfinite(next) ? next : 0.0;
+    info->nextEventTimeDefined = defined ? fmi2True : fmi2False;
+    info->nextEventTime = next;
     return fmi2OK;
 }
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
 {
     INSTANCE(c);
-    int status = me_allowed(inst, "EnterContinuousTimeMode", 2, "Event Mode");
-    if (status != ST_OK) return (fmi2Status)status;
-    ((fmi2_env *)inst->env)->me_mode = ME_CONTINUOUS;
-    return fmi2OK;
+    return (fmi2Status)tapmp_me_enter_continuous_time_mode(inst);
 }
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
@@ -505,13 +373,14 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
 {
     (void)noSetFMUStatePriorToCurrentPoint;
     INSTANCE(c);
-    int status = me_allowed(inst, "CompletedIntegratorStep", 4, "Continuous-Time Mode");
+    int enter = 0, terminate = 0, status = tapmp_me_allowed(inst, "CompletedIntegratorStep", ME_CONTINUOUS);
     if (status == ST_OK) status = tapmp_require_pointer(inst, enterEventMode, "CompletedIntegratorStep", "enterEventMode");
     if (status == ST_OK)
         status = tapmp_require_pointer(inst, terminateSimulation, "CompletedIntegratorStep", "terminateSimulation");
+    if (status == ST_OK) status = tapmp_me_completed_integrator_step(inst, &enter, &terminate);
     if (status != ST_OK) return (fmi2Status)status;
-    *enterEventMode = fmi2False;
-    *terminateSimulation = fmi2False;
+    *enterEventMode = enter ? fmi2True : fmi2False;
+    *terminateSimulation = terminate ? fmi2True : fmi2False;
     return fmi2OK;
 }
 #endif

@@ -3,8 +3,11 @@
  * variable `time` has the value reference N_VARS. A model with time events (MODEL_HAS_EVENTS: the
  * controller) has Event Mode (hasEventMode, mightReturnEarlyFromDoStep); the others refuse
  * eventModeUsed. A model with a periodic input clock (MODEL_CLOCK: the clocked controller) has the clock
- * functions and requires eventModeUsed. Model Exchange, Scheduled Execution, other clocks and derivatives are
- * not provided:
+ * functions and requires eventModeUsed. A model with a continuous state (MODEL_N_STATES: the plant) is
+ * offered for Model Exchange too, under the same model identifier (instance.c's tapmp_me_* operations,
+ * shared with FMI 2.0); its time derivatives der(X) ... are the Float64 variables N_VARS + 1 ...
+ * Scheduled Execution, other clocks, derivatives and, for the other models, Model Exchange are not
+ * provided:
  * those calls return fmi3Error with a message (their capability flags are false in the
  * modelDescription). */
 #include <math.h>
@@ -54,10 +57,22 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
-    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
+    (void)resourcePath, (void)visible;
+#ifdef MODEL_N_STATES
+    fmi3_env *env = calloc(1, sizeof *env);
+    if (!env) return NULL;
+    env->env = instanceEnvironment;
+    env->log = logMessage;
+    tapmp_instance *inst = tapmp_new(instanceName, "fmi3", logger, env, loggingOn, instantiationToken);
+    if (!inst) free(env);
+    else inst->model_exchange = 1;
+    return inst;
+#else
+    (void)instanceName, (void)instantiationToken, (void)loggingOn;
     log_no_instance(instanceEnvironment, logMessage, "fmi3InstantiateModelExchange: " MODEL_IDENTIFIER_STRING
                     " is a co-simulation FMU only: allowed is fmi3InstantiateCoSimulation");
     return NULL;
+#endif
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -133,13 +148,25 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefi
     return (fmi3Status)(status != ST_OK ? status : tapmp_enter_initialization(inst));
 }
 
-fmi3Status fmi3ExitInitializationMode(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_exit_initialization(inst); }
+fmi3Status fmi3ExitInitializationMode(fmi3Instance c)
+{
+    INSTANCE(c);
+#ifdef MODEL_N_STATES
+    if (inst->model_exchange) return (fmi3Status)tapmp_me_exit_initialization(inst);  /* into Event Mode */
+#endif
+    return (fmi3Status)tapmp_exit_initialization(inst);
+}
 fmi3Status fmi3Terminate(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_terminate(inst); }
 fmi3Status fmi3Reset(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_reset(inst); }
 
 fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv)
 {
     INSTANCE(c);
+#ifdef MODEL_N_STATES
+    for (size_t i = 0; vr && v && i < n && nv == n; i++)  /* der(X) ... follow `time` (N_VARS) */
+        if (vr[i] > N_VARS && vr[i] <= N_VARS + MODEL_N_STATES)
+            return (fmi3Status)tapmp_me_get_real(inst, N_VARS + 1, vr, n, v, nv);
+#endif
     return (fmi3Status)tapmp_get_real(inst, vr, n, v, nv);
 }
 
@@ -406,6 +433,8 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
 {
     (void)noSetFMUStatePriorToCurrentPoint;
     INSTANCE(c);
+    if (inst->model_exchange)
+        return unsupported(c, "DoStep", "the instance is a Model Exchange instance (fmi3InstantiateModelExchange)");
     int event = 0, early = 0;
     double last = inst->time;
     int status = tapmp_do_step_events(inst, t, h, &event, &early, &last);
@@ -449,7 +478,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
 #define NO_ME "Model Exchange is not provided"
 #define NO_CLOCKS "this FMU has no clocks"
 #define NO_DERIVATIVES "providesDirectionalDerivatives and providesAdjointDerivatives are false"
-#ifndef MODEL_HAS_EVENTS
+#if !defined(MODEL_HAS_EVENTS) && !defined(MODEL_N_STATES)
 NOT_PROVIDED0(EnterEventMode, "hasEventMode is false")
 NOT_PROVIDED0(EnterStepMode, "hasEventMode is false")
 NOT_PROVIDED(UpdateDiscreteStates, "hasEventMode is false",
@@ -492,7 +521,8 @@ NOT_PROVIDED(SetShiftFraction, NO_CLOCKS,
              (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c_[], const fmi3UInt64 r[]),
              (void)vr, (void)n, (void)c_, (void)r)
 #endif
-NOT_PROVIDED0(EvaluateDiscreteStates, NO_ME)
+NOT_PROVIDED0(EvaluateDiscreteStates, "providesEvaluateDiscreteStates is false")
+#ifndef MODEL_N_STATES
 NOT_PROVIDED0(EnterContinuousTimeMode, NO_ME)
 NOT_PROVIDED(CompletedIntegratorStep, NO_ME, (fmi3Instance c, fmi3Boolean a, fmi3Boolean *b, fmi3Boolean *d),
              (void)a, (void)b, (void)d)
@@ -504,8 +534,127 @@ NOT_PROVIDED(GetContinuousStates, NO_ME, (fmi3Instance c, fmi3Float64 x[], size_
 NOT_PROVIDED(GetNominalsOfContinuousStates, NO_ME, (fmi3Instance c, fmi3Float64 x[], size_t n), (void)x, (void)n)
 NOT_PROVIDED(GetNumberOfEventIndicators, NO_ME, (fmi3Instance c, size_t *n), (void)n)
 NOT_PROVIDED(GetNumberOfContinuousStates, NO_ME, (fmi3Instance c, size_t *n), (void)n)
+#endif
 NOT_PROVIDED(GetOutputDerivatives, "maxOutputDerivativeOrder is 0",
              (fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Int32 o[], fmi3Float64 v[], size_t nv),
              (void)vr, (void)n, (void)o, (void)v, (void)nv)
 NOT_PROVIDED(ActivateModelPartition, NO_CLOCKS, (fmi3Instance c, fmi3ValueReference clock, fmi3Float64 t),
              (void)clock, (void)t)
+
+#ifdef MODEL_N_STATES
+/* --- Model Exchange: the version-neutral operations of instance.c (tapmp_me_*) --------------
+ * A Co-Simulation instance of this model has no Event Mode (hasEventMode is false). */
+#ifdef MODEL_HAS_EVENTS
+#error "a model with time events for Co-Simulation and a continuous state for Model Exchange is not supported"
+#endif
+
+fmi3Status fmi3EnterEventMode(fmi3Instance c)
+{
+    INSTANCE(c);
+    if (!inst->model_exchange) return unsupported(c, "EnterEventMode", "hasEventMode is false");
+    return (fmi3Status)tapmp_me_enter_event_mode(inst);
+}
+
+fmi3Status fmi3EnterStepMode(fmi3Instance c)
+{
+    INSTANCE(c);
+    return unsupported(c, "EnterStepMode", inst->model_exchange ? "the instance is a Model Exchange instance "
+                       "(allowed: fmi3EnterContinuousTimeMode)" : "hasEventMode is false");
+}
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate,
+                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime)
+{
+    INSTANCE(c);
+    if (!inst->model_exchange) return unsupported(c, "UpdateDiscreteStates", "hasEventMode is false");
+    int defined = 0;
+    double next = 0.0;
+    int status = tapmp_me_update(inst, "UpdateDiscreteStates", &defined, &next);
+    if (status != ST_OK) return (fmi3Status)status;
+    /* no discrete state: the time event changes the forces only */
+    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
+    if (terminateSimulation) *terminateSimulation = fmi3False;
+    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
+    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
+    if (nextEventTimeDefined) *nextEventTimeDefined = defined ? fmi3True : fmi3False;
+    if (nextEventTime) *nextEventTime = next;
+    return fmi3OK;
+}
+
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_enter_continuous_time_mode(inst);
+}
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
+{
+    (void)noSetFMUStatePriorToCurrentPoint;
+    INSTANCE(c);
+    int enter = 0, terminate = 0, status = tapmp_me_allowed(inst, "CompletedIntegratorStep", ME_CONTINUOUS);
+    if (status == ST_OK) status = tapmp_require_pointer(inst, enterEventMode, "CompletedIntegratorStep", "enterEventMode");
+    if (status == ST_OK)
+        status = tapmp_require_pointer(inst, terminateSimulation, "CompletedIntegratorStep", "terminateSimulation");
+    if (status == ST_OK) status = tapmp_me_completed_integrator_step(inst, &enter, &terminate);
+    if (status != ST_OK) return (fmi3Status)status;
+    *enterEventMode = enter ? fmi3True : fmi3False;
+    *terminateSimulation = terminate ? fmi3True : fmi3False;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_set_time(inst, time);
+}
+
+fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 x[], size_t nx)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_set_states(inst, x, nx);
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 dx[], size_t nx)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_get_derivatives(inst, "GetContinuousStateDerivatives", dx, nx);
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 z[], size_t ni)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_event_indicators(inst, z, ni);
+}
+
+fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 x[], size_t nx)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_get_states(inst, "GetContinuousStates", x, nx);
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominals[], size_t nx)
+{
+    INSTANCE(c);
+    return (fmi3Status)tapmp_me_nominals(inst, nominals, nx);
+}
+
+/* Allowed in every mode (the numbers are fixed); only the pointer is checked. */
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *n)
+{
+    INSTANCE(c);
+    if (tapmp_require_pointer(inst, n, "GetNumberOfEventIndicators", "nEventIndicators") != ST_OK) return fmi3Error;
+    *n = 0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *n)
+{
+    INSTANCE(c);
+    if (tapmp_require_pointer(inst, n, "GetNumberOfContinuousStates", "nContinuousStates") != ST_OK) return fmi3Error;
+    *n = MODEL_N_STATES;
+    return fmi3OK;
+}
+#endif

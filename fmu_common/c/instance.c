@@ -595,6 +595,7 @@ int tapmp_reset(tapmp_instance *inst)
     inst->clock_active = inst->interval_reported = 0;
     inst->failed = inst->retune = inst->has_model = inst->dirty = 0;
     inst->error[0] = 0;
+    inst->me_continuous = 0;
     memset(&inst->m, 0, sizeof inst->m);
     for (int vr = 0; vr < N_VARS; vr++) {
         inst->reals[vr] = VARS[vr].type == 'R' ? VARS[vr].start : 0.0;
@@ -1050,3 +1051,194 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
     *state = st;
     return ST_OK;
 }
+
+#ifdef MODEL_N_STATES
+/* --- Model Exchange (FMI 2.0 and 3.0): the host integrates the model's continuous state ------ */
+
+static const char *me_mode_name(const tapmp_instance *inst)
+{
+    if (inst->mode == MODE_STEP) return inst->me_continuous ? "Continuous-Time Mode" : "Event Mode";
+    return MODE_NAMES[inst->mode];
+}
+
+/* The names of the modes of `modes` (ME_INIT ...), joined as "A, B and C". */
+static const char *me_modes_text(int modes)
+{
+    static const char *const texts[8] = {"no mode", "Initialization Mode", "Event Mode",
+                                         "Initialization Mode and Event Mode", "Continuous-Time Mode",
+                                         "Initialization Mode and Continuous-Time Mode",
+                                         "Event Mode and Continuous-Time Mode",
+                                         "Initialization Mode, Event Mode and Continuous-Time Mode"};
+    return texts[modes & 7];
+}
+
+int tapmp_me_allowed(tapmp_instance *inst, const char *call, int modes)
+{
+    if (!inst->model_exchange)
+        return tapmp_fail(inst, "%s%s is not allowed: the instance was instantiated for Co-Simulation (%s)", inst->fmi,
+                          call, inst->fmi[3] == '3' ? "fmi3InstantiateCoSimulation" : "fmuType = fmi2CoSimulation");
+    if (inst->failed) return tapmp_fail(inst, "%s%s refused after an earlier error: %s", inst->fmi, call, inst->error);
+    int bit = inst->mode == MODE_INITIALIZATION ? ME_INIT : inst->mode != MODE_STEP ? 0
+              : inst->me_continuous ? ME_CONTINUOUS : ME_EVENT;
+    if (!(modes & bit))
+        return tapmp_fail(inst, "%s%s is not allowed in %s: allowed in %s", inst->fmi, call, me_mode_name(inst),
+                          me_modes_text(modes));
+    return ST_OK;
+}
+
+int tapmp_me_exit_initialization(tapmp_instance *inst)
+{
+    int status = tapmp_exit_initialization(inst);
+    if (status > ST_WARNING) return status;
+    char msg[TAPMP_MESSAGE_MAX];
+    if (!model_me_check(inst, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
+    inst->me_continuous = 0;  /* Model Exchange leaves initialization into Event Mode */
+    return status;
+}
+
+/* In Initialization Mode the model follows the values set since it was last built: a get of no
+ * variable rebuilds it (the initial unknowns) before a state or derivative is read. */
+static void me_refresh(tapmp_instance *inst)
+{
+    if (inst->mode == MODE_INITIALIZATION) tapmp_get_real(inst, NULL, 0, NULL, 0);
+}
+
+static int me_array(tapmp_instance *inst, const char *call, const void *p, size_t n, size_t expected,
+                    const char *what)
+{
+    if (n != expected)
+        return tapmp_fail(inst, "%s%s: %s = %zu is invalid: allowed is %zu", inst->fmi, call, what, n, expected);
+    if (n && !p)
+        return tapmp_fail(inst, "%s%s: the array = NULL is invalid: allowed is an array of %zu values", inst->fmi,
+                          call, n);
+    return ST_OK;
+}
+
+int tapmp_me_set_time(tapmp_instance *inst, double time)
+{
+    int status = tapmp_me_allowed(inst, "SetTime", ME_AFTER_INIT);
+    if (status != ST_OK) return status;
+    char v[40];
+    if (!isfinite(time)) return tapmp_invalid(inst, "time", tapmp_repr(time, v), "a finite number", 0);
+    inst->time = time;
+    return ST_OK;
+}
+
+int tapmp_me_set_states(tapmp_instance *inst, const double x[], size_t nx)
+{
+    int status = tapmp_me_allowed(inst, "SetContinuousStates", ME_AFTER_INIT);
+    if (status == ST_OK) status = me_array(inst, "SetContinuousStates", x, nx, MODEL_N_STATES, "nx");
+    if (status != ST_OK) return status;
+    char msg[TAPMP_MESSAGE_MAX];
+    if (!model_me_set_states(inst, x, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
+    return ST_OK;
+}
+
+int tapmp_me_get_states(tapmp_instance *inst, const char *call, double x[], size_t nx)
+{
+    int status = tapmp_me_allowed(inst, call, ME_ANY);
+    if (status == ST_OK) status = me_array(inst, call, x, nx, MODEL_N_STATES, "nx");
+    if (status != ST_OK) return status;
+    me_refresh(inst);
+    model_me_get_states(inst, x);
+    return ST_OK;
+}
+
+/* The derivatives into d, each finite; else the logged error. */
+static int me_derivatives(tapmp_instance *inst, const char *call, double d[MODEL_N_STATES])
+{
+    me_refresh(inst);
+    model_me_derivatives(inst, d);
+    for (int i = 0; i < MODEL_N_STATES; i++)
+        if (!isfinite(d[i])) {
+            char v[40];
+            return tapmp_fail(inst, "%s%s: the derivative of state %d is %s at t = %.6g s: allowed is a finite number "
+                              "(the forces or the state are out of range)", inst->fmi, call, i, tapmp_repr(d[i], v),
+                              inst->time);
+        }
+    return ST_OK;
+}
+
+int tapmp_me_get_derivatives(tapmp_instance *inst, const char *call, double dx[], size_t nx)
+{
+    int status = tapmp_me_allowed(inst, call, ME_ANY);
+    if (status == ST_OK) status = me_array(inst, call, dx, nx, MODEL_N_STATES, "nx");
+    if (status != ST_OK) return status;
+    double d[MODEL_N_STATES];
+    status = me_derivatives(inst, call, d);
+    if (status == ST_OK) memcpy(dx, d, sizeof d);
+    return status;
+}
+
+int tapmp_me_get_real(tapmp_instance *inst, unsigned first, const unsigned vr[], size_t n, double v[], size_t nv)
+{
+    const char *call = call_name(inst, 0, 'R');
+    int status = check_arrays(inst, call, vr, n, v, nv);
+    if (status != ST_OK) return status;
+    if (inst->failed) return tapmp_fail(inst, "%s%s refused after an earlier error: %s", inst->fmi, call, inst->error);
+    /* in either interface, once the model is set up */
+    if (inst->mode != MODE_INITIALIZATION && inst->mode != MODE_STEP)
+        return tapmp_fail(inst, "%s%s of a state derivative is not allowed in %s: allowed from Initialization Mode "
+                          "on", inst->fmi, call, inst->model_exchange ? me_mode_name(inst) : MODE_NAMES[inst->mode]);
+    double d[MODEL_N_STATES];
+    status = me_derivatives(inst, call, d);
+    if (status != ST_OK) return status;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= first && vr[i] < first + MODEL_N_STATES) {
+            v[i] = d[vr[i] - first];
+            continue;
+        }
+        status = tapmp_get_real(inst, vr + i, 1, v + i, 1);
+        if (status > ST_WARNING) return status;
+    }
+    return ST_OK;
+}
+
+int tapmp_me_event_indicators(tapmp_instance *inst, double z[], size_t ni)
+{
+    int status = tapmp_me_allowed(inst, "GetEventIndicators", ME_ANY);
+    return status == ST_OK ? me_array(inst, "GetEventIndicators", z, ni, 0, "ni") : status;
+}
+
+int tapmp_me_nominals(tapmp_instance *inst, double nominals[], size_t nx)
+{
+    int status = tapmp_me_allowed(inst, "GetNominalsOfContinuousStates", ME_ANY);
+    if (status == ST_OK) status = me_array(inst, "GetNominalsOfContinuousStates", nominals, nx, MODEL_N_STATES, "nx");
+    if (status != ST_OK) return status;
+    for (size_t i = 0; i < nx; i++) nominals[i] = 1.0;  /* the declared nominal of every Real */
+    return ST_OK;
+}
+
+int tapmp_me_enter_event_mode(tapmp_instance *inst)
+{
+    int status = tapmp_me_allowed(inst, "EnterEventMode", ME_AFTER_INIT);
+    if (status == ST_OK) inst->me_continuous = 0;
+    return status;
+}
+
+int tapmp_me_enter_continuous_time_mode(tapmp_instance *inst)
+{
+    int status = tapmp_me_allowed(inst, "EnterContinuousTimeMode", ME_EVENT);
+    if (status == ST_OK) inst->me_continuous = 1;
+    return status;
+}
+
+int tapmp_me_completed_integrator_step(tapmp_instance *inst, int *enter_event_mode, int *terminate)
+{
+    int status = tapmp_me_allowed(inst, "CompletedIntegratorStep", ME_CONTINUOUS);
+    if (status != ST_OK) return status;
+    *enter_event_mode = 0;
+    *terminate = 0;
+    return ST_OK;
+}
+
+int tapmp_me_update(tapmp_instance *inst, const char *call, int *next_defined, double *next_time)
+{
+    int status = tapmp_me_allowed(inst, call, ME_EVENT);
+    if (status != ST_OK) return status;
+    double next = model_me_next_event_time(inst);
+    *next_defined = isfinite(next);
+    *next_time = isfinite(next) ? next : 0.0;
+    return ST_OK;
+}
+#endif

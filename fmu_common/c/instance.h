@@ -54,6 +54,8 @@ typedef struct tapmp_instance {
     size_t n_states, max_states;
     int event_mode_used;       /* FMI 3.0 co-simulation: the host handles the model's events in Event Mode */
     int early_return_allowed;  /* FMI 3.0 co-simulation: doStep may return early at an event */
+    int model_exchange;        /* instantiated for Model Exchange (the host integrates the state) */
+    int me_continuous;         /* Model Exchange after initialization: Continuous-Time Mode (1) or Event Mode (0) */
     int clock_active;          /* MODEL_CLOCK: the input clock was activated in this Event Mode (fmi3SetClock) */
     int interval_reported;     /* MODEL_CLOCK: fmi3GetInterval* has reported the interval once */
     /* everything below is the FMU state */
@@ -194,13 +196,50 @@ TAPMP_LINKAGE int model_event_update(tapmp_instance *inst, double out[], char *m
  * (MODEL_N_STATES values), set by the host's integrator (1, or 0 + msg if it is outside the
  * model's domain; the outputs follow it), its derivatives at inst->time for the inputs set now,
  * the time of its next time event (INFINITY: none), and whether the settings suit Model
- * Exchange (1, or 0 + msg). fmi2_api.c maps the FMI 2.0 Model Exchange functions onto them. */
+ * Exchange (1, or 0 + msg). The tapmp_me_* operations below build the FMI 2.0 and 3.0 Model
+ * Exchange functions (fmi2_api.c, fmi3_api.c) on them. */
 #ifdef MODEL_N_STATES
 TAPMP_LINKAGE void model_me_get_states(const tapmp_instance *inst, double x[]);
 TAPMP_LINKAGE int model_me_set_states(tapmp_instance *inst, const double x[], char *msg, size_t size);
 TAPMP_LINKAGE void model_me_derivatives(const tapmp_instance *inst, double dx[]);
 TAPMP_LINKAGE double model_me_next_event_time(const tapmp_instance *inst);
 TAPMP_LINKAGE int model_me_check(const tapmp_instance *inst, char *msg, size_t size);
+
+/* Model Exchange operations, FMI version neutral; each returns a status and names its call
+ * (`call`, without the fmi2 / fmi3 prefix) in messages. The modes a call is allowed in are bits
+ * of `modes`: ME_INIT (Initialization Mode), ME_EVENT (Event Mode), ME_CONTINUOUS (Continuous-Time
+ * Mode). No event indicators: the right-hand side is smooth in the state (the Coulomb friction is
+ * tanh-smoothed; the force saturation acts on the inputs, which the host sets); the one
+ * discontinuity in time, the external force step at disturbance_time, is a time event. */
+enum { ME_INIT = 1, ME_EVENT = 2, ME_CONTINUOUS = 4 };
+#define ME_AFTER_INIT (ME_EVENT | ME_CONTINUOUS)
+#define ME_ANY (ME_INIT | ME_EVENT | ME_CONTINUOUS)
+/* ST_OK if `call` may run now: a Model Exchange instance, no earlier error, in a mode of `modes`. */
+TAPMP_LINKAGE int tapmp_me_allowed(tapmp_instance *inst, const char *call, int modes);
+/* ExitInitializationMode of a Model Exchange instance: as tapmp_exit_initialization, then the
+ * settings checked for Model Exchange (model_me_check); it leaves into Event Mode. */
+TAPMP_LINKAGE int tapmp_me_exit_initialization(tapmp_instance *inst);
+/* SetTime [s]: Event Mode and Continuous-Time Mode. */
+TAPMP_LINKAGE int tapmp_me_set_time(tapmp_instance *inst, double time);
+/* The continuous state (nx = MODEL_N_STATES values): set (after initialization), get (from
+ * Initialization Mode on); their derivatives at the instance's time for the inputs set now. */
+TAPMP_LINKAGE int tapmp_me_set_states(tapmp_instance *inst, const double x[], size_t nx);
+TAPMP_LINKAGE int tapmp_me_get_states(tapmp_instance *inst, const char *call, double x[], size_t nx);
+TAPMP_LINKAGE int tapmp_me_get_derivatives(tapmp_instance *inst, const char *call, double dx[], size_t nx);
+/* GetReal / GetFloat64 when a value reference is one of the state derivatives: those are the
+ * variables first, first + 1, ... (MODEL_N_STATES of them), the others are got as usual. */
+TAPMP_LINKAGE int tapmp_me_get_real(tapmp_instance *inst, unsigned first, const unsigned vr[], size_t n,
+                                    double v[], size_t nv);
+/* The event indicators (ni must be 0) and the states' nominal values (1, as declared). */
+TAPMP_LINKAGE int tapmp_me_event_indicators(tapmp_instance *inst, double z[], size_t ni);
+TAPMP_LINKAGE int tapmp_me_nominals(tapmp_instance *inst, double nominals[], size_t nx);
+/* EnterEventMode, EnterContinuousTimeMode, CompletedIntegratorStep (*enter_event_mode,
+ * *terminate: never), and the event update in Event Mode (no discrete state changes; the next
+ * time event: *next_defined, *next_time [s]). */
+TAPMP_LINKAGE int tapmp_me_enter_event_mode(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_me_enter_continuous_time_mode(tapmp_instance *inst);
+TAPMP_LINKAGE int tapmp_me_completed_integrator_step(tapmp_instance *inst, int *enter_event_mode, int *terminate);
+TAPMP_LINKAGE int tapmp_me_update(tapmp_instance *inst, const char *call, int *next_defined, double *next_time);
 #endif
 
 /* A model whose instances hold resources outside the instance (the pythonfmu family: a

@@ -196,9 +196,10 @@ def _variability(v: Var) -> str:
     return v.variability or ("continuous" if v.type == "Real" else "discrete")
 
 
-# Model Exchange (FMI 2.0, the plant): its continuous states, in the order of fmi2GetContinuousStates
-# (fmu_plant/plant.c). Their derivatives der(X) ... der(dB) follow the table's variables (value
-# references N_VARS ...). The model has no event indicators: see fmu_common/c/fmi2_api.c.
+# Model Exchange (FMI 2.0 and 3.0, the plant): its continuous states, in the order of
+# fmi2GetContinuousStates / fmi3GetContinuousStates (fmu_plant/plant.c). Their derivatives der(X) ...
+# der(dB) follow the table's variables: value references N_VARS ... in FMI 2.0, N_VARS + 1 ... in FMI
+# 3.0 (after `time`). The model has no event indicators: see fmu_common/c/instance.h.
 ME_STATES = {PLANT: ("X", "Z", "B", "dX", "dZ", "dB")}
 _DER_UNIT = {"m": "m/s", "rad": "rad/s", "m/s": "m/s2", "rad/s": "rad/s2"}
 
@@ -318,13 +319,52 @@ def event_mode_attributes(model: str) -> dict:
             "hasEventMode": events}
 
 
+def _model_exchange_fmi3(model: str) -> ET.Element:
+    """FMI 3.0's <ModelExchange>, under the model identifier of <CoSimulation>: no event indicators
+    and no discrete state, so neither completedIntegratorStep nor evaluateDiscreteStates is needed."""
+    return ET.Element("ModelExchange", {
+        "modelIdentifier": model, "needsExecutionTool": "false", "canBeInstantiatedOnlyOncePerProcess": "false",
+        "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
+        "providesDirectionalDerivatives": "false", "providesAdjointDerivatives": "false",
+        "needsCompletedIntegratorStep": "false", "providesEvaluateDiscreteStates": "false"})
+
+
+def _state_derivatives_fmi3(model: str, variables: ET.Element, structure: ET.Element, refs: dict,
+                            place: dict) -> None:
+    """FMI 3.0: the state derivatives der(X) ... as local Float64 variables (value references N_VARS + 1
+    ...) with their `derivative` attribute, each a <ContinuousStateDerivative> and an <InitialUnknown>
+    with what it depends on (:func:`state_derivative_dependencies`), in the schema's order."""
+    table = VARIABLES[model]
+    units = {v.name: v.unit for v in table}
+    first = len(table) + 1  # after `time`
+    derivatives, initial = [], []
+    for k, (name, (step, init)) in enumerate(state_derivative_dependencies(model).items()):
+        state = ME_STATES[model][k]
+        ET.SubElement(variables, "Float64", {
+            "name": name, "valueReference": str(first + k), "description": f"time derivative of {state} (Model "
+            "Exchange)", "causality": "local", "variability": "continuous", "unit": _DER_UNIT[units[state]],
+            "derivative": str(refs[state])})
+        derivatives.append(ET.Element("ContinuousStateDerivative", {"valueReference": str(first + k),
+                                                                    **dependency_attributes(step, refs, place)}))
+        initial.append(ET.Element("InitialUnknown", {"valueReference": str(first + k),
+                                                     **dependency_attributes(init, refs, place)}))
+    children = list(structure)
+    at = next((i for i, e in enumerate(children) if e.tag != "Output"), len(children))
+    for k, element in enumerate(derivatives):  # after the outputs, before the initial unknowns
+        structure.insert(at + k, element)
+    for element in initial:
+        structure.append(element)
+
+
 def model_description_fmi3(model: str) -> bytes:
-    """modelDescription.xml (FMI 3.0 co-simulation) of the native ``model``."""
+    """modelDescription.xml (FMI 3.0 co-simulation, and Model Exchange for the plant) of the native ``model``."""
     table = VARIABLES[model]
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "3.0", "modelName": model, "instantiationToken": instantiation_token(model),
         "description": DESCRIPTIONS[model], "author": "TAPMP co-simulation project", "license": "MIT",
         "generationTool": "tapmp-cosim orchestrator/engine/build_native.py", "variableNamingConvention": "structured"})
+    if model in ME_STATES:
+        root.append(_model_exchange_fmi3(model))  # the schema's order: ModelExchange, CoSimulation
     ET.SubElement(root, "CoSimulation", {
         "modelIdentifier": model, "needsExecutionTool": "false", "canBeInstantiatedOnlyOncePerProcess": "false",
         "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
@@ -332,7 +372,10 @@ def model_description_fmi3(model: str) -> bytes:
         "canHandleVariableCommunicationStepSize": "true", "maxOutputDerivativeOrder": "0",
         "providesIntermediateUpdate": "false", **event_mode_attributes(model),
         "providesEvaluateDiscreteStates": "false"})
-    root.append(unit_definitions(v.unit for v in table if v.unit))
+    units = [v.unit for v in table if v.unit]
+    if model in ME_STATES:
+        units += [_DER_UNIT[v.unit] for v in table if v.name in ME_STATES[model]]
+    root.append(unit_definitions(units))
     _categories_and_experiment(root, "fmi3Error")
     variables = ET.SubElement(root, "ModelVariables")
     ET.SubElement(variables, "Float64", name="time", valueReference=str(len(table)), causality="independent",
@@ -356,6 +399,8 @@ def model_description_fmi3(model: str) -> bytes:
     for vr in outputs:
         ET.SubElement(structure, "InitialUnknown", {"valueReference": str(vr),
                                                     **dependency_attributes(deps[table[vr].name].initial, refs, place)})
+    if model in ME_STATES:
+        _state_derivatives_fmi3(model, variables, structure, refs, place)
     return to_bytes(root)
 
 

@@ -64,6 +64,7 @@ from . import stepper as stepper_core
 from .archive import ExtractBudget, ExtractLimitError
 from .clocks import Clock
 from .errors import CoSimulationError, DivergenceError
+from .model_exchange import DEFAULT_TOLERANCE as DEFAULT_ME_TOLERANCE, ModelExchangeUnit, model_exchange_units
 from .schedule import (CONNECTION_STARTS, ORDERINGS, Connection, ScheduleError, check_algebraic_loops, check_order,
                        gauss_seidel_order, initialization_order)
 from .loaded import LoadedFMUs, LoadedSystem
@@ -110,14 +111,17 @@ class CoSimulation:
     ``order`` (Gauss-Seidel only) lists every element once in the order they step; without
     it the order comes from the graph (``orchestrator.engine.schedule``). After entering,
     :attr:`step_order` and :attr:`init_order` hold the element names in the orders used.
+    ``model_exchange`` names elements (or roles) whose FMU runs as Model Exchange, integrated by the
+    master between communication points with CVODE at the relative tolerance ``me_tolerance``
+    (orchestrator.engine.model_exchange).
     """
 
     def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
                  step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
                  check: OutputCheck | None = None, clock: str = "exact",
                  connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None,
-                 event_mode: bool = False, roles: dict | None = None, other_tables=(),
-                 loaded: LoadedFMUs | None = None):
+                 event_mode: bool = False, roles: dict | None = None, other_tables=(), model_exchange=(),
+                 me_tolerance: float = DEFAULT_ME_TOLERANCE, loaded: LoadedFMUs | None = None):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -135,6 +139,11 @@ class CoSimulation:
         if self.event_mode and stepper == "compiled":
             raise CoSimulationError("stepper = 'compiled' is unavailable with event_mode = true: allowed are "
                                     "'python' or 'auto' (event mode runs in the Python loop)")
+        self.model_exchange = model_exchange  # elements or roles run as Model Exchange (model_exchange.py)
+        self.me_tolerance = me_tolerance
+        if model_exchange and stepper == "compiled":
+            raise CoSimulationError("stepper = 'compiled' is unavailable with a Model Exchange FMU (model_exchange): "
+                                    "allowed are 'python' or 'auto' (the master's integrator runs in Python)")
         self.stepper = stepper
         self._core = None        # the CompiledStepper once opened, if used
         self.filled = 0          # rows the last advance() stored, also when it raised
@@ -200,7 +209,7 @@ class CoSimulation:
         except ExtractLimitError as err:
             raise CoSimulationError(str(err)) from None
         # -- the loaded FMUs: this co-simulation's own, or a reset system kept by ``loaded`` --
-        if self.loaded is None:
+        if self.loaded is None or self.model_exchange:  # a Model Exchange instance is no part of a kept system
             self._system = LoadedSystem(self.ssp_path, self._budget, self.event_mode)
         else:
             self._system = self.loaded.take(self.ssp_path, self._budget, self.event_mode)
@@ -212,6 +221,8 @@ class CoSimulation:
             unit.log = self.log
             self.guids[name] = unit.md.guid
         ssd = system.ssd
+        model_exchange_units(self.units, self.model_exchange, self.roles, self.me_tolerance,
+                             f"the system in SSP file {self.ssp_path}")
         self._connect(ssd.system.connections)
         for unit in self.units.values():
             unit.finish_connections()
@@ -242,6 +253,8 @@ class CoSimulation:
             if propagate:
                 self._call(unit, unit.apply_inputs, "setReal")
             self._call(unit, unit.slave.exitInitializationMode, "exitInitializationMode")
+            if isinstance(unit, ModelExchangeUnit):  # in Event Mode: the event iteration, then the integrator
+                self._call(unit, lambda u=unit: u.start_continuous(self.t0), "enterContinuousTimeMode", self.t0)
             if unit.event_mode:  # it left initialization into Event Mode: the event at the start time
                 if unit.clocks:
                     self._start_clocks(unit)
@@ -263,8 +276,8 @@ class CoSimulation:
                 envelope_units.append((unit, i, float(limit)))
         self._check_outputs(self.t0)
         self._event_units = [u for u in self._step_units if u.event_mode]
-        if self.event_mode:
-            pass  # the Python loop: the compiled core has no Event Mode
+        if self.event_mode or any(isinstance(u, ModelExchangeUnit) for u in self._step_units):
+            pass  # the Python loop: the compiled core has no Event Mode and no integrator
         elif self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
             try:
                 self._core = stepper_core.CompiledStepper(
@@ -582,7 +595,7 @@ class CoSimulation:
         if system is None:
             return
         system.target = None
-        if self.loaded is None:
+        if self.loaded is None or self.model_exchange:
             system.close()
         else:
             self.loaded.give(system)

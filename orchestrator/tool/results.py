@@ -105,7 +105,8 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
             "scenario": scenario.to_dict(), "ssp": str(ssp), "step": scenario.step,
             "ordering": scenario.ordering, "record_every": scenario.record_every,
             "clock": scenario.clock, "connection_start": scenario.connection_start,
-            "event_mode": scenario.event_mode, "versions": versions(), "status": "running"}
+            "event_mode": scenario.event_mode, "plant_interface": scenario.plant_interface,
+            "versions": versions(), "status": "running"}
     write_result(out / "run.json", info)
     start = time.perf_counter()
     stop = StopRequest()
@@ -118,7 +119,8 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
                               scenario.ordering, check=envelope(scenario), clock=scenario.clock,
                               connection_start=scenario.connection_start, event_mode=scenario.event_mode,
                               open_inputs=scenario.open_inputs, order=scenario.order, roles=ROLES,
-                              other_tables=SCENARIO_TABLES, loaded=loaded) as sim:
+                              other_tables=SCENARIO_TABLES, loaded=loaded,
+                              model_exchange=("plant",) if scenario.plant_interface == "me" else ()) as sim:
                 info["guids"] = sim.guids
                 info["columns"] = list(sim.columns)
                 if fmt == "mat":  # results.part.npy needs its column names on record (a killed run)

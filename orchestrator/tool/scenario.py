@@ -12,8 +12,10 @@ undriven input, and an entry that is no input of the system or that a connection
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
 see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
 format (the result file: "csv" (default) or "mat", see orchestrator.tool.results;
-`--format` overrides it), settling_bands (the bands of the move metrics of a point-to-point
-run, trajectory.profile 1-3, see orchestrator.tool.metrics.MoveMetrics; default
+`--format` overrides it), plant_interface (the plant FMU's interface: "cs", Co-Simulation with its own
+RK4 (default), or "me", Model Exchange integrated by the master with CVODE, see
+orchestrator.engine.model_exchange; the native FMUs offer it), settling_bands (the bands of the move
+metrics of a point-to-point run, trajectory.profile 1-3, see orchestrator.tool.metrics.MoveMetrics; default
 [1e-6, 1e-7], in m, rad for B). output is the scenario's result folder (default
 results/<name>): `tapmp run` writes into output/<law>, `tapmp compare` into output/compare.
 Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
@@ -61,8 +63,12 @@ MISMATCH_RANGE = (0.01, 100.0)
 TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": str, "stop_time": float,
        "start_time": float, "step": float, "ordering": str, "output": str,
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
-       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "event_mode": bool}
+       "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "event_mode": bool,
+       "plant_interface": str}
 RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.tool.results)
+# The plant's FMI interface in a run: "cs" (Co-Simulation, its own RK4) or "me" (Model Exchange,
+# integrated by the master with CVODE: orchestrator.engine.model_exchange)
+PLANT_INTERFACES = ("cs", "me")
 TABLES = {"gain_overrides", "trajectory", "plant", "controller", "limits", "mismatch"}
 # The divergence envelope the master checks every step (0 switches a limit off):
 # |q_i| of every motor (true position) and |B| of the platform. The paper's motion
@@ -261,6 +267,7 @@ class Scenario:
     # [ELEMENT] tables: FMU parameters by SSP element name
     elements: Annotated[dict, BeforeValidator(_elements)] = field(default_factory=dict)
     fmus: Annotated[str, one_of(FAMILIES)] = "native"  # FMU family: python, native or fmi3 (engine.families)
+    plant_interface: Annotated[str, one_of(PLANT_INTERFACES)] = "cs"  # the plant as Co-Simulation or Model Exchange
     format: Annotated[str, one_of(RESULT_FORMATS)] = "csv"   # result file: csv or mat (RESULT_FORMATS)
     # point-to-point runs: settling bands [m for X, Z and the motors, rad for B] of the move metrics
     settling_bands: Annotated[list, BeforeValidator(_settling_bands)] = field(default_factory=lambda: [1e-6, 1e-7])
@@ -445,7 +452,17 @@ def _check_controller(s: Scenario) -> None:
             f"{s.controller.get('force_limit')!r} is invalid: allowed is a number >= 0")
 
 
-_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_move, _check_order, _check_controller)
+def _check_plant_interface(s: Scenario) -> None:
+    """Model Exchange has no communication step to draw the measurement noise at."""
+    rms = s.plant.get("noise_rms", 0.0)
+    require(s.plant_interface != "me" or rms == 0.0,
+            f"plant.noise_rms = {rms!r} is invalid with plant_interface = \"me\": allowed is 0 (the noise is drawn "
+            "once per communication step, which Model Exchange does not have; use plant_interface = \"cs\", or "
+            "tapmp compare --no-noise)")
+
+
+_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_move, _check_order, _check_controller,
+                 _check_plant_interface)
 
 
 def read_gains_file(s: Scenario) -> Scenario:

@@ -1,8 +1,8 @@
-"""The native FMI 2.0 plant's Model Exchange interface (fmu_common/c/fmi2_api.c on fmu_plant/plant.c's
-model_me_* hooks), called through FMPy: the states and derivatives are the C model's, the external
-force step is a time event, and every call that does not fit is an error with its message. The
-controller and the trajectory stay Co-Simulation only. Third-party integrators on it:
-tests/interop/test_model_exchange.py."""
+"""The native FMI 2.0 and 3.0 plants' Model Exchange interface (fmu_common/c/fmi2_api.c and fmi3_api.c on
+instance.c's tapmp_me_* operations and fmu_plant/plant.c's model_me_* hooks), called through FMPy: the
+states and derivatives are the C model's, the external force step is a time event, and every call
+that does not fit is an error with its message. The controller and the trajectory stay
+Co-Simulation only. Third-party integrators on it: tests/interop/test_model_exchange.py."""
 
 import zipfile
 from pathlib import Path
@@ -15,39 +15,76 @@ from fmpy import calloc, extract, free, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
                        fmi2CallbackLoggerTYPE)
+from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.logging import addLoggerProxy
 
 from tapmp.interface import CONTROLLER, INITIAL_STATE, PLANT, TRAJECTORY
 
 STATES = ("X", "Z", "B", "dX", "dZ", "dB")
+FAMILIES = ("fmi2", "fmi3")
 
 
 class MEPlant:
-    """One Model Exchange instance of the native FMI 2.0 plant, its log messages kept."""
+    """One Model Exchange instance of the native FMI 2.0 or 3.0 (``family``) plant, its log messages
+    kept, with the calls both versions have under one name each."""
 
-    def __init__(self, fmu, folder, model=PLANT):
+    def __init__(self, fmu, folder, family="fmi2", model=PLANT):
+        self.family = family
         self.md = read_model_description(str(fmu))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.messages = []
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(
-            lambda env, name, status, category, message: self.messages.append((status, message.decode())))
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(self.callbacks))
-        self.fmu = FMU2Model(guid=self.md.guid, unzipDirectory=extract(str(fmu), unzipdir=str(folder)),
-                             modelIdentifier=model, instanceName="me")
-        self.fmu.instantiate(callbacks=self.callbacks, loggingOn=True)
+        unzip = extract(str(fmu), unzipdir=str(folder))
+        if family == "fmi2":
+            self.callbacks = fmi2CallbackFunctions()
+            self.callbacks.logger = fmi2CallbackLoggerTYPE(
+                lambda env, name, status, category, message: self.messages.append((status, message.decode())))
+            self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+            self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+            addLoggerProxy(byref(self.callbacks))
+            self.fmu = FMU2Model(guid=self.md.guid, unzipDirectory=unzip, modelIdentifier=model, instanceName="me")
+            self.fmu.instantiate(callbacks=self.callbacks, loggingOn=True)
+        else:
+            self.fmu = FMU3Model(guid=self.md.guid, unzipDirectory=unzip, modelIdentifier=model, instanceName="me")
+            self.fmu.instantiate(loggingOn=True, logMessage=lambda env, status, category, message:
+                                 self.messages.append((status, message.decode())))
 
     def initialize(self, **values):
-        for name, value in values.items():
-            self.fmu.setReal([self.vr[name]], [float(value)])
-        self.fmu.setupExperiment(startTime=0.0)
-        self.fmu.enterInitializationMode()
+        if self.family == "fmi2":
+            for name, value in values.items():
+                self.fmu.setReal([self.vr[name]], [float(value)])
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+        else:
+            for name, value in values.items():
+                self.fmu.setFloat64([self.vr[name]], [float(value)])
+            self.fmu.enterInitializationMode(startTime=0.0)
         self.fmu.exitInitializationMode()
 
+    def get_real(self, names) -> list:
+        vrs = [self.vr[n] for n in names]
+        return self.fmu.getReal(vrs) if self.family == "fmi2" else self.fmu.getFloat64(vrs)
+
+    def derivatives(self, pdx, n):
+        if self.family == "fmi2":
+            return self.fmu.getDerivatives(pdx, n)
+        return self.fmu.getContinuousStateDerivatives(pdx, n)
+
+    def update(self) -> tuple:
+        """The event update in Event Mode: (next time event defined, its time [s])."""
+        if self.family == "fmi2":
+            info = self.fmu.newDiscreteStates()
+            assert info[:4] == (False, False, False, False)  # nothing discrete changes, nothing ends
+            return info[4], info[5]
+        info = self.fmu.updateDiscreteStates()
+        assert info[:4] == (False, False, False, False)
+        return info[4], info[5]
+
+    def call(self, name) -> str:
+        """The name of a call of this family, as messages name it."""
+        return f"{self.family}{name}"
+
     def error(self, call) -> str:
-        """The one error message ``call`` logs as it fails with fmi2Error."""
+        """The one error message ``call`` logs as it fails with an error status."""
         before = len(self.messages)
         with pytest.raises(FMICallException) as err:
             call()
@@ -56,29 +93,34 @@ class MEPlant:
         return message
 
 
-@pytest.fixture
-def me_plant(native_built, tmp_path):
-    plant = MEPlant(native_built["fmi2"][PLANT], tmp_path / "unzip")
+@pytest.fixture(params=FAMILIES)
+def me_plant(request, native_built, tmp_path):
+    plant = MEPlant(native_built[request.param][PLANT], tmp_path / "unzip", request.param)
     yield plant
     plant.fmu.freeInstance()
 
 
-def test_both_interfaces_share_one_model_identifier_and_the_derivatives_are_declared(native_built):
-    with zipfile.ZipFile(native_built["fmi2"][PLANT]) as z:
+@pytest.mark.parametrize("family", FAMILIES)
+def test_both_interfaces_share_one_model_identifier_and_the_derivatives_are_declared(native_built, family):
+    with zipfile.ZipFile(native_built[family][PLANT]) as z:
         root = ET.fromstring(z.read("modelDescription.xml"))
     me, cs = root.find("ModelExchange"), root.find("CoSimulation")
+    assert list(root).index(me) < list(root).index(cs)  # the schema's order
     assert me.get("modelIdentifier") == cs.get("modelIdentifier") == PLANT
-    assert root.get("numberOfEventIndicators") == "0"
-    md = read_model_description(str(native_built["fmi2"][PLANT]))
+    md = read_model_description(str(native_built[family][PLANT]))
+    assert md.numberOfEventIndicators == 0
     assert [d.variable.name for d in md.derivatives] == [f"der({s})" for s in STATES]
     assert [d.variable.derivative.name for d in md.derivatives] == list(STATES)
+    if family == "fmi3":  # after the independent variable `time`, which is N_VARS
+        time = next(v for v in md.modelVariables if v.causality == "independent")
+        assert [d.variable.valueReference for d in md.derivatives] == [time.valueReference + 1 + k for k in range(6)]
     for model in (CONTROLLER, TRAJECTORY):  # Co-Simulation only
-        with zipfile.ZipFile(native_built["fmi2"][model]) as z:
+        with zipfile.ZipFile(native_built[family][model]) as z:
             assert ET.fromstring(z.read("modelDescription.xml")).find("ModelExchange") is None
 
 
 def array(values) -> tuple[np.ndarray, object]:
-    """A float64 array and the fmi2Real pointer to it that FMPy's Model Exchange calls take."""
+    """A float64 array and the fmi2Real / fmi3Float64 pointer to it that FMPy's Model Exchange calls take."""
     a = np.ascontiguousarray(values, dtype=float)
     return a, a.ctypes.data_as(POINTER(c_double))
 
@@ -99,13 +141,16 @@ def test_states_and_derivatives_follow_the_model(me_plant):
     fmu.setTime(0.01)
     fmu.setContinuousStates(px, 6)
     dx, pdx = array(np.zeros(6))
-    fmu.getDerivatives(pdx, 6)
-    assert np.array_equal(dx, fmu.getReal([me_plant.vr[f"der({s})"] for s in STATES]))
+    me_plant.derivatives(pdx, 6)
+    assert np.array_equal(dx, me_plant.get_real([f"der({s})" for s in STATES]))
     assert np.array_equal(dx[:3], x[3:])
     model = PlantModel(ModelParams(), PlantConfig(), INITIAL_STATE[:3], INITIAL_STATE[3:])
     assert np.allclose(dx, model.derivatives(tuple(x), 20.0, 10.0, 60.0), rtol=1e-12, atol=0), dx
-    assert fmu.getReal([me_plant.vr[s] for s in STATES]) == list(x)
+    assert me_plant.get_real(STATES) == list(x)
     assert np.abs(dx[3:]).min() > 0.1  # forces and gravity accelerate it
+    if me_plant.family == "fmi3":
+        assert (fmu.getNumberOfContinuousStates(), fmu.getNumberOfEventIndicators()) == (6, 0)
+        assert me_plant.get_real(["time"]) == [0.01]
 
 
 def test_the_external_force_step_is_a_time_event(me_plant):
@@ -113,22 +158,22 @@ def test_the_external_force_step_is_a_time_event(me_plant):
     change there and not before."""
     me_plant.initialize(disturbance_force1=50.0, disturbance_time=0.05)
     fmu = me_plant.fmu
-    info = fmu.newDiscreteStates()
-    assert info == (False, False, False, False, True, 0.05)
+    assert me_plant.update() == (True, 0.05)
     fmu.enterContinuousTimeMode()
     dx, pdx = array(np.zeros(6))
     before = []
     for t in (0.05 - 1e-9, 0.05):
         fmu.setTime(t)
-        fmu.getDerivatives(pdx, 6)
+        me_plant.derivatives(pdx, 6)
         before.append(dx.copy())
     assert np.abs(before[1][3:] - before[0][3:]).max() > 1.0  # m/s2: the 50 N step on mover 1
     fmu.enterEventMode()
-    assert fmu.newDiscreteStates()[4] is False  # no further event
+    assert me_plant.update()[0] is False  # no further event
 
 
-def test_fmpy_integrates_across_the_time_event_as_the_co_simulation_plant_steps(native_built):
-    plant = native_built["fmi2"][PLANT]
+@pytest.mark.parametrize("family", FAMILIES)
+def test_fmpy_integrates_across_the_time_event_as_the_co_simulation_plant_steps(native_built, family):
+    plant = native_built[family][PLANT]
     start = {"F1": 20.0, "F2": 10.0, "F3": 60.0, "disturbance_force2": -80.0, "disturbance_time": 0.05}
     kw = dict(stop_time=0.1, output_interval=1e-4, start_values=start, output=list(STATES))
     cs = simulate_fmu(str(plant), fmi_type="CoSimulation", **kw)
@@ -143,16 +188,17 @@ def test_fmpy_integrates_across_the_time_event_as_the_co_simulation_plant_steps(
     assert abs(without["Z"][-1] - cs["Z"][-1]) > 1e-4  # m: the step matters
 
 
-def test_calls_that_do_not_fit_model_exchange_are_errors_with_their_message(native_built, tmp_path):
-    plant = native_built["fmi2"][PLANT]
-    fresh = iter(MEPlant(plant, tmp_path / f"unzip{k}") for k in range(4))  # an error ends an instance's run
+@pytest.mark.parametrize("family", FAMILIES)
+def test_calls_that_do_not_fit_model_exchange_are_errors_with_their_message(native_built, family, tmp_path):
+    plant = native_built[family][PLANT]
+    fresh = iter(MEPlant(plant, tmp_path / f"unzip{k}", family) for k in range(4))  # an error ends a run
     early = next(fresh)
     assert early.error(lambda: early.fmu.setTime(0.0)) == (
-        "fmi2SetTime is not allowed in Instantiated: allowed in Event Mode and Continuous-Time Mode")
+        f"{family}SetTime is not allowed in Instantiated: allowed in Event Mode and Continuous-Time Mode")
     in_event_mode = next(fresh)
     in_event_mode.initialize()
     assert in_event_mode.error(lambda: in_event_mode.fmu.completedIntegratorStep()) == (
-        "fmi2CompletedIntegratorStep is not allowed in Event Mode: allowed in Continuous-Time Mode")
+        f"{family}CompletedIntegratorStep is not allowed in Event Mode: allowed in Continuous-Time Mode")
     outside = next(fresh)
     outside.initialize()
     outside.fmu.enterContinuousTimeMode()
@@ -162,11 +208,47 @@ def test_calls_that_do_not_fit_model_exchange_are_errors_with_their_message(nati
         "finite values with |B| < pi/2 rad")
     stepping = next(fresh)
     stepping.initialize()
-    do_step = stepping.fmu.dll.fmi2DoStep
-    do_step.argtypes, do_step.restype = [c_void_p, c_double, c_double, c_int], c_int
-    assert do_step(stepping.fmu.component, 0.0, 1e-4, 1) == 3
-    assert stepping.messages[-1] == (3, "fmi2DoStep is not supported: the instance is a Model Exchange instance "
-                                        "(fmuType = fmi2ModelExchange)")
+    if family == "fmi2":
+        do_step = stepping.fmu.dll.fmi2DoStep
+        do_step.argtypes, do_step.restype = [c_void_p, c_double, c_double, c_int], c_int
+        assert do_step(stepping.fmu.component, 0.0, 1e-4, 1) == 3
+        assert stepping.messages[-1] == (3, "fmi2DoStep is not supported: the instance is a Model Exchange instance "
+                                            "(fmuType = fmi2ModelExchange)")
+    else:
+        do_step = stepping.fmu.dll.fmi3DoStep
+        do_step.argtypes = [c_void_p, c_double, c_double, c_int, c_void_p, c_void_p, c_void_p, c_void_p]
+        do_step.restype = c_int
+        assert do_step(stepping.fmu.component, 0.0, 1e-4, 1, None, None, None, None) == 3
+        assert stepping.messages[-1] == (3, "fmi3DoStep is not supported: the instance is a Model Exchange instance "
+                                            "(fmi3InstantiateModelExchange)")
+        enter_step_mode = stepping.fmu.dll.fmi3EnterStepMode
+        enter_step_mode.argtypes, enter_step_mode.restype = [c_void_p], c_int
+        assert enter_step_mode(stepping.fmu.component) == 3
+        assert stepping.messages[-1][1] == (
+            "fmi3EnterStepMode is not supported: the instance is a Model Exchange instance (allowed: "
+            "fmi3EnterContinuousTimeMode)")
+
+
+def test_model_exchange_calls_on_a_co_simulation_instance_are_errors(native_built, tmp_path):
+    """An FMI 3.0 Co-Simulation instance of the plant has no Event Mode and no continuous-state calls."""
+    md = read_model_description(str(native_built["fmi3"][PLANT]))
+    messages = []
+    slave = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(native_built["fmi3"][PLANT]), unzipdir=str(tmp_path)),
+                      modelIdentifier=PLANT, instanceName="cs")
+    slave.instantiate(loggingOn=True, logMessage=lambda env, status, cat, msg: messages.append(msg.decode()))
+    try:
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        with pytest.raises(FMICallException):
+            slave.enterEventMode()
+        assert messages[-1] == "fmi3EnterEventMode is not supported: hasEventMode is false"
+        x, px = array(np.zeros(6))
+        with pytest.raises(FMICallException):
+            slave.fmi3GetContinuousStates(slave.component, px, 6)
+        assert messages[-1] == ("fmi3GetContinuousStates is not allowed: the instance was instantiated for "
+                                "Co-Simulation (fmi3InstantiateCoSimulation)")
+    finally:
+        slave.freeInstance()
 
 
 def test_noise_is_refused_in_model_exchange(me_plant):
@@ -177,7 +259,8 @@ def test_noise_is_refused_in_model_exchange(me_plant):
 
 @pytest.mark.parametrize("model", [CONTROLLER, TRAJECTORY])
 def test_the_controller_and_the_trajectory_refuse_model_exchange(native_built, model, tmp_path):
-    """They export no Model Exchange function; fmi2Instantiate for Model Exchange is refused."""
+    """They export no FMI 2.0 Model Exchange function; fmi2Instantiate and fmi3InstantiateModelExchange
+    for Model Exchange are refused with a message."""
     messages = []
     callbacks = fmi2CallbackFunctions()
     callbacks.logger = fmi2CallbackLoggerTYPE(lambda env, name, status, cat, msg: messages.append(msg.decode()))
@@ -185,7 +268,7 @@ def test_the_controller_and_the_trajectory_refuse_model_exchange(native_built, m
     callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
     addLoggerProxy(byref(callbacks))
     md = read_model_description(str(native_built["fmi2"][model]))
-    folder = extract(str(native_built["fmi2"][model]), unzipdir=str(tmp_path))
+    folder = extract(str(native_built["fmi2"][model]), unzipdir=str(tmp_path / "fmi2"))
     slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=model, instanceName="me")
     assert not hasattr(slave.dll, "fmi2GetDerivatives") and hasattr(slave.dll, "fmi2DoStep")
     component = slave.fmi2Instantiate(b"me", 0, md.guid.encode(), Path(folder).as_uri().encode(), byref(callbacks),
@@ -193,3 +276,12 @@ def test_the_controller_and_the_trajectory_refuse_model_exchange(native_built, m
     assert not component
     assert messages == [f"fmi2Instantiate: fmuType = 0 is invalid: allowed is fmi2CoSimulation (1); {model} is a "
                         "co-simulation FMU"], messages
+    md3 = read_model_description(str(native_built["fmi3"][model]))
+    me = FMU3Model(guid=md3.guid, unzipDirectory=extract(str(native_built["fmi3"][model]),
+                                                         unzipdir=str(tmp_path / "fmi3")),
+                   modelIdentifier=model, instanceName="me")
+    logged = []
+    with pytest.raises(Exception, match="Failed to instantiate FMU"):
+        me.instantiate(logMessage=lambda env, status, cat, msg: logged.append(msg.decode()))
+    assert logged == [f"fmi3InstantiateModelExchange: {model} is a co-simulation FMU only: allowed is "
+                      "fmi3InstantiateCoSimulation"], logged

@@ -3,7 +3,8 @@
  * instantiation with odd arguments, get/set with arbitrary value references and counts
  * (value arrays of exactly the count given), doStep with any t and h, FMU states got, set,
  * freed, serialized and deserialized from fuzzed bytes, also after their instance was
- * freed, reset, terminate and free twice. Built by tests/fmu/test_fuzz.py with
+ * freed, reset, terminate and free twice; for the plant, Model Exchange instances and every Model
+ * Exchange call with counts and pointers of any kind. Built by tests/fmu/test_fuzz.py with
  * clang -fsanitize=fuzzer,address,undefined. */
 #include "all.c"
 #include "fuzz_input.h"
@@ -26,7 +27,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     const fmi2CallbackFunctions without = {NULL, NULL, NULL, NULL, NULL};
     int ops = 0;
     while (in.n && ops++ < 200) {
-        unsigned op = fuzz_byte(&in) % 22, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
+        /* 255 is the Model Exchange calls: every other byte means the operation it meant before they
+         * were added, so the kept inputs (regressions/) replay as they were found */
+        unsigned code = fuzz_byte(&in), op = code == 255 ? 22 : code % 22, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
         fmi2Component c = slot[s];
         switch (op) {
         case 0: {  /* instantiate, odd arguments included */
@@ -125,6 +128,30 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fmi2SerializedFMUstateSize(d, states[k], &need);
             break;
         }
+#ifdef MODEL_N_STATES
+        case 22: {  /* Model Exchange: arrays of exactly the count given, pointers maybe NULL */
+            size_t n = fuzz_count(&in);
+            fmi2Real *x = malloc((n ? n : 1) * sizeof *x);
+            for (size_t i = 0; i < n; i++) x[i] = fuzz_double(&in);
+            fmi2Real *arg = fuzz_byte(&in) & 1 ? x : NULL;
+            fmi2Boolean b[2];
+            fmi2EventInfo info;
+            switch (fuzz_byte(&in) % 10) {
+            case 0: fmi2SetTime(c, fuzz_double(&in)); break;
+            case 1: fmi2SetContinuousStates(c, arg, n); break;
+            case 2: fmi2GetContinuousStates(c, arg, n); break;
+            case 3: fmi2GetDerivatives(c, arg, n); break;
+            case 4: fmi2GetEventIndicators(c, arg, n); break;
+            case 5: fmi2GetNominalsOfContinuousStates(c, arg, n); break;
+            case 6: fmi2EnterEventMode(c); break;
+            case 7: fmi2NewDiscreteStates(c, fuzz_byte(&in) & 1 ? &info : NULL); break;
+            case 8: fmi2EnterContinuousTimeMode(c); break;
+            default: fmi2CompletedIntegratorStep(c, fuzz_byte(&in) & 1, fuzz_byte(&in) & 1 ? b : NULL, b + 1); break;
+            }
+            free(x);
+            break;
+        }
+#endif
         default: {
             fmi2ValueReference vr[2] = {N_VARS, fuzz_vr(&in, N_VARS)};
             fmi2Real v[2];

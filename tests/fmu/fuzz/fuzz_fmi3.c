@@ -3,7 +3,9 @@
  * FMI 3.0 calls: instantiation with odd arguments, get/set with arbitrary value references
  * and counts (value arrays of exactly the count given, so a read or write past them is
  * caught), doStep with any t and h, FMU states got, set, freed, serialized and deserialized
- * from fuzzed bytes, also after their instance was freed, reset, terminate and free twice.
+ * from fuzzed bytes, also after their instance was freed, reset, terminate and free twice;
+ * Model Exchange instances (the plant's; the others refuse them) and every Model Exchange call with
+ * counts and pointers of any kind.
  * Built by tests/fmu/test_fuzz.py with clang -fsanitize=fuzzer,address,undefined. */
 #include "all.c"
 #include "fuzz_input.h"
@@ -30,7 +32,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char name[64], token[128];
     int ops = 0;
     while (in.n && ops++ < 200) {
-        unsigned op = fuzz_byte(&in) % 22, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
+        /* 255 is the Model Exchange calls: every other byte means the operation it meant before they
+         * were added, so the kept inputs (regressions/) replay as they were found */
+        unsigned code = fuzz_byte(&in), op = code == 255 ? 22 : code % 22, s = fuzz_byte(&in) % SLOTS, k = fuzz_byte(&in) % STATES;
         fmi3Instance c = slot[s];
         switch (op) {
         case 0: {  /* instantiate, odd arguments included */
@@ -122,12 +126,19 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fmi3GetClock(c, &vr, n, &b);
             break;
         }
-        case 19: {  /* the other instantiation functions */
+        case 19: {  /* the other instantiation functions; a Model Exchange instance (the plant's) stays */
             const char *tok = fuzz_string(&in, token, sizeof token, INSTANTIATION_TOKEN);
-            fmi3Instance other = fuzz_byte(&in) & 1
+            int me = fuzz_byte(&in) & 1;
+            fmi3Instance other = me
                 ? fmi3InstantiateModelExchange("me", tok, NULL, 0, 0, NULL, fuzz_logger)
                 : fmi3InstantiateScheduledExecution("se", tok, NULL, 0, 0, NULL, fuzz_logger, NULL, NULL, NULL);
-            fmi3FreeInstance(other);
+            if (me && other) {
+                if (live[s]) fmi3FreeInstance(slot[s]);
+                slot[s] = other;
+                live[s] = 1;
+                t[s] = 0.0;
+            } else
+                fmi3FreeInstance(other);
             break;
         }
         case 20: {  /* a state of one instance handed to another */
@@ -135,6 +146,32 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fmi3SetFMUState(d, states[k]);
             size_t need;
             fmi3SerializedFMUStateSize(d, states[k], &need);
+            break;
+        }
+        case 22: {  /* Model Exchange: arrays of exactly the count given, pointers maybe NULL */
+            size_t n = fuzz_count(&in), count = 0;
+            fmi3Float64 *x = malloc((n ? n : 1) * sizeof *x);
+            for (size_t i = 0; i < n; i++) x[i] = fuzz_double(&in);
+            fmi3Float64 *arg = fuzz_byte(&in) & 1 ? x : NULL;
+            fmi3Boolean b[6];
+            fmi3Float64 next = 0.0;
+            switch (fuzz_byte(&in) % 13) {
+            case 0: fmi3SetTime(c, fuzz_double(&in)); break;
+            case 1: fmi3SetContinuousStates(c, arg, n); break;
+            case 2: fmi3GetContinuousStates(c, arg, n); break;
+            case 3: fmi3GetContinuousStateDerivatives(c, arg, n); break;
+            case 4: fmi3GetEventIndicators(c, arg, n); break;
+            case 5: fmi3GetNominalsOfContinuousStates(c, arg, n); break;
+            case 6: fmi3EnterEventMode(c); break;
+            case 7: fmi3UpdateDiscreteStates(c, b, b + 1, b + 2, b + 3, b + 4, fuzz_byte(&in) & 1 ? &next : NULL);
+                break;
+            case 8: fmi3EnterContinuousTimeMode(c); break;
+            case 9: fmi3CompletedIntegratorStep(c, fuzz_byte(&in) & 1, fuzz_byte(&in) & 1 ? b : NULL, b + 1); break;
+            case 10: fmi3GetNumberOfContinuousStates(c, fuzz_byte(&in) & 1 ? &count : NULL); break;
+            case 11: fmi3GetNumberOfEventIndicators(c, fuzz_byte(&in) & 1 ? &count : NULL); break;
+            default: fmi3EnterStepMode(c); break;
+            }
+            free(x);
             break;
         }
         default: {  /* the time variable and an output in one get */
