@@ -527,9 +527,12 @@ def cmd_study(args) -> int:
         recording = {k: v for k, v in (("format", args.format), ("record_every", every)) if v is not None}
         study = dataclasses.replace(study, set={**study.set, **recording})
     out = Path(args.out or study.output)
-    if study.keep_results and not study.tune:  # else each case deletes its result file once scored
+    case_list = None
+    if not study.tune:
         from .studies.study import cases
-        check_output_size([study.base_scenario()] * len(cases(study, max_cases)), out, study.name, args.workers or 1)
+        case_list = cases(study, max_cases)  # every case validated before a cluster starts
+    if study.keep_results and not study.tune:  # else each case deletes its result file once scored
+        check_output_size([study.base_scenario()] * len(case_list), out, study.name, args.workers or 1)
     remote = None
     with output_lock(out):  # before starting a cluster; run_study takes it again (re-entrant)
         if args.scheduler:
@@ -542,7 +545,7 @@ def cmd_study(args) -> int:
             command = args.command_line
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
-                          not args.no_progress, command, args.write_docs, remote, max_cases)
+                          not args.no_progress, command, args.write_docs, remote, max_cases, case_list)
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped

@@ -39,11 +39,14 @@ class Unit:
     (fmpy's getReal/setReal wrappers build new arrays and lists on every call).
     """
 
-    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list, budget=None, where: str = ""):
+    def __init__(self, name: str, fmu_path: Path, unzip_dir: Path, log: list, budget=None, where: str = "",
+                 extract: bool = True):
         self.name = name
         # extracted first, counted against ``budget`` (archive.ExtractBudget): a member's size is
-        # checked before modelDescription.xml is read into memory
-        extract_archive(fmu_path, unzip_dir, budget or ExtractBudget(), where or f"FMU {fmu_path}")
+        # checked before modelDescription.xml is read into memory; extract=False: ``unzip_dir``
+        # holds the FMU extracted already (an FMU loaded again after its instance was freed)
+        if extract:
+            extract_archive(fmu_path, unzip_dir, budget or ExtractBudget(), where or f"FMU {fmu_path}")
         self.md = _model_description(fmu_path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vars = {v.name: v for v in self.md.modelVariables}
@@ -100,6 +103,29 @@ class Unit:
                                    log_message(None, name, status, category, message))
         else:
             self.slave.instantiate(callbacks=callbacks, loggingOn=True)
+
+    def reset(self) -> int:
+        """fmi2Reset (fmi3Reset) of the instance: back to the state right after instantiation,
+        every variable at its start value; returns the status."""
+        if self.fmi3:
+            return self.slave.dll.fmi3Reset(self.slave.component)
+        return self.slave.dll.fmi2Reset(self.slave.component)
+
+    def prepare_reuse(self) -> None:
+        """Forget the connections and events of the last co-simulation (after :meth:`reset`), so
+        that the next one connects and steps this instance as a new one."""
+        self.sources = []
+        self.in_vrs = self.inp = None
+        self.n_in = 0
+        self._copies = ()
+        self.next_event = math.inf
+        self.n_events = 0
+        self.clock_t0 = self.clock_interval = math.nan
+        self.clock_k = 0
+        if self.fmi3:
+            for flag in self._flags:
+                flag.value = False
+            self._last_time.value = 0.0
 
     def enter_initialization(self, start_time: float) -> None:
         """fmi2SetupExperiment + fmi2EnterInitializationMode, or fmi3EnterInitializationMode."""

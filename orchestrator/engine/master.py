@@ -57,15 +57,10 @@ order, so its rows are the Python loop's to the bit.
 
 import math
 import os
-import shutil
-import weakref
-from ctypes import byref, c_double, c_int64
+from ctypes import c_double, c_int64
 from pathlib import Path
 
-from fmpy import calloc, free
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                       fmi2CallbackLoggerTYPE)
 
 from . import stepper as stepper_core
 from .archive import ExtractBudget, ExtractLimitError
@@ -74,8 +69,8 @@ from .errors import CoSimulationError, DivergenceError
 from .model_exchange import DEFAULT_TOLERANCE as DEFAULT_ME_TOLERANCE, ModelExchangeUnit, model_exchange_units
 from .schedule import (CONNECTION_STARTS, ORDERINGS, Connection, ScheduleError, check_algebraic_loops, check_order,
                        gauss_seidel_order, initialization_order)
-from .ssd import ParameterAddressError, check_elements, column_prefixes, extract_fmus, read_ssp, resolve_parameters
-from .tempdirs import make_folder
+from .loaded import LoadedFMUs, LoadedSystem
+from .ssd import ParameterAddressError, column_prefixes, resolve_parameters
 from .instance import Unit
 
 STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, else Python
@@ -128,7 +123,7 @@ class CoSimulation:
                  check: OutputCheck | None = None, clock: str = "exact",
                  connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None,
                  event_mode: bool = False, roles: dict | None = None, other_tables=(), model_exchange=(),
-                 me_tolerance: float = DEFAULT_ME_TOLERANCE):
+                 me_tolerance: float = DEFAULT_ME_TOLERANCE, loaded: LoadedFMUs | None = None):
         if ordering not in ORDERINGS:
             raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
@@ -176,6 +171,8 @@ class CoSimulation:
         self.units: dict[str, Unit] = {}
         self.log: list[str] = []
         self.tmp = None
+        self.loaded = loaded     # LoadedFMUs that keeps the FMUs loaded between co-simulations, or None
+        self._system = None      # the LoadedSystem while open
         self.k = 0
         self.guids = {}
         self.check = check or OutputCheck()
@@ -210,28 +207,19 @@ class CoSimulation:
             self._budget = ExtractBudget()  # of the SSP's members and the FMUs' together
         except ExtractLimitError as err:
             raise CoSimulationError(str(err)) from None
-        ssd, members = read_ssp(self.ssp_path, self._budget)
-        elements = check_elements(self.ssp_path, ssd.system.elements, members)  # before anything is extracted
-        self.tmp = make_folder()
-        weakref.finalize(self, shutil.rmtree, str(self.tmp), True)  # also if close() is never reached
-        fmus = extract_fmus(self.ssp_path, members, elements, self.tmp / "ssp", self._budget)
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        from fmpy.logging import addLoggerProxy
-        addLoggerProxy(byref(self.callbacks))
-        for name, (source, _) in elements.items():
-            try:
-                unit = Unit(name, fmus[name], self.tmp / "fmu" / name, self.log, self._budget,
-                            f"SSP file {self.ssp_path}: the FMU {source} of element {name}")
-            except ExtractLimitError as err:
-                raise CoSimulationError(str(err), name) from None
-            except Exception as err:
-                raise CoSimulationError(f"SSP file {self.ssp_path}: cannot load the FMU {source} of "
-                                        f"element {name} (truncated or not an FMU): {err}", name) from err
-            self.units[name] = unit
+        # -- the loaded FMUs: this co-simulation's own, or a reset system kept by ``loaded`` --
+        if self.loaded is None or self.model_exchange:  # a Model Exchange instance is no part of a kept system
+            self._system = LoadedSystem(self.ssp_path, self._budget, self.event_mode)
+        else:
+            self._system = self.loaded.take(self.ssp_path, self._budget, self.event_mode)
+        system = self._system
+        system.target = self._logger
+        self.tmp = system.tmp
+        self.units = system.units
+        for name, unit in self.units.items():
+            unit.log = self.log
             self.guids[name] = unit.md.guid
+        ssd = system.ssd
         model_exchange_units(self.units, self.model_exchange, self.roles, self.me_tolerance,
                              f"the system in SSP file {self.ssp_path}")
         self._connect(ssd.system.connections)
@@ -246,9 +234,10 @@ class CoSimulation:
         self._check_clocks()
         for name in self.init_order:
             unit = self.units[name]
-            self._call(unit, lambda u=unit: u.instantiate(self.callbacks, self._logger, self.event_mode),
-                       "instantiate")
-            unit.instantiated = True
+            if not unit.instantiated:  # else reset by ``loaded``: in the state right after instantiation
+                self._call(unit, lambda u=unit: u.instantiate(system.callbacks, system.log_message, self.event_mode),
+                           "instantiate")
+                unit.instantiated = True
             for pname, value in parameters.get(name, {}).items():
                 self._call(unit, lambda u=unit, p=pname, v=value: u.set_parameter(p, v),
                            f"set parameter {pname}")
@@ -616,20 +605,15 @@ class CoSimulation:
 
     # --- teardown ------------------------------------------------------------------
     def close(self) -> None:
-        """Terminate and free every instance and delete the extracted files; idempotent."""
-        for unit in self.units.values():
-            if unit.instantiated:
-                try:
-                    unit.slave.terminate()
-                except Exception:
-                    pass  # an instance in error state may refuse; it is freed regardless
-                try:
-                    unit.slave.freeInstance()
-                except Exception:
-                    pass
-                unit.instantiated = False
+        """Terminate and free every instance and delete the extracted files, or, with ``loaded``,
+        reset every instance and give the system back to it; idempotent."""
+        system, self._system = self._system, None
         self.units = {}
-        if self.tmp is not None:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            self.tmp = None
-
+        self.tmp = None
+        if system is None:
+            return
+        system.target = None
+        if self.loaded is None or self.model_exchange:
+            system.close()
+        else:
+            self.loaded.give(system)

@@ -105,6 +105,12 @@ class StudyPlugin(WorkerPlugin):
     def setup(self, worker) -> None:
         self.worker = str(worker.address)
 
+    def teardown(self, worker) -> None:
+        """The study ended (or the worker closes): free the FMUs its cases kept loaded in this worker
+        and remove their folder (engine.loaded.process_fmus)."""
+        from ..engine.loaded import close_process_fmus
+        close_process_fmus()
+
     def check(self) -> None:
         """StudyError (naming this worker and both versions) if this worker differs from the client."""
         text = mismatch(self.worker, identity(), self.client_identity)

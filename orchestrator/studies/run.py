@@ -18,7 +18,7 @@ from .tuning import run_tuning
 
 def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
               overwrite: bool = False, progress: bool = True, command: str = "", write_docs: bool = False,
-              remote: dict | None = None, max_cases: int = MAX_CASES) -> dict:
+              remote: dict | None = None, max_cases: int = MAX_CASES, case_list: list | None = None) -> dict:
     """Run a study on a Dask client; returns a summary (counts by status, paths, wall time,
     bytes of case files received). The output folder is locked for the whole study
     (results.OutputInUseError if in use).
@@ -26,13 +26,14 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
     remote: for a client of a running scheduler, {"address": str, "data": bool (False: the workers
     share the client's files, --shared-fs), "timeout": how long to wait for a worker [s]}; the
     workers are checked before the first case (orchestrator.studies.remote.shipping).
-    max_cases: a grid / Monte Carlo study with more cases is refused (StudyError)."""
+    max_cases: a grid / Monte Carlo study with more cases is refused (StudyError). case_list: the
+    study's cases (study.cases) if the caller has listed them already."""
     ssp = Path(ssp)
     if not ssp.is_file():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
                          "tapmp build) or pass --ssp")
     out = Path(out or study.output)
-    if not study.tune:
+    if not study.tune and case_list is None:
         case_list = cases(study, max_cases)  # before anything is written or sent
     if remote:
         from .remote import shipping

@@ -143,9 +143,10 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     or does not start, with status "interrupted" (never a study.csv row).
     """
     from ..engine.errors import DivergenceError
+    from ..engine.loaded import process_fmus
     from ..tool.results import run_scenario
     from ..tool.stops import stop_requested
-    from ..tool.stability import check
+    from ..tool.stability import cached_check
 
     start = time.perf_counter()
     row = {"status": "failed", "error": "", "worker": f"{os.uname().nodename}:{os.getpid()}"}
@@ -165,7 +166,7 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
                 folder = case_folder()
                 case_dir = folder / "case"
         scenario = case_scenario(base, changes, gain_files or {})
-        report = check(scenario)
+        report = cached_check(scenario)
         row["spectral_radius"] = report.spectral_radius
         if reject_unstable and not report.stable:
             row.update(status="rejected", error=f"not run: {report.verdict} (spectral radius "
@@ -173,7 +174,9 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
         else:
             if not keep_results:  # rows that would be deleted: keep the first and last only (the metrics
                 scenario = replace_fields(scenario, record_every=scenario.n_steps)  # use every step regardless)
-            m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token)
+            # the FMUs stay loaded in this worker and are reset between cases (engine.loaded)
+            m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token,
+                             loaded=process_fmus())
             row.update(_metric_columns(m), status="completed", metrics=m)
             if not keep_results:
                 for name in ("results.csv", "results.mat"):  # either format (scenario key format)

@@ -13,6 +13,7 @@ full disk) ends it with ResultsWriteError, the result file cut back to its last 
 block of rows; a failure of the co-simulation keeps the whole rows before it.
 """
 
+import functools
 import platform
 import sys
 import time
@@ -40,7 +41,13 @@ def one_line(err) -> str:
 
 
 def versions() -> dict:
-    """Versions of the packages a result depends on."""
+    """Versions of the packages a result depends on (looked up once per process: a study worker
+    records them in every case's run.json)."""
+    return dict(_versions())
+
+
+@functools.lru_cache(maxsize=1)
+def _versions() -> dict:
     out = {"python": platform.python_version()}
     for pkg in ("tapmp-cosim", "fmpy", "pythonfmu", "numpy"):
         try:
@@ -52,7 +59,7 @@ def versions() -> dict:
 
 def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = False,
                  progress=None, stop_token: str | None = None, keep_rows: list | None = None,
-                 keep_bytes: int = 0) -> dict:
+                 keep_bytes: int = 0, loaded=None) -> dict:
     """Run one scenario; write run.json, metrics.json and results.csv or results.mat
     (``scenario.format``) into ``out`` (prepare_output: a completed run there is kept
     unless ``overwrite``, a failed or interrupted one is replaced).
@@ -72,11 +79,14 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
     ``keep_rows``, a list, receives the recorded rows block by block (arrays) as they are
     written, for a caller that plots them, as long as they total at most ``keep_bytes``;
     beyond that it is emptied (read the result file instead).
+
+    ``loaded`` (engine.loaded.LoadedFMUs, e.g. a study worker's): take the FMUs loaded from it
+    and give them back reset (the same rows as FMUs loaded for this run alone).
     """
     check_output(out, overwrite, unmarked_only=True)  # before the lock file is made: a refused folder is left as it was
     with output_lock(out):
         out = prepare_output(out, overwrite)
-        return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)
+        return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes, loaded)
 
 
 def run_scenario_held(scenario: Scenario, ssp: Path, out: Path, progress=None, stop_token: str | None = None,
@@ -88,7 +98,7 @@ def run_scenario_held(scenario: Scenario, ssp: Path, out: Path, progress=None, s
 
 
 def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, keep_rows=None,
-                keep_bytes: int = 0) -> dict:
+                keep_bytes: int = 0, loaded=None) -> dict:
     """run_scenario's body, in the locked and prepared output folder ``out``."""
     fmt = getattr(scenario, "format", "csv")
     info = {"kind": "run", "format": fmt, "results_file": FORMATS[fmt],
@@ -109,7 +119,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
                               scenario.ordering, check=envelope(scenario), clock=scenario.clock,
                               connection_start=scenario.connection_start, event_mode=scenario.event_mode,
                               open_inputs=scenario.open_inputs, order=scenario.order, roles=ROLES,
-                              other_tables=SCENARIO_TABLES,
+                              other_tables=SCENARIO_TABLES, loaded=loaded,
                               model_exchange=("plant",) if scenario.plant_interface == "me" else ()) as sim:
                 info["guids"] = sim.guids
                 info["columns"] = list(sim.columns)

@@ -39,7 +39,8 @@ from pydantic.dataclasses import dataclass
 
 from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
-from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
+from tapmp import cmodel
+from tapmp.interface import CONTROLLER, ELEMENT, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
@@ -303,6 +304,10 @@ class Scenario:
 
     def parameters(self) -> dict:
         """FMU parameters by SSP element name, ready for the master algorithm."""
+        return self._parameters(gains=True)
+
+    def _parameters(self, gains: bool) -> dict:
+        """parameters(); without the controller's gains if not ``gains`` (a gains_file not read yet)."""
         traj = dict(self.trajectory)
         plant = dict(self.plant)
         if self.start_on_trajectory:
@@ -313,7 +318,7 @@ class Scenario:
         ctrl.update(self.mismatched_params())
         ctrl["law"] = LAWS[self.law]
         ctrl["T_s"] = self.step  # the controller's sample period: one sample per macro step
-        for name, values in zip(GAIN_NAMES, self.gain_values()):
+        for name, values in zip(GAIN_NAMES, self.gain_values() if gains else ()):
             for i, v in enumerate(values, start=1):
                 ctrl[f"{name}{i}"] = v
         if "L_1" in self.controller and "L_1" not in traj:
@@ -445,11 +450,29 @@ def _check_order(s: Scenario) -> None:
             f"{s.ordering!r}: allowed is an order only with ordering = \"gauss-seidel\" (Jacobi steps all at once)")
 
 
-def _check_controller(s: Scenario) -> None:
-    vs = s.controller.get("velocity_source", 0)
-    require(vs in (0, 1), f"controller.velocity_source = {vs!r} is invalid: allowed are 0 or 1")
-    require(s.controller.get("force_limit", 0.0) >= 0.0, f"controller.force_limit = "
-            f"{s.controller.get('force_limit')!r} is invalid: allowed is a number >= 0")
+_INITIAL_STATE = ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")  # the plant's initial pose and velocity
+
+
+def _check_initial_state(s: Scenario) -> None:
+    """With start_on_trajectory the plant starts on the reference: an initial state in [plant]
+    would be replaced without a word, so it is refused."""
+    given = [k for k in _INITIAL_STATE if k in s.plant]
+    if s.start_on_trajectory and given:
+        raise ValueError(f"plant.{given[0]} = {s.plant[given[0]]!r} is invalid with start_on_trajectory = true (the "
+                         "plant starts on the reference's pose and velocity): allowed is start_on_trajectory = false "
+                         "to set the plant's initial state")
+
+
+def _check_settings(s: Scenario) -> None:
+    """Every TAPMP FMU's settings exactly as the scenario hands them over (parameters()), through
+    the C model's range check that every FMU family runs at initialization: one rule per setting,
+    named by the scenario's table. A gains_file's gains are checked once read (read_gains_file)."""
+    params = s._parameters(gains=not (s.gains_file and not s.gain_file_values))
+    for model, element in ELEMENT.items():
+        try:
+            cmodel.check_settings(model, params[element])
+        except ModelInputError as err:
+            raise ValueError(f"{element}.{err}") from None
 
 
 def _check_plant_interface(s: Scenario) -> None:
@@ -461,8 +484,8 @@ def _check_plant_interface(s: Scenario) -> None:
             "tapmp compare --no-noise)")
 
 
-_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_move, _check_order, _check_controller,
-                 _check_plant_interface)
+_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_initial_state, _check_settings, _check_move,
+                 _check_order, _check_plant_interface)
 
 
 def read_gains_file(s: Scenario) -> Scenario:

@@ -303,3 +303,31 @@ def check(scenario: Scenario) -> StabilityReport:
                            ordering=scenario.ordering, h=scenario.step, law=scenario.law,
                            time=scenario.start_time, states=m.names, eigenvalues=[complex(z) for z in eig])
 
+
+
+_CHECKED: dict = {}  # key of cache_key -> StabilityReport, for cached_check
+_CHECKED_MAX = 1024
+
+
+def cache_key(scenario: Scenario) -> str:
+    """What :func:`check` reads of a scenario, as text: the FMUs' parameter tables, the gains,
+    the step [s], the start time [s], the ordering and the law. Two scenarios with the same key
+    get the same report."""
+    import json
+    return json.dumps([scenario.parameters(), scenario.gain_values(), scenario.step, scenario.start_time,
+                       scenario.ordering, scenario.law], sort_keys=True, default=repr)
+
+
+def cached_check(scenario: Scenario) -> StabilityReport:
+    """:func:`check`, computed once per process for each :func:`cache_key` (a study's cases that
+    differ only in what the check does not read, e.g. the stop time, share one linearization).
+    Returns a copy the caller may change."""
+    import copy
+    key = cache_key(scenario)
+    report = _CHECKED.get(key)
+    if report is None:
+        report = check(scenario)
+        if len(_CHECKED) >= _CHECKED_MAX:
+            _CHECKED.pop(next(iter(_CHECKED)))  # the oldest first
+        _CHECKED[key] = report
+    return copy.deepcopy(report)

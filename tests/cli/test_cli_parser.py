@@ -64,7 +64,8 @@ def test_the_help_lists_every_subcommand_and_the_shipped_names(tmp_path):
      "error: tapmp compare: argument --format: format = 'cvs' is invalid: allowed are csv, mat; did you mean csv? "
      "(see tapmp compare --help)"),
     (["rnu"], "error: tapmp: argument command: 'rnu' is invalid: allowed are build, run, check, analyze, compare, "
-              "reproduce, study, export, plot; did you mean run? (see tapmp --help)"),
+              "reproduce, study, export, plot, paper-gains, calibrate, null-models, theorem1, modal; did you mean run? "
+              "(see tapmp --help)"),
     (["run", "x.toml", "--no-such-option"], "error: tapmp: unrecognized arguments: --no-such-option "
                                             "(see tapmp --help)"),
     (["reproduce", "--workers", "two"], "error: tapmp reproduce: argument --workers: invalid int value: 'two' "

@@ -111,6 +111,16 @@ def test_throughput_prints_cases_per_minute_bytes_and_cpu_per_case_on_a_loopback
     assert received > 200 and client > 0 and scheduler > 0 and worker > 0
 
 
+def test_bench_case_prints_the_cpu_per_case_with_fmus_kept_loaded_and_loaded_per_case(native_built, tmp_path):
+    out = bench("bench_case.py", "--ssp", native_built["fmi2"]["ssp"], "--cases", "2", "--stop-time", "0.01",
+                "--profile", tmp_path=tmp_path)
+    rows = table(out, "mode")
+    assert [r[0] for r in rows] == ["kept loaded, reset", "loaded per case"] and all(r[1] == "2" for r in rows)
+    assert all(float(r[2]) > 0 and float(r[3]) > 0 for r in rows)
+    assert "run_case" in out and "cumulative" in out  # the profile of the kept mode
+    assert not list(tmp_path.glob("tapmp_cosim_*")) and not list(tmp_path.glob("tapmp_case_*"))
+
+
 def test_bench_loop_prints_both_loops_and_the_same_doubles(tmp_path):
     out = bench("bench_loop.py", "--stop-time", "0.005", "--repeat", "1", tmp_path=tmp_path)
     rows = table(out, "loop")

@@ -42,7 +42,7 @@ def test_set_overrides_any_value_and_gain_scalars_apply_to_all_motors():
     ('connection_start="one"', r"connection_start = 'one' is invalid: allowed are propagated, zero"),
     ("plant.m_p=-1", r"plant.m_p = -1.0 is invalid: allowed is a number in \[1e-12, 1e\+06\]"),
     ("plant.substeps=0", r"plant.substeps = 0 is invalid: allowed is an integer in \[1, 10000\]"),
-    ("controller.velocity_source=2", r"velocity_source = 2 is invalid: allowed are 0 or 1"),
+    ("controller.velocity_source=2", r"velocity_source = 2 is invalid: allowed is 0 \(backward difference of q\) or 1 \(dq inputs\)"),
     ("gain_overrides.K_T=0", r"gain_overrides.K_T1 = 0.0 is invalid: allowed is a number in \[1e-12, 1e\+12\]"),
     ("gain_overrides.b=[1, 2]", r"gain_overrides.b = \[1, 2\] is invalid: allowed is a number or a list of 3"),
     ('stop_time="long"', r"stop_time = 'long' has the wrong type: allowed is float"),

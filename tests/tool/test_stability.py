@@ -203,3 +203,18 @@ def test_stability_check_includes_the_attraction_and_the_mismatch():
     assert strong.verdict == "unstable"
     mism = check(load(PAPER, ["mismatch.m_1=1.5", "mismatch.m_3=1.5"]))
     assert mism.spectral_radius != base.spectral_radius
+
+
+def test_the_cached_pre_check_is_the_checks_report_keyed_by_what_the_check_reads():
+    from orchestrator.tool.stability import cache_key, cached_check
+    sc = load(PAPER, ["stop_time=0.5", "gain_overrides.D=450"])
+    report = cached_check(sc)
+    assert report.to_dict() == check(sc).to_dict()
+    # a case that differs only in what the check does not read shares the report
+    assert cache_key(load(PAPER, ["stop_time=0.2", "gain_overrides.D=450"])) == cache_key(sc)
+    for other in (["gain_overrides.D=900"], ["gain_overrides.D=450", "plant.c_v1=30"],
+                  ["gain_overrides.D=450", "step=2e-4"], ["gain_overrides.D=450", 'ordering="jacobi"']):
+        assert cache_key(load(PAPER, ["stop_time=0.5", *other])) != cache_key(sc), other
+    # the caller gets its own copy
+    report.eigenvalues.clear()
+    assert cached_check(sc).eigenvalues == check(sc).eigenvalues != []
