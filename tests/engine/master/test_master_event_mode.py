@@ -89,3 +89,10 @@ def test_event_mode_with_the_compiled_core_gives_the_python_loops_rows(fmi3):
     python, _ = advance(fmi3["ssp"], 1e-3, 20, "python")
     assert core
     np.testing.assert_array_equal(compiled, python)
+
+
+@pytest.fixture(scope="module")
+def native_fmi2_ssp(tmp_path_factory):
+    from orchestrator.engine.build_native import build_native
+    return build_native(tmp_path_factory.mktemp("native2"), families=("fmi2",), log=lambda *_: None,
+                        windows=False)["fmi2"]["ssp"]
