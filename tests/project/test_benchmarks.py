@@ -131,6 +131,15 @@ def test_bench_loop_prints_both_loops_and_the_same_doubles(tmp_path):
     assert m and float(m.group(1)) == pytest.approx(float(rows[0][2]) / float(rows[1][2]), rel=0.03, abs=0.1)
 
 
+
+def test_bench_event_mode_prints_both_loops_per_system_and_the_same_doubles(native_built, tmp_path):
+    fmi3 = native_built["fmi3"]
+    out = bench("bench_event_mode.py", "--ssp", fmi3["ssp"], fmi3["clocked_ssp"], "--steps", "50", "--repeat", "1",
+                tmp_path=tmp_path)
+    for name in ("TAPMP.ssp", "TAPMP_Clocked.ssp"):
+        assert re.search(rf"^{re.escape(name)}: python {NUMBER} us, compiled {NUMBER} us per macro step$", out, re.M)
+    assert "same doubles: yes" in out.splitlines()
+
 def test_reference_run_regenerates_the_stored_reference_bit_for_bit(tmp_path):
     out = bench("reference_run.py", "--out", tmp_path / "ref.csv", tmp_path=tmp_path)
     assert out.strip() == f"wrote {tmp_path / 'ref.csv'}"
