@@ -38,20 +38,21 @@ def test_compare_into_a_log_prints_a_summary_of_the_metrics_and_no_long_or_progr
     assert lines[-1] == f"results, figures and the full tables (comparison.md) in {out}"
     assert lines[1].startswith("mean: the steady tracking error per mode")
     del lines[1]
-    assert lines[1].split() == ["run", "tracking", "MAE", "[um]", "sync", "MAE", "[um]", "vs", "APD-DC:", "tracking",
-                                "sync", "F", "RMS", ">", "100", "Hz", "[N]", "mean:", "common", "diff.", "Z", "diff.",
-                                "B", "[um]"]
+    assert lines[1].split() == ["run", "tracking", "MAE", "[um]", "sync", "MAE", "[um]", "SC-DC", "vs", "it:",
+                                "tracking", "sync", "F", "RMS", ">", "100", "Hz", "[N]", "mean:", "common", "diff.", "Z",
+                                "diff.", "B", "[um]"]
     metrics = {b.name: json.loads((out / b.name / "metrics.json").read_text()) for b in BASELINES}
-    base_t, base_y = _mean(metrics["apd-dc"]["tracking_mae_um"]), _mean(metrics["apd-dc"]["sync_mae_um"])
+    sc_t, sc_y = _mean(metrics["sc-dc"]["tracking_mae_um"]), _mean(metrics["sc-dc"]["sync_mae_um"])
     rows = {r.split()[0]: r.split()[1:] for r in lines[2:-1]}
     assert list(rows) == [b.name for b in BASELINES]
     for name, (t, y, rt, ry, f, *_) in rows.items():
         assert float(f) == pytest.approx(_mean(metrics[name]["force_hf_rms_n"]), rel=1e-3)  # effort, mean of motors
         mt, my = _mean(metrics[name]["tracking_mae_um"]), _mean(metrics[name]["sync_mae_um"])
         assert float(t) == pytest.approx(mt, abs=5e-5) and float(y) == pytest.approx(my, abs=5e-5)
-        assert float(rt.rstrip("%")) == pytest.approx(100 * (base_t - mt) / base_t, abs=0.05)
-        assert float(ry.rstrip("%")) == pytest.approx(100 * (base_y - my) / base_y, abs=0.05)
-    assert rows["apd-dc"][2:4] == ["+0.0%", "+0.0%"]
+        # SC-DC's reduction against the run: positive where SC-DC has the smaller error
+        assert float(rt.rstrip("%")) == pytest.approx(100 * (mt - sc_t) / mt, abs=0.05)
+        assert float(ry.rstrip("%")) == pytest.approx(100 * (my - sc_y) / my, abs=0.05)
+    assert rows["sc-dc"][2:4] == ["+0.0%", "+0.0%"]
     # the full Markdown is in comparison.md, not on the terminal
     md = (out / "comparison.md").read_text()
     assert "| `sc-dc` | SC-DC |" in md and "|" not in res.stdout

@@ -58,15 +58,17 @@ def test_model_description_declares_the_interface(fmus, family, model):
     md = read_model_description(str(path))
     fmi3 = family == "fmi3"
     expected = _expected(model, fmi3)
-    # the FMI 2.0 plant's Model Exchange state derivatives: <Derivatives> and <InitialUnknowns>
-    derivatives = state_derivative_dependencies(model) if family == "fmi2" and model in ME_STATES else {}
+    # the native plant's Model Exchange state derivatives (FMI 2.0 and 3.0): <Derivatives> or
+    # <ContinuousStateDerivative>, and <InitialUnknowns>
+    derivatives = state_derivative_dependencies(model) if family != "python" and model in ME_STATES else {}
     expected[1].update({name: initial for name, (_, initial) in derivatives.items()})
     assert _declared(md, fmi3) == expected
-    assert {d.variable.name: tuple(k.name for k in d.dependencies) for d in md.derivatives} == {
-        name: step for name, (step, _) in derivatives.items()}
+    # the knowns in the FMU's own variable order (FMI 3.0 declares the forces F1..F3 before the states)
+    assert {d.variable.name: sorted(k.name for k in d.dependencies) for d in md.derivatives} == {
+        name: sorted(step) for name, (step, _) in derivatives.items()}
     root = ET.fromstring(zipfile.ZipFile(path).read("modelDescription.xml"))
     unknowns = root.find("ModelStructure").iter()
-    listed = [u for u in unknowns if u.tag in ("Unknown", "Output", "InitialUnknown")]
+    listed = [u for u in unknowns if u.tag in ("Unknown", "Output", "InitialUnknown", "ContinuousStateDerivative")]
     assert len(listed) == 2 * sum(v.causality == "output" for v in VARIABLES[model]) + 2 * len(derivatives)
     for u in listed:  # every unknown says what it depends on; every listed known is "dependent"
         deps, kinds = u.get("dependencies"), u.get("dependenciesKind")
@@ -152,7 +154,7 @@ def test_fmil_reads_the_declared_dependencies(fmus, built, tmp_path):
             got = {k: {o: tuple(sorted(v)) for o, v in read[str(path)][k].items()} for k in "OI"}
         else:
             step, initial = _expected(model, family == "fmi3")
-            if family == "fmi2" and model in ME_STATES:  # the Model Exchange state derivatives
+            if family in ("fmi2", "fmi3") and model in ME_STATES:  # the Model Exchange state derivatives
                 initial = {**initial, **{n: i for n, (_, i) in state_derivative_dependencies(model).items()}}
             got = read[str(path)]
         for kind, expected in (("O", step), ("I", initial)):
