@@ -505,10 +505,6 @@ def cmd_study(args) -> int:
     every = record_every(args.record_every) if args.record_every is not None else None
     if args.write_docs and not study.tune:
         raise StudyError(f"--write-docs: {args.study} has no [tune] table; only a tuning writes a write_to folder")
-    ssp = _ssp(args)  # before starting a cluster
-    if not ssp.exists():
-        raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
-                         "or tapmp build) or pass --ssp")
     if args.workers is not None:
         _check_workers(args.workers)
     if args.scheduler and args.workers is not None:
@@ -533,6 +529,10 @@ def cmd_study(args) -> int:
         case_list = cases(study, max_cases)  # every case validated before a cluster starts
     if study.keep_results and not study.tune:  # else each case deletes its result file once scored
         check_output_size([study.base_scenario()] * len(case_list), out, study.name, args.workers or 1)
+    ssp = _ssp(args)  # after the cases (a study file's error first), before starting a cluster
+    if not ssp.exists():
+        raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
+                         "or tapmp build) or pass --ssp")
     remote = None
     with output_lock(out):  # before starting a cluster; run_study takes it again (re-entrant)
         if args.scheduler:

@@ -1,7 +1,8 @@
 """One range rule per setting, from every command: walking the settings table
 (tapmp.interface.VARIABLES), a value just outside each parameter's range, set the way a scenario
 sets it, gets the same one line naming the setting, exit 2, from `tapmp check`, `tapmp run` and
-`tapmp study` (refused while the study's cases are listed, before any Dask worker starts). The
+`tapmp study` (refused while the study's cases are listed, before any FMU is looked for or Dask
+worker started). The
 Python model and every FMU family refuse the same values with the same text
 (tests/fmu/test_setting_ranges_fmu.py)."""
 
@@ -59,7 +60,8 @@ def set_args(keys: dict) -> list[str]:
 @pytest.mark.parametrize("model, v", SETTINGS, ids=[f"{ELEMENT[m]}.{v.name}" for m, v in SETTINGS])
 def test_check_and_run_refuse_a_setting_just_outside_its_range_in_one_line(tmp_path, capsys, model, v):
     keys, _ = scenario_keys(model, v)
-    for command in (["check"], ["run", "--out", str(tmp_path / "r"), "--no-progress"]):
+    # an SSP that does not exist: the setting is refused before any FMU is looked for
+    for command in (["check"], ["run", "--out", str(tmp_path / "r"), "--no-progress", "--ssp", str(tmp_path / "no.ssp")]):
         code = main([command[0], str(PAPER), *set_args(keys), *command[1:]])
         err = capsys.readouterr().err
         assert (code, err) == (2, f"error: {refusal(model, v)}\n"), command[0]
@@ -74,7 +76,7 @@ def test_a_study_refuses_a_grid_value_just_outside_its_range_before_starting_wor
     study = tmp_path / "walk.toml"
     study.write_text(f'[study]\nname = "walk"\nbase = "{PAPER}"\n[set]\nstop_time = 0.01\n{rows}'
                      f'[grid]\n"{key}" = [{toml_value(value)}]\n')
-    code = main(["study", str(study), "--out", str(tmp_path / "o"), "--no-progress"])
+    code = main(["study", str(study), "--out", str(tmp_path / "o"), "--no-progress", "--ssp", str(tmp_path / "no.ssp")])
     err = capsys.readouterr().err
     assert (code, err) == (2, f"error: grid: {refusal(model, v)}\n")
     assert not (tmp_path / "o").exists()
