@@ -389,6 +389,8 @@ def row_of(fut) -> dict:
     worker is run again by Dask: this waits for that run. A future that could not run (its
     worker died too often, the task could not be sent) is a failed row naming what happened.
     TimeoutError if the row does not come within GATHER_S (the worker that held it is gone)."""
+    if fut.status == "cancelled":  # Dask gave it up (its result is not waited for: it never comes)
+        return {"status": "failed", "error": "cancelled by Dask (its worker and its result were lost)"}
     try:
         return fut.result(timeout=GATHER_S)
     except TimeoutError:

@@ -230,3 +230,14 @@ def test_resume_with_a_damaged_study_json_is_one_line(built, tmp_path, capsys, d
     assert code == 2 and err[-1].startswith(f"error: --resume: {tmp_path / 'out' / 'study.json'} is damaged (")
     assert err[-1].endswith("): the study cannot be matched with it; pass --overwrite to start again")
     assert not (tmp_path / "out" / "study.csv").exists()
+
+
+def test_a_case_future_dask_gives_up_is_a_failed_row_at_once(client):
+    """A cancelled future (Dask gave the task up, e.g. with its worker) is never waited for: its
+    result would not come, and the study would wait for it again and again; its row says so."""
+    import time
+
+    from orchestrator.studies.study import row_of
+    fut = client.submit(time.sleep, 30, pure=False)
+    fut.cancel()
+    assert row_of(fut) == {"status": "failed", "error": "cancelled by Dask (its worker and its result were lost)"}

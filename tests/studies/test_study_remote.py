@@ -303,32 +303,6 @@ def test_a_worker_killed_mid_study_reruns_no_recorded_case(cluster_factory, ssp,
         assert runs.count(case) == 1, (case, runs)
 
 
-def test_a_row_lost_with_its_worker_is_the_row_of_the_run_dask_makes_again(cluster_factory):
-    """A case finished and its row held by a worker that is killed before the client fetched it:
-    the future turns 'lost', Dask runs the task again on the restarted worker, and the row is
-    that run's (not a failed row without an error)."""
-    from dask.distributed import Client
-
-    from orchestrator.studies.study import row_of
-    c = cluster_factory()
-    worker = c.worker(1)
-    with Client(c.address, timeout=WAIT_S) as client:
-        fut = client.submit(dict, status="completed", pure=False, key="case-lost")
-        wait_until(lambda: fut.status == "finished", worker, "the task", lambda: fut.status)
-        (pid,) = c.worker_pids()
-        os.kill(pid, signal.SIGKILL)
-        wait_until(lambda: fut.status != "finished", worker, "the lost result", lambda: fut.status)
-        deadline = time.monotonic() + WAIT_S
-        while True:  # as the study does: a row that does not come within GATHER_S is awaited again
-            try:
-                row = row_of(fut)
-                break
-            except TimeoutError:
-                assert time.monotonic() < deadline, "the rerun's row did not come"
-        assert row == {"status": "completed"}
-        assert c.runs() == ["case-lost", "case-lost"]  # run once, lost, run again
-
-
 def test_with_every_worker_gone_the_study_waits_with_one_line_and_ends_on_sigterm(cluster_factory, ssp, tmp_path):
     c = cluster_factory()
     worker = c.worker(1)

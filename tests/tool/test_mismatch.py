@@ -73,7 +73,7 @@ def test_mismatch_reaches_the_controller_fmu_and_not_the_plant_fmu(built, native
     # differ by the feedforward u_d (Eq. 26) of the mismatched model minus that of the nominal one
     plant, ctrl_mis, traj = s.plain_models()
     ctrl_nom = nominal.plain_models()[1]
-    from tapmp.control import feedforward
+    from tests.support.control_reference import feedforward
     from tapmp.trajectory import reference
     ref = reference(s.start_time, traj)
     q, dq = plant.measured_positions(), plant.joint_velocities()
