@@ -1015,6 +1015,10 @@ def main(argv=None) -> int:
         with _signals_interrupt():
             return args.func(args)
     except KeyboardInterrupt as err:
+        import logging
+        # a stopped study's Dask client tasks end with AllExit, which asyncio reports at exit as "never
+        # retrieved": the line below stays the command's last word
+        logging.getLogger("asyncio").setLevel(logging.CRITICAL)
         print(f"{one_line(err) if str(err) else 'interrupted'}: the results so far are in the output folder",
               file=sys.stderr)
         return getattr(err, "exit_code", 130)
