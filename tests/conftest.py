@@ -13,11 +13,14 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import pytest
+# as every tapmp command does (orchestrator.cli.single_threaded_blas): before numpy is loaded
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from orchestrator.engine.build import build_all
-from tests.support.fmus import LoadedFMU
-from tests.support.shared import shared
+import pytest  # noqa: E402
+
+from orchestrator.engine.build import build_all  # noqa: E402
+from tests.support.fmus import LoadedFMU  # noqa: E402
+from tests.support.shared import shared  # noqa: E402
 
 # The compatibility rows (tests/interop/compatibility.py): its check after every test
 pytest_plugins = ("tests.interop.compatibility",)
