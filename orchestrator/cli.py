@@ -1007,11 +1007,22 @@ def _signals_interrupt():
             signal.signal(s, signal.SIG_DFL if handler is None else handler)
 
 
+def single_threaded_blas() -> None:
+    """One BLAS thread per process unless the environment says otherwise (OPENBLAS_NUM_THREADS),
+    set before numpy is loaded: the matrices here are tiny (at most some 40 x 40), where OpenBLAS's
+    threads only wait on each other (the robustness analysis of a comparison took 7.8 s of wall
+    time with them on a busy 2-core machine, 1.8 s without), and the commands run in parallel
+    by processes (--jobs, Dask workers), which inherit the setting."""
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def main(argv=None) -> int:
     """The `tapmp` command; returns its exit code: 0, 1 (`check`: not stable; `study`: a case
     failed), 2 (an error, one line on stderr) or 128 + N after signal N (SIGINT 130, SIGHUP 129,
     SIGTERM 143)."""
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    single_threaded_blas()
     args = parser().parse_args(argv)
     args.command_line = "tapmp " + shlex.join(argv)  # what was typed, as comparison.md and study.json record it
     errors = user_errors()

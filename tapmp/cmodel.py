@@ -33,6 +33,9 @@ HEADER = C_DIR / "tapmp_model.h"
 # the FMI-free closed loop stepped in C (tapmp.closed_loop.run): part of the library, not of the FMUs
 LOOP_SOURCE = C_DIR / "tapmp_loop.c"
 LOOP_HEADER = C_DIR / "tapmp_loop.h"
+# the effort metric's high-pass filter (orchestrator.tool.highpass): part of the library, not of the FMUs
+FILTER_SOURCE = C_DIR / "tapmp_filter.c"
+FILTER_HEADER = C_DIR / "tapmp_filter.h"
 
 
 class CModelError(RuntimeError):
@@ -66,10 +69,11 @@ def settings_header() -> str:
 
 
 def source_hash() -> str:
-    """16 hex digits of the SHA-256 of tapmp_model.c, tapmp_model.h, the generated tapmp_settings.h
-    and the closed loop tapmp_loop.c, tapmp_loop.h."""
+    """16 hex digits of the SHA-256 of tapmp_model.c, tapmp_model.h, the generated tapmp_settings.h,
+    the closed loop tapmp_loop.c, tapmp_loop.h and the filter tapmp_filter.c, tapmp_filter.h."""
     data = b"\0".join((SOURCE.read_bytes(), HEADER.read_bytes(), settings_header().encode(),
-                       LOOP_SOURCE.read_bytes(), LOOP_HEADER.read_bytes()))
+                       LOOP_SOURCE.read_bytes(), LOOP_HEADER.read_bytes(),
+                       FILTER_SOURCE.read_bytes(), FILTER_HEADER.read_bytes()))
     return hashlib.sha256(data).hexdigest()[:16]
 
 
@@ -79,7 +83,7 @@ def bundled_name() -> str:
 
 
 def compile_library(output: Path) -> Path:
-    """Compile tapmp_model.c and tapmp_loop.c into the shared library ``output`` with the native FMUs' flags
+    """Compile tapmp_model.c, tapmp_loop.c and tapmp_filter.c into the shared library ``output`` with the native FMUs' flags
     (tapmp.toolchain.CFLAGS) but exported symbols; CModelError if the compiler fails."""
     from .toolchain import CFLAGS, ToolchainError, compile_c
     # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
@@ -87,7 +91,7 @@ def compile_library(output: Path) -> Path:
     with tempfile.TemporaryDirectory(prefix="tapmp_settings_") as generated:
         Path(generated, SETTINGS_HEADER).write_text(settings_header())
         try:
-            return compile_c([SOURCE, LOOP_SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
+            return compile_c([SOURCE, LOOP_SOURCE, FILTER_SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
                              what="the C model")
         except ToolchainError as err:
             raise CModelError(str(err)) from None
@@ -121,14 +125,15 @@ _LOADED = None
 
 
 def load():
-    """(ffi, lib): cffi's FFI with the declarations of tapmp_model.h and tapmp_loop.h and the
-    loaded C model."""
+    """(ffi, lib): cffi's FFI with the declarations of tapmp_model.h, tapmp_loop.h and
+    tapmp_filter.h and the loaded C model."""
     global _LOADED
     if _LOADED is None:
         from cffi import FFI
         ffi = FFI()
         ffi.cdef(cdef_text(HEADER.read_text()))
         ffi.cdef(cdef_text(LOOP_HEADER.read_text()))
+        ffi.cdef(cdef_text(FILTER_HEADER.read_text()))
         path = library_path()
         try:
             lib = ffi.dlopen(str(path))

@@ -304,6 +304,14 @@ def process_fmus() -> LoadedFMUs:
         return _PROCESS
 
 
+def forget_process_fmus() -> None:
+    """In a process forked from one that had a LoadedFMUs: leave it to the parent, whose instances
+    and folder it is (a call here would act on the parent's), and make this process's own on
+    first use."""
+    global _PROCESS, _PROCESS_LOCK
+    _PROCESS, _PROCESS_LOCK = None, threading.Lock()  # the parent's lock may have been held at the fork
+
+
 def close_process_fmus() -> None:
     """Close this process's LoadedFMUs if it has one (a study's end on a worker)."""
     with _PROCESS_LOCK:

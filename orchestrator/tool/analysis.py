@@ -55,6 +55,7 @@ import json
 import math
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from scipy import linalg
@@ -134,22 +135,33 @@ class SplitLoop:
         """A + B C: the closed loop's one-step matrix (scaled coordinates)."""
         return self.A + self.B @ self.C
 
-    def loop(self, v, gain: float = 1.0):
-        """-L_v as a python-control discrete-time StateSpace (input w_v, output y_v), the loop
-        opened in direction v with the other directions closed; ``gain`` scales the closed part
-        (1 = the loop as it runs)."""
-        import control
+    def loop(self, v, gain: float = 1.0) -> "StateSpace":
+        """-L_v as a discrete-time StateSpace (input w_v, output y_v), the loop opened in direction
+        v with the other directions closed; ``gain`` scales the closed part (1 = the loop as it runs)."""
         v = np.asarray(v, dtype=float).reshape(3, 1)
         P = gain * (np.eye(3) - v @ v.T)
         A = self.A + self.B @ P @ self.C
-        return control.ss(A, self.B @ v, v.T @ self.C, v.T @ self.D @ v, self.h)
+        return StateSpace(A, self.B @ v, v.T @ self.C, v.T @ self.D @ v, self.h)
 
-    def disturbance(self, v):
-        """The closed loop from a force d v at the plant input [N] to the tracking error v^T e [m]
-        (python-control StateSpace)."""
-        import control
+    def disturbance(self, v) -> "StateSpace":
+        """The closed loop from a force d v at the plant input [N] to the tracking error v^T e [m]."""
         v = np.asarray(v, dtype=float).reshape(3, 1)
-        return control.ss(self.closed_loop(), self.B @ v / F_SCALE, v.T @ self.Ce, np.zeros((1, 1)), self.h)
+        return StateSpace(self.closed_loop(), self.B @ v / F_SCALE, v.T @ self.Ce, np.zeros((1, 1)), self.h)
+
+
+class StateSpace(NamedTuple):
+    """A discrete-time system x+ = A x + B u, y = C x + D u with sample time h [s]: the matrices
+    python-control's StateSpace holds (``control.ss(*sys)`` makes one), without importing it, which
+    alone takes about 1 s; the frequency responses here evaluate the matrices themselves."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    h: float
+
+    def __neg__(self) -> "StateSpace":
+        return StateSpace(self.A, self.B, -self.C, -self.D, self.h)
 
 
 def batch_response(A, B, C, D, h: float, freqs) -> np.ndarray:
@@ -172,8 +184,8 @@ SEARCH_POINTS = 4000  # frequencies on which crossings are bracketed before bren
 
 
 def margins(L, h: float, f_low: float = 1e-3) -> dict:
-    """Gain and phase margins of the loop gain L (a discrete-time python-control system,
-    negative feedback), from crossings bracketed on a log grid from f_low [Hz] to the Nyquist
+    """Gain and phase margins of the loop gain L (a discrete-time StateSpace or python-control
+    system, negative feedback), from crossings bracketed on a log grid from f_low [Hz] to the Nyquist
     frequency and refined by brentq on L evaluated exactly at z = exp(j 2 pi f h).
 
     gm: the upper gain margin, the smallest factor > 1 at a phase crossover (L real and
@@ -184,11 +196,12 @@ def margins(L, h: float, f_low: float = 1e-3) -> dict:
     pm_deg: the phase margin 180 deg + arg L at the gain crossover |L| = 1 of smallest |PM|
     (inf if none); f_pc_hz, f_gc_hz: the frequencies of gm and pm [Hz] (None if none).
     """
-    import control
     from scipy.optimize import brentq
     nyq = 0.5 / h
-    ss = control.ss(L)
-    A, B, C, D = (np.asarray(M, dtype=float) for M in (ss.A, ss.B, ss.C, ss.D))
+    if not hasattr(L, "A"):  # a transfer function: its state-space realization
+        import control
+        L = control.ss(L)
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (L.A, L.B, L.C, L.D))
     eye = np.eye(A.shape[0])
 
     def Lf(f):

@@ -147,15 +147,11 @@ def noise_intro() -> str:
             f"`noise_seed` set, nothing else changed (its folder: `{NOISE_FOLDER}/<run>-<rms>nm`).")
 
 
-def run_noise(runs: dict, ssp, out: Path, jobs: int, progress: bool, label: str) -> None:
-    """Run noise_runs(runs) on the SSP file ``ssp`` into out/noise/<name> on ``jobs`` processes."""
-    from .pool import run_many
-    tasks = noise_runs(runs)
-    say(f"{label}: the noise runs ({len(tasks)} runs at " + ", ".join(_nm(x) for x in NOISE_LEVELS)
-        + " nm rms)")
-    bars = (lambda name: progress_bar(f"{label} {name}", True)) if progress else None
-    run_many({name: (sc, ssp, Path(out) / NOISE_FOLDER / name) for name, sc in tasks.items()}, jobs, False, bars,
-             label)
+def noise_tasks(runs: dict, ssp, out: Path) -> dict:
+    """{out/noise/<name> relative name: (scenario, ssp, folder)} of noise_runs(runs) on the SSP
+    file ``ssp``, as pool.run_many takes them."""
+    return {f"{NOISE_FOLDER}/{name}": (sc, ssp, Path(out) / NOISE_FOLDER / name)
+            for name, sc in noise_runs(runs).items()}
 
 
 def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, command: str, jobs: int = 1,
@@ -179,15 +175,19 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
     with comparison_folder(out, overwrite, scenario, runs, written_by):  # runs in subfolders; comparison.md, figures here
         say(f"{scenario.name}: {len(runs)} runs of {scenario.stop_time - scenario.start_time:g} s "
             f"({scenario.n_steps} steps, {scenario.format}) on {min(jobs, len(runs))} process(es) -> {out}")
+        noisy = noise_tasks(runs, ssp, out) if noise else {}
+        if noisy:
+            say(f"{scenario.name}: the noise runs ({len(noisy)} runs at "
+                + ", ".join(_nm(x) for x in NOISE_LEVELS) + " nm rms)")
         bars = (lambda name: progress_bar(f"{scenario.name} {name}", True)) if progress else None
         drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
-        # without figures the runs' rows stay in the workers (no copy back to this process)
-        records = run_many({name: (sc, ssp, out / name) for name, sc in runs.items()}, jobs, figures, bars,
-                           scenario.name, first=drawing.needed if drawing else (),
+        # One pool for the runs and the noise runs, the figures' runs first: the figures are drawn
+        # while the others go on. Only the figures' rows come back to this process.
+        records = run_many({**{name: (sc, ssp, out / name) for name, sc in runs.items()}, **noisy}, jobs,
+                           list(runs) if figures else False, bars, scenario.name,
+                           first=drawing.needed if drawing else (),
                            on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
-        results = {name: r["metrics"] for name, r in records.items()}
-        if noise:
-            run_noise(runs, ssp, out, jobs, progress, scenario.name)
+        results = {name: records[name]["metrics"] for name in runs}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks, reference)
         if noise:
             text += "\n".join(["", "## Measurement noise: SC-DC, APD-DC and the matched baselines", "",

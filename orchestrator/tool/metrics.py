@@ -49,43 +49,37 @@ def reductions(base: dict, new: dict) -> dict[str, list[float]]:
 
 
 class _HighPassRms:
-    """RMS [N] of three force channels above EFFORT_HZ, streamed block by block (scipy's sosfilt
-    with its state carried over; the step from the first two time stamps)."""
+    """RMS [N] of three force channels above EFFORT_HZ, streamed block by block (highpass.HighPassRms;
+    the step from the first two time stamps)."""
 
     def __init__(self):
-        self.sos = self.zi = self.x0 = None
-        self.sq = np.zeros(3)
-        self.n = 0
+        self.filter = self.x0 = None
         self.pending = None
-        self.step = None
 
     def add(self, time: np.ndarray, forces: np.ndarray) -> None:
-        from scipy import signal
         if self.pending is not None:
             time, forces = np.concatenate([self.pending[0], time]), np.vstack([self.pending[1], forces])
             self.pending = None
-        if self.sos is None:
+        if self.filter is None:
             if len(time) < 2:
                 self.pending = (time, forces)
                 return
-            self.step = float(time[1] - time[0])
-            if not 0.5 / self.step > EFFORT_HZ:
-                self.sos = False  # the sample rate cannot resolve the band
+            step = float(time[1] - time[0])
+            if not 0.5 / step > EFFORT_HZ:
+                self.filter = False  # the sample rate cannot resolve the band
                 return
-            self.sos = signal.butter(4, EFFORT_HZ, "highpass", fs=1.0 / self.step, output="sos")
+            from .highpass import HighPassRms, butter_highpass_sos
+            self.filter = HighPassRms(butter_highpass_sos(4, EFFORT_HZ, 1.0 / step), forces.shape[1])
             # Started at rest on the first sample: the filter sees the forces less their first value,
             # from a zero state. For a high-pass (zero gain at 0 Hz) that is the steady state on the
-            # first sample, without sosfilt_zi's linear solve, whose last bits differ between processes.
+            # first sample.
             self.x0 = np.array(forces[0], dtype=float)
-            self.zi = np.zeros((self.sos.shape[0], 2, forces.shape[1]))
-        if self.sos is False:
+        if self.filter is False:
             return
-        y, self.zi = signal.sosfilt(self.sos, forces - self.x0, axis=0, zi=self.zi)
-        self.sq += (y ** 2).sum(0)
-        self.n += y.shape[0]
+        self.filter.add(forces - self.x0)
 
     def result(self):
-        return (np.sqrt(self.sq / self.n)).tolist() if self.n else None
+        return self.filter.result() if self.filter else None
 
 
 def saturation_limit(parameters: dict) -> float:

@@ -80,15 +80,20 @@ _CANCEL = None  # in a worker: the parent's event "start no more runs"
 
 def _worker_init(cancel) -> None:
     """A worker keeps the parent's cancel event. Stop signals reach its run through the command
-    line's handler, which the forked worker inherits (an idle worker ignores them)."""
+    line's handler, which the forked worker inherits (an idle worker ignores them). FMUs the
+    parent kept loaded stay the parent's: the worker loads its own."""
     global _CANCEL
     _CANCEL = cancel
+    from ..engine.loaded import forget_process_fmus
+    forget_process_fmus()
 
 
 def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -> dict:
     """One run (results.run_scenario, overwrite; ``held``: its folder's lock is held by the
-    parent process) as a record: {"metrics", "rows"} ("rows": the recorded rows if ``keep`` and
-    they fit KEEP_ROWS_BYTES, else None) or {"error", ...} for a failure, never an exception."""
+    parent process, and this is a pool's worker, which keeps the SSP's FMUs loaded for its next
+    run) as a record: {"metrics", "rows"} ("rows": the recorded rows if ``keep`` and they fit
+    KEEP_ROWS_BYTES, else None) or {"error", ...} for a failure, never an exception."""
+    from ..engine.loaded import process_fmus
     from .results import run_scenario, run_scenario_held
     if _CANCEL is not None and _CANCEL.is_set():  # the set failed or was stopped: start nothing more
         return {"error": "not run", "type": "CoSimulationError", "exit_code": 2, "skipped": True}
@@ -96,7 +101,7 @@ def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -
     try:
         if held:
             metrics = run_scenario_held(scenario, Path(ssp), Path(out), progress, keep_rows=rows,
-                                        keep_bytes=KEEP_ROWS_BYTES)
+                                        keep_bytes=KEEP_ROWS_BYTES, loaded=process_fmus())
         else:
             metrics = run_scenario(scenario, Path(ssp), Path(out), True, progress, keep_rows=rows,
                                    keep_bytes=KEEP_ROWS_BYTES)
@@ -108,11 +113,12 @@ def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -
     return {"metrics": metrics, "rows": rows if keep and len(rows) else None}
 
 
-def run_many(tasks: dict, jobs: int, keep: bool = True, progress=None, label: str = "", first=(),
+def run_many(tasks: dict, jobs: int, keep=True, progress=None, label: str = "", first=(),
              on_record=None, idle=None) -> dict:
     """Run ``tasks`` ({name: (scenario, ssp, out folder)}) on ``jobs`` processes (in this
     process if jobs == 1 or there is one task); {name: record of run_one} in the order of
-    ``tasks``. The first failure is raised (see the module docstring). ``progress(name)``
+    ``tasks``. ``keep``: whether the runs' rows come back (run_one), True or False for every
+    task or the names of the tasks whose rows do. The first failure is raised (see the module docstring). ``progress(name)``
     makes a per-run progress callback when running in this process; a pool shows one bar
     of completed runs instead (when ``progress`` is given). Every run folder is locked by this
     process from the start to the end of the set (a pool's workers run in them).
@@ -126,14 +132,15 @@ def run_many(tasks: dict, jobs: int, keep: bool = True, progress=None, label: st
         return _run_many(tasks, jobs, keep, progress, label, first, on_record, idle)
 
 
-def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str, first=(), on_record=None,
+def _run_many(tasks: dict, jobs: int, keep, progress, label: str, first=(), on_record=None,
               idle=None) -> dict:
+    kept = set(tasks) if keep is True else set() if keep is False else set(keep)
     records = {}
     if jobs == 1 or len(tasks) == 1:
         for name, (sc, ssp, out) in tasks.items():
             update, close = progress(name) if progress else (None, lambda: None)
             try:
-                records[name] = run_one(sc, ssp, out, keep, update)
+                records[name] = run_one(sc, ssp, out, name in kept, update)
             finally:
                 close()
             if "error" in records[name]:
@@ -150,7 +157,7 @@ def _run_many(tasks: dict, jobs: int, keep: bool, progress, label: str, first=()
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context,
                                initializer=_worker_init, initargs=(cancel,))
     order = [n for n in first if n in tasks] + [n for n in tasks if n not in first]
-    futures = {pool.submit(run_one, *tasks[name][:3], keep, None, True): name for name in order}
+    futures = {pool.submit(run_one, *tasks[name][:3], name in kept, None, True): name for name in order}
     try:
         pending = set(futures)
         while pending:

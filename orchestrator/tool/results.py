@@ -90,11 +90,11 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
 
 
 def run_scenario_held(scenario: Scenario, ssp: Path, out: Path, progress=None, stop_token: str | None = None,
-                      keep_rows: list | None = None, keep_bytes: int = 0) -> dict:
+                      keep_rows: list | None = None, keep_bytes: int = 0, loaded=None) -> dict:
     """run_scenario (overwrite) into ``out`` whose output_lock another process of this command
     holds for it (a worker of `tapmp compare`'s pool: the command locks every run folder)."""
     out = prepare_output(out, True)
-    return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes)
+    return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes, loaded)
 
 
 def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, keep_rows=None,

@@ -120,3 +120,26 @@ def test_check_prints_a_growth_factor_just_above_1_with_the_digits_that_show_it(
     factor = res.stdout.split("worst mode grows x")[1].split()[0]
     assert factor == printed
     assert abs((float(factor) - 1.0) - (rho - 1.0)) <= 0.05 * (rho - 1.0), (factor, rho)  # the growth is there
+
+
+def _blas_threads_after_check(cwd, env_value):
+    """(OPENBLAS_NUM_THREADS, the process's thread count) after `tapmp check` of the paper scenario
+    in a child process whose environment sets OPENBLAS_NUM_THREADS to ``env_value`` (None: unset)."""
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if env_value is not None:
+        env["OPENBLAS_NUM_THREADS"] = env_value
+    code = ("import os, sys\nfrom orchestrator.cli import main\nmain(sys.argv[1:])\n"
+            "threads = next(l.split()[1] for l in open('/proc/self/status') if l.startswith('Threads:'))\n"
+            "print(os.environ['OPENBLAS_NUM_THREADS'], threads, file=sys.stderr)\n")
+    res = subprocess.run([sys.executable, "-c", code, "check", "paper_simulation", "--set", "stop_time=0.01"],
+                         capture_output=True, text=True, cwd=cwd, env=env, timeout=600)
+    value, threads = res.stderr.strip().splitlines()[-1].split()
+    return value, int(threads)
+
+
+def test_a_command_runs_blas_on_one_thread_unless_the_environment_says_otherwise(tmp_path):
+    # the matrices are tiny: OpenBLAS's threads only wait on each other (docs/performance.md)
+    assert _blas_threads_after_check(tmp_path, None) == ("1", 1)  # numpy and scipy loaded, no BLAS thread
+    value, threads = _blas_threads_after_check(tmp_path, "2")
+    assert value == "2" and threads > 1  # the user's setting is kept: OpenBLAS started its threads

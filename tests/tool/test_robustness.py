@@ -92,7 +92,7 @@ def test_the_disk_margin_agrees_with_python_control_for_one_loop():
     G = split.loop(analysis.break_directions()["diff. Z"])
     freqs = analysis.frequency_grid(sc.step, 1.0, None, 2000)
     ours = analysis.disk_margin(G.A, G.B, G.C, G.D, sc.step, freqs)
-    dm, _, _ = control.disk_margins(-G, 2.0 * np.pi * freqs[:-1], skew=0.0)  # python-control: below Nyquist
+    dm, _, _ = control.disk_margins(-control.ss(*G), 2.0 * np.pi * freqs[:-1], skew=0.0)  # python-control: below Nyquist
     assert ours["disk_margin"] <= dm * (1.0 + 1e-9) and ours["disk_margin"] == pytest.approx(dm, rel=1e-3)
 
 
