@@ -64,23 +64,13 @@ class {name}(TapmpSlave):
 '''
 
 PYTHONFMU_FLOOR = '''
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
-from tapmp.interface import VARIABLES
-
 
 class {name}(Fmi2Slave):
     """Pass-through floor on pythonfmu's binary: the interface of {model}, an empty doStep."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        for v in VARIABLES["{model}"]:
-            setattr(self, v.name, v.start)
-            kw = dict(causality=Fmi2Causality[v.causality])
-            if v.causality == "parameter":
-                kw["variability"] = Fmi2Variability[v.variability]
-            elif v.type == "Real":
-                kw["variability"] = Fmi2Variability.continuous
-            self.register_variable((Real if v.type == "Real" else Integer)(v.name, **kw))
+        register_interface(self, "{model}")
 
     def do_step(self, current_time, step_size):
         return True
@@ -129,39 +119,8 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path, every_output: bool = Fals
     return float(out.stdout.split()[0])
 
 
-def declare_no_feedthrough(fmu: Path) -> Path:
-    """Declare in ``fmu``'s modelDescription that its outputs depend on no input
-    (ModelStructure/Outputs dependencies=""), as the TAPMP FMUs do: pythonfmu writes no
-    dependencies, which means every input, and the master refuses the loop as algebraic."""
-    import xml.etree.ElementTree as ET
-    import zipfile
-
-    with zipfile.ZipFile(fmu) as z:
-        members = {i: z.read(i) for i in z.infolist()}
-    for info in members:
-        if info.filename == "modelDescription.xml":
-            root = ET.fromstring(members[info])
-            outputs = [i for i, v in enumerate(root.find("ModelVariables"), start=1) if v.get("causality") == "output"]
-            structure = root.find("ModelStructure")
-            for child in list(structure):
-                structure.remove(child)
-            out, init = ET.SubElement(structure, "Outputs"), ET.SubElement(structure, "InitialUnknowns")
-            for index in outputs:
-                ET.SubElement(out, "Unknown", index=str(index), dependencies="")
-                ET.SubElement(init, "Unknown", index=str(index))
-            members[info] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
-    tmp = fmu.with_suffix(".tmp")
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        for info, data in members.items():
-            z.writestr(info, data)
-    tmp.replace(fmu)
-    return fmu
-
-
 def build_systems(tmp: Path, log) -> dict[str, Path]:
     """SSP files of the real system and of the two pass-through floors."""
-    from pythonfmu import FmuBuilder
-
     systems = {"full": build.build_all(tmp / "full", log=lambda *_: None)["ssp"]}
     binaries = build.compile_binaries(tmp)
     # Own class names: pythonfmu's binary imports the adapter module by name, so a
@@ -172,13 +131,13 @@ def build_systems(tmp: Path, log) -> dict[str, Path]:
         fmus = {}
         for model in FMU_NAMES:
             script = tmp / f"{kind}-src" / model / f"{prefix}{model}.py"
-            script.parent.mkdir(parents=True)
-            script.write_text(template.format(model=model, name=prefix + model))
+            code = template.format(model=model, name=prefix + model)
             if kind == "floor":
+                script.parent.mkdir(parents=True)
+                script.write_text(code)
                 fmus[model] = build.build_fmu(model, out, binaries, script)
             else:
-                fmus[model] = declare_no_feedthrough(
-                    Path(FmuBuilder.build_FMU(script, dest=out, project_files=[ROOT / "tapmp"])))
+                fmus[model] = build.build_interface_fmu(script, code, out)
         systems[kind] = write_ssp(out / "TAPMP.ssp", fmus)
         log(f"built the {kind} system")
     return systems

@@ -932,9 +932,16 @@ def parser() -> argparse.ArgumentParser:
 
     # The paper study's own commands (orchestrator/paper): what docs/paper-*.md, calibration.md and
     # theorem1.md print
-    pg = sub.add_parser("paper-gains", help="run the paper's gains (Eq. 40-43) at fine steps in the plain loop",
-                        description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop and print "
-                        "the table (docs/paper-gains.md).")
+    def paper_command(name, func, help, description):
+        """The paper study's subcommand ``name``, which runs ``func``: its parser, for its arguments."""
+        sp = sub.add_parser(name, help=help, description=description)
+        sp.set_defaults(func=func)
+        return sp
+
+    pg = paper_command("paper-gains", cmd_paper_gains,
+                       help="run the paper's gains (Eq. 40-43) at fine steps in the plain loop",
+                       description="Run the paper's gains (Eq. 40-43) at fine steps in the plain loop and print "
+                       "the table (docs/paper-gains.md).")
     pg.add_argument("--stop-time", type=float, default=0.5, help="horizon of every run [s] (default 0.5)")
     pg.add_argument("--steps", type=float, nargs="+", help="steps [s] (default 1e-6 1e-5 1e-4)")
     pg.add_argument("--cases", nargs="+", help="gain sets: 'Eq. 40-41', 'Eq. 42-43' (default both)")
@@ -943,10 +950,10 @@ def parser() -> argparse.ArgumentParser:
     pg.add_argument("--plants", nargs="+", help="encoder, exact (default both)")
     pg.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     pg.add_argument("--json", help="also write the rows to this JSON file")
-    pg.set_defaults(func=cmd_paper_gains)
-    ca = sub.add_parser("calibrate", help="calibrate the plant on the paper's APD-DC rows, predict SC-DC",
-                        description="Calibrate the plant on APD-DC (the paper's Tables 1-2 or 4-5), predict SC-DC "
-                        "and write the calibrated scenario (docs/calibration.md).")
+    ca = paper_command("calibrate", cmd_calibrate,
+                       help="calibrate the plant on the paper's APD-DC rows, predict SC-DC",
+                       description="Calibrate the plant on APD-DC (the paper's Tables 1-2 or 4-5), predict SC-DC "
+                       "and write the calibrated scenario (docs/calibration.md).")
     ca.add_argument("--target", required=True, choices=("simulation", "experiment"))
     fmu_args(ca)
     ca.add_argument("--work", help="folder for the runs (default results/calibration/<target>)")
@@ -956,20 +963,18 @@ def parser() -> argparse.ArgumentParser:
     ca.add_argument("--write-to", metavar="FILE", help="calibrated scenario file to write (default: "
                     "paper_<target>_calibrated.toml in the work folder; scenarios/paper_<target>_calibrated.toml "
                     "replaces the shipped one)")
-    ca.set_defaults(func=cmd_calibrate)
-    nm = sub.add_parser("null-models", help="score the null models on the paper's reductions (no simulation)",
-                        description="Print how the null models (constants, the gain ratio) score on the paper's "
-                        "printed reductions (docs/paper-reproduction.md).")
-    nm.set_defaults(func=cmd_null_models)
-    t1 = sub.add_parser("theorem1", help="Theorem 1's counterexample and Eq. 31 on a random state",
-                        description="Print the counterexample's eigenvalues for both laws and both sides of Eq. 31 "
-                        "on a random state (docs/theorem1.md).")
-    t1.set_defaults(func=cmd_theorem1)
-    mo = sub.add_parser("modal", help="the laws' modal gains of gain presets",
-                        description="Print the modal gains of SC-DC and APD-DC for gain presets (docs/modal-view.md).")
+    paper_command("null-models", cmd_null_models,
+                  help="score the null models on the paper's reductions (no simulation)",
+                  description="Print how the null models (constants, the gain ratio) score on the paper's "
+                  "printed reductions (docs/paper-reproduction.md).")
+    paper_command("theorem1", cmd_theorem1, help="Theorem 1's counterexample and Eq. 31 on a random state",
+                  description="Print the counterexample's eigenvalues for both laws and both sides of Eq. 31 "
+                  "on a random state (docs/theorem1.md).")
+    mo = paper_command("modal", cmd_modal, help="the laws' modal gains of gain presets",
+                       description="Print the modal gains of SC-DC and APD-DC for gain presets "
+                       "(docs/modal-view.md).")
     mo.add_argument("presets", nargs="*", metavar="PRESET", help="gain presets (default: default, "
                     "paper_simulation, paper_experiment)")
-    mo.set_defaults(func=cmd_modal)
     return p
 
 

@@ -252,3 +252,67 @@ def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
     paths[CONTAINER] = build_container(paths, out_dir)
     log(f"built {paths[CONTAINER]}")
     return paths
+
+
+# The head of a pythonfmu script on pythonfmu 0.7's own binary: pythonfmu's names and
+# ``register_interface(slave, model)``, which registers the variables of the TAPMP model ``model``
+# on ``slave`` at their start values. A script adds one class derived from Fmi2Slave itself, named
+# after its file (pythonfmu wants one such class a script; that binary's fmi2Reset crashed with a
+# base class in between): the benchmark's floor, the tests' FMUs that fail on purpose.
+INTERFACE_SCRIPT = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from tapmp.interface import VARIABLES
+
+
+def register_interface(slave, model):
+    """The variables of the TAPMP model ``model`` registered on ``slave``, at their start values."""
+    for v in VARIABLES[model]:
+        setattr(slave, v.name, v.start)
+        kw = dict(causality=Fmi2Causality[v.causality])
+        if v.causality == "parameter":
+            kw["variability"] = Fmi2Variability[v.variability]
+        elif v.type == "Real":
+            kw["variability"] = Fmi2Variability.continuous
+        slave.register_variable((Real if v.type == "Real" else Integer)(v.name, **kw))
+'''
+
+
+def declare_no_feedthrough(fmu: Path) -> Path:
+    """Declare in ``fmu``'s modelDescription that its outputs depend on no input
+    (ModelStructure/Outputs dependencies=""), as the TAPMP FMUs do: pythonfmu writes no
+    dependencies, which means every input, and the master refuses the loop as algebraic."""
+    with zipfile.ZipFile(fmu) as z:
+        members = {i: z.read(i) for i in z.infolist()}
+    for info in members:
+        if info.filename == "modelDescription.xml":
+            root = ET.fromstring(members[info])
+            outputs = [i for i, v in enumerate(root.find("ModelVariables"), start=1)
+                       if v.get("causality") == "output"]
+            structure = root.find("ModelStructure")
+            for child in list(structure):
+                structure.remove(child)
+            out, init = ET.SubElement(structure, "Outputs"), ET.SubElement(structure, "InitialUnknowns")
+            for index in outputs:
+                ET.SubElement(out, "Unknown", index=str(index), dependencies="")
+                ET.SubElement(init, "Unknown", index=str(index))
+            members[info] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    tmp = fmu.with_suffix(".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for info, data in members.items():
+            z.writestr(info, data)
+    tmp.replace(fmu)
+    return fmu
+
+
+def build_interface_fmu(script: Path, code: str, out_dir: Path) -> Path:
+    """Write ``script`` (:data:`INTERFACE_SCRIPT` followed by ``code``: a subclass of Fmi2Slave
+    named after the script's file that calls ``register_interface``) and build it into ``out_dir``
+    on pythonfmu 0.7's own binary, ``tapmp`` bundled, its outputs declared without direct
+    feedthrough; returns the FMU's path. Such an FMU runs only in a process whose Python can
+    import pythonfmu (the binary uses the host's libpython)."""
+    from pythonfmu import FmuBuilder
+
+    script.parent.mkdir(parents=True, exist_ok=True)
+    script.write_text(INTERFACE_SCRIPT + code)
+    fmu = FmuBuilder.build_FMU(script, dest=out_dir, project_files=[ROOT / "tapmp"])
+    return declare_no_feedthrough(Path(fmu))

@@ -34,6 +34,17 @@ def _legend(fig, axes):
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
 
 
+def _save(fig, axes, title, path):
+    """``fig`` with the title ``title`` and the legend of its first panel below the panels, written
+    to ``path`` (PNG) and closed; returns ``path``."""
+    fig.suptitle(title, fontsize=10)
+    _legend(fig, axes)
+    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _lines(result):
     """(run name, label, color, linestyle) per run with a stable closed loop (an unstable one has
     no steady-state response to draw), SC-DC first and drawn thickest."""
@@ -70,13 +81,8 @@ def _bode(result, breaks, title, path):
         mag.set_ylim(-60.0, 80.0)
         for a in (mag, ph):
             a.grid(True, which="both", lw=0.3)
-    fig.suptitle(f"{title} ({result['scenario']}, h = {result['h']:g} s; bars: gain margin at the phase "
-                 "crossover, phase margin at the gain crossover)", fontsize=10)
-    _legend(fig, axes)
-    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, axes, f"{title} ({result['scenario']}, h = {result['h']:g} s; bars: gain margin at the "
+                 "phase crossover, phase margin at the gain crossover)", path)
 
 
 def _sensitivity(result, path):
@@ -99,12 +105,7 @@ def _sensitivity(result, path):
             else:
                 a.set_title(f"{b}: complementary sensitivity T = L/(1+L)", fontsize=10)
                 a.set_xlabel("frequency [Hz]")
-    fig.suptitle(f"Sensitivity at the plant input per mode ({result['scenario']}; dotted: -3 dB)", fontsize=10)
-    _legend(fig, axes)
-    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, axes, f"Sensitivity at the plant input per mode ({result['scenario']}; dotted: -3 dB)", path)
 
 
 def _disturbance(result, path):
@@ -121,13 +122,8 @@ def _disturbance(result, path):
             a.grid(True, which="both", lw=0.3)
             if row == 1:
                 a.set_xlabel("frequency [Hz]")
-    fig.suptitle(f"Disturbance sensitivity (compliance) per mode and per motor ({result['scenario']})",
-                 fontsize=10)
-    _legend(fig, axes)
-    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, axes, f"Disturbance sensitivity (compliance) per mode and per motor ({result['scenario']})",
+                 path)
 
 
 def plot_analysis(result: dict, out: Path) -> list[Path]:

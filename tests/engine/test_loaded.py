@@ -152,9 +152,6 @@ def test_a_worker_process_removes_its_loaded_fmus_folder_when_it_exits(native_bu
 # constructor that raises after an instance of the process stepped without being terminated,
 # so fmi2Reset after a case fails while fmi2Instantiate after fmi2Terminate works.
 REFUSING = '''
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
-from tapmp.interface import VARIABLES
-
 _STEPPED = []
 
 
@@ -166,14 +163,7 @@ class Refusing_Trajectory(Fmi2Slave):
         if _STEPPED:
             _STEPPED.clear()
             raise RuntimeError("this FMU cannot be reset after a step")
-        for v in VARIABLES["TAPMP_Trajectory"]:
-            setattr(self, v.name, v.start)
-            kw = dict(causality=Fmi2Causality[v.causality])
-            if v.causality == "parameter":
-                kw["variability"] = Fmi2Variability[v.variability]
-            elif v.type == "Real":
-                kw["variability"] = Fmi2Variability.continuous
-            self.register_variable((Real if v.type == "Real" else Integer)(v.name, **kw))
+        register_interface(self, "TAPMP_Trajectory")
 
     def terminate(self):
         _STEPPED.clear()
@@ -217,19 +207,10 @@ else:
 
 
 def test_an_instance_whose_reset_fails_is_replaced_by_a_new_one(native_built, tmp_path):
-    from pythonfmu import FmuBuilder
-
+    from orchestrator.engine.build import build_interface_fmu
     from orchestrator.engine.ssp import write_ssp
     from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        from bench_cosim import declare_no_feedthrough
-    finally:
-        sys.path.remove(str(ROOT / "benchmarks"))
-    script = tmp_path / "src" / "Refusing_Trajectory.py"
-    script.parent.mkdir()
-    script.write_text(REFUSING)
-    trajectory = declare_no_feedthrough(Path(FmuBuilder.build_FMU(script, dest=tmp_path, project_files=[ROOT / "tapmp"])))
+    trajectory = build_interface_fmu(tmp_path / "src" / "Refusing_Trajectory.py", REFUSING, tmp_path)
     with zipfile.ZipFile(native_built["fmi2"]["ssp"]) as z:
         fmus = {m: Path(z.extract(f"resources/{m}.fmu", tmp_path / "native")) for m in (PLANT, CONTROLLER)}
     ssp = write_ssp(tmp_path / "refusing.ssp", {**fmus, TRAJECTORY: trajectory})

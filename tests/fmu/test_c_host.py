@@ -3,14 +3,12 @@ compiled here by the project's toolchain (zig cc), loads the FMU binary, steps i
 
 import os
 import subprocess
-import zipfile
 from pathlib import Path
 
-import fmpy
 import pytest
 
-from tapmp.toolchain import compile_c
 from tapmp.interface import CONTROLLER, PLANT
+from tests.support.c_hosts import compile_c_host, unzip_fmu
 
 pytestmark = pytest.mark.slow  # compiles a C host and runs the FMU in it
 
@@ -20,17 +18,7 @@ RUNS = 20  # an exit-time crash showed up in about half of the runs with pythonf
 
 @pytest.fixture(scope="module")
 def host(tmp_path_factory):
-    exe = tmp_path_factory.mktemp("c_host") / "fmi2_host"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    return compile_c([HOST_SOURCE], exe, shared=False, flags=["-O1", "-Wall"], includes=[headers], libs=["dl"])
-
-
-def unzip(fmu: Path, dest: Path) -> Path:
-    with zipfile.ZipFile(fmu) as z:
-        z.extractall(dest)
-    for so in (dest / "binaries" / "linux64").glob("*.so"):
-        so.chmod(0o755)
-    return dest
+    return compile_c_host(HOST_SOURCE, tmp_path_factory.mktemp("c_host") / "fmi2_host")
 
 
 def run_host(host, fmu_dir, model, steps, inputs, outputs, env=None):
@@ -49,7 +37,7 @@ def test_plant_fmu_steps_in_a_c_host_like_in_fmpy_and_exits_cleanly_every_time(b
     for k in range(100):
         fmu.slave.doStep(k * 1e-4, 1e-4)
     expected = fmu.get(*outs)
-    fmu_dir = unzip(built[PLANT], tmp_path / "plant")
+    fmu_dir = unzip_fmu(built[PLANT], tmp_path / "plant")
     inputs = {fmu.vr[n]: v for n, v in forces.items()}
     codes = []
     for _ in range(RUNS):
@@ -68,14 +56,14 @@ def test_controller_fmu_steps_in_a_c_host_like_in_fmpy(built, load_fmu, host, tm
     for k in range(100):
         fmu.slave.doStep(k * 1e-4, 1e-4)
     expected = fmu.get(*outs)
-    proc = run_host(host, unzip(built[CONTROLLER], tmp_path / "ctrl"), CONTROLLER, 100,
+    proc = run_host(host, unzip_fmu(built[CONTROLLER], tmp_path / "ctrl"), CONTROLLER, 100,
                     {fmu.vr[n]: v for n, v in inputs.items()}, [fmu.vr[n] for n in outs])
     assert proc.returncode == 0, proc.stderr
     assert [float(x) for x in proc.stdout.split()] == expected
 
 
 def test_c_host_without_a_usable_libpython_gets_a_clear_instantiate_error(built, host, tmp_path):
-    fmu_dir = unzip(built[PLANT], tmp_path / "plant")
+    fmu_dir = unzip_fmu(built[PLANT], tmp_path / "plant")
     proc = run_host(host, fmu_dir, PLANT, 1, {}, [], env={"TAPMP_LIBPYTHON": "/nonexistent/libpython3.so"})
     assert proc.returncode == 1
     assert "cannot load libpython '/nonexistent/libpython3.so' (set TAPMP_LIBPYTHON)" in proc.stderr

@@ -222,33 +222,39 @@ def test_an_interval_other_than_T_s_is_refused(fmus, tmp_path):
     r.slave.freeInstance()
 
 
-def test_setting_the_interval_once_the_model_runs_is_refused(fmus, tmp_path):
-    r = Host(fmus[CLOCKED], tmp_path)
-    r.start()
-    clock = (c_uint32 * 1)(r.vr["sample_clock"])
-    assert refused(r, r.slave.setIntervalDecimal, clock, (c_double * 1)(T_S)) == (
-        3, "fmi3SetIntervalDecimal is not allowed in Step Mode: allowed in Instantiated or Initialization Mode (the "
-           "interval of the clock sample_clock is fixed once the model runs)")
-    r.slave.freeInstance()
+def set_interval_to_T_s(r):
+    """fmi3SetIntervalDecimal of the clock's own interval T_s."""
+    return r.slave.setIntervalDecimal, (c_uint32 * 1)(r.vr["sample_clock"]), (c_double * 1)(T_S)
 
 
-def test_setClock_outside_event_mode_is_refused(fmus, tmp_path):
-    r = Host(fmus[CLOCKED], tmp_path)
-    r.start()  # now in Step Mode
-    assert refused(r, r.slave.setClock, [r.vr["sample_clock"]], [True]) == (
-        3, "fmi3SetClock is not allowed in Step Mode: allowed in Event Mode (the clock sample_clock ticks at an "
-           "event)")
-    r.slave.freeInstance()
+def tick(r):
+    """fmi3SetClock of sample_clock."""
+    return r.slave.setClock, [r.vr["sample_clock"]], [True]
 
 
-def test_setClock_of_a_value_reference_that_is_not_a_clock_is_refused(fmus, tmp_path):
-    r = Host(fmus[CLOCKED], tmp_path)
-    r.start()
+def set_clock_of_F1_in_event_mode(r):
+    """fmi3SetClock of the output F1 (no clock), in Event Mode."""
     r.slave.enterEventMode()
-    f1 = r.vr["F1"]
-    assert refused(r, r.slave.setClock, [f1], [True]) == (
-        3, f"SetClock valueReference = {f1} is invalid: allowed is {r.vr['sample_clock']}, the clock sample_clock "
-           "(fmi3SetClock takes clocks only) (at t = 0 s)")
+    return r.slave.setClock, [r.vr["F1"]], [True]
+
+
+@pytest.mark.parametrize("misuse, message", [
+    pytest.param(set_interval_to_T_s, "fmi3SetIntervalDecimal is not allowed in Step Mode: allowed in Instantiated "
+                 "or Initialization Mode (the interval of the clock sample_clock is fixed once the model runs)",
+                 id="setting_the_interval_once_the_model_runs"),
+    pytest.param(tick, "fmi3SetClock is not allowed in Step Mode: allowed in Event Mode (the clock sample_clock "
+                 "ticks at an event)", id="setClock_outside_event_mode"),
+    pytest.param(set_clock_of_F1_in_event_mode, "SetClock valueReference = {F1} is invalid: allowed is "
+                 "{sample_clock}, the clock sample_clock (fmi3SetClock takes clocks only) (at t = 0 s)",
+                 id="setClock_of_a_value_reference_that_is_not_a_clock"),
+])
+def test_a_misuse_of_the_clock_once_the_model_runs_is_refused_with_a_message(fmus, tmp_path, misuse, message):
+    """Each misuse after initialization (now in Step Mode) fails with one error naming what is allowed;
+    ``message`` names value references as {F1} and {sample_clock}."""
+    r = Host(fmus[CLOCKED], tmp_path)
+    r.start()
+    call, *args = misuse(r)
+    assert refused(r, call, *args) == (3, message.format(**r.vr))
     r.slave.freeInstance()
 
 

@@ -7,13 +7,13 @@ import subprocess
 import zipfile
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation
 from tapmp.interface import CONNECTIONS, CONTROLLER, ELEMENT, PLANT, TRAJECTORY
-from tapmp.toolchain import compile_c
+from tests.support.c_hosts import compile_c_host, unzip_fmu
+from tests.support.native_fmi3_runs import fmi3  # noqa: F401 (a fixture)
 
 pytestmark = pytest.mark.slow  # builds the FMI 3.0 FMUs, compiles a C host and runs it as a child process
 
@@ -23,33 +23,15 @@ PRINTED = ("controller.F1", "controller.F2", "controller.F3", "plant.q1", "plant
 
 
 @pytest.fixture(scope="module")
-def fmi3(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native
-    return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
-                        windows=False)["fmi3"]
-
-
-@pytest.fixture(scope="module")
 def host(tmp_path_factory):
-    exe = tmp_path_factory.mktemp("c_host") / "fmi3_clocked_loop"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    return compile_c([HOST_SOURCE], exe, shared=False, flags=["-O1", "-Wall", "-Werror"], includes=[headers],
-                     libs=["dl"])
-
-
-def unzip(fmu: Path, dest: Path) -> Path:
-    with zipfile.ZipFile(fmu) as z:
-        z.extractall(dest)
-    for so in (dest / "binaries" / "x86_64-linux").glob("*.so"):
-        so.chmod(0o755)
-    return dest
+    return compile_c_host(HOST_SOURCE, tmp_path_factory.mktemp("c_host") / "fmi3_clocked_loop", werror=True)
 
 
 def run_host(host, fmi3, tmp, steps=STEPS):
     from orchestrator.engine.build_native import CLOCKED
     order = (TRAJECTORY, CLOCKED, PLANT)  # the master's initialization order: trajectory, controller, plant
     index = {TRAJECTORY: 0, CONTROLLER: 1, PLANT: 2}
-    elements = [f"{unzip(fmi3[m], tmp / m)}:{m}" for m in order]
+    elements = [f"{unzip_fmu(fmi3[m], tmp / m)}:{m}" for m in order]
     links = [f"{index[s]}.{o}:{index[d]}.{i}" for s, o, d, i in CONNECTIONS]
     by_element = {ELEMENT[m]: index[m] for m in index}
     printed = [f"{by_element[c.split('.')[0]]}.{c.split('.')[1]}" for c in PRINTED]

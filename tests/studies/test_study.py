@@ -10,27 +10,13 @@ import pytest
 from orchestrator.cli import main
 from orchestrator.tool.scenario import ScenarioError, load, load_gain_file
 from orchestrator.studies.run import run_study
-from orchestrator.studies.study import (StudyError, cases, close_client, load_study, open_client,
-                                        read_study_csv)
+from orchestrator.studies.study import StudyError, cases, load_study, read_study_csv
+from tests.support.studies import client, write_study  # noqa: F401 (client is a fixture)
 
 pytestmark = pytest.mark.slow  # studies on a real Dask LocalCluster
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
-
-
-@pytest.fixture(scope="module")
-def client():
-    """A real LocalCluster: two single-threaded worker processes."""
-    c = open_client(workers=2)
-    yield c
-    close_client(c)
-
-
-def write_study(folder: Path, text: str, name="s") -> Path:
-    path = folder / f"{name}.toml"
-    path.write_text(f'[study]\nname = "{name}"\nbase = "{BASE}"\noutput = "{folder / "out"}"\n' + text)
-    return path
 
 
 def rows_of(out: Path) -> dict:

@@ -10,33 +10,24 @@ from orchestrator.cli import main
 from orchestrator.tool.robustness import mode_peaks
 from orchestrator.tool.scenario import load
 from orchestrator.studies.run import run_study
-from orchestrator.studies.study import StudyError, close_client, load_study, open_client, read_study_csv
+from orchestrator.studies.study import StudyError, load_study, read_study_csv
+from tests.support.studies import client, write_study  # noqa: F401 (client is a fixture)
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = ROOT / "scenarios" / "paper_simulation.toml"
 
 
-@pytest.fixture(scope="module")
-def client():
-    """A real LocalCluster: two single-threaded worker processes."""
-    c = open_client(workers=2)
-    yield c
-    close_client(c)
-
-
-def write_study(folder: Path, tune: str) -> Path:
-    path = folder / "s.toml"
-    path.write_text(f'[study]\nname = "s"\nbase = "{BASE}"\noutput = "{folder / "out"}"\n'
-                    f'[set]\nstop_time = 0.02\n[tune]\nlaws = ["sc-dc"]\nwrite_to = "{folder / "tuned"}"\n'
-                    f'compare_stop_time = 0.02\nseed = 3\n{tune}\n'
-                    '[tune.bounds.sc-dc]\nLambda_v = [0.05, 2.0]\nLambda_p = [10.0, 3000.0]\n')
-    return path
+def tuning_study(folder: Path, tune: str) -> Path:
+    """A study that tunes SC-DC on 0.02 s runs; ``tune`` adds to its [tune] table."""
+    return write_study(folder, f'[set]\nstop_time = 0.02\n[tune]\nlaws = ["sc-dc"]\nwrite_to = "{folder / "tuned"}"\n'
+                       f'compare_stop_time = 0.02\nseed = 3\n{tune}\n'
+                       '[tune.bounds.sc-dc]\nLambda_v = [0.05, 2.0]\nLambda_p = [10.0, 3000.0]\n')
 
 
 @pytest.mark.slow
 def test_the_constrained_tuning_never_returns_a_design_beyond_its_bound(built, client, tmp_path):
     bound = 1.6  # below the start gains' 2.55: the start itself is rejected
-    study = load_study(write_study(tmp_path, f"population = 4\ngenerations = 2\nms_bound = {bound}"))
+    study = load_study(tuning_study(tmp_path, f"population = 4\ngenerations = 2\nms_bound = {bound}"))
     summary = run_study(study, built["ssp"], client, progress=False, command="tapmp study s.toml")
     r = summary["tuning"]["sc-dc"]
     assert r["start"] is None and "above tune.ms_bound = 1.6" in r["start_note"]
@@ -59,7 +50,7 @@ def test_the_constrained_tuning_never_returns_a_design_beyond_its_bound(built, c
 
 @pytest.mark.slow
 def test_an_unreachable_bound_is_an_error_and_writes_no_preset(built, client, tmp_path):
-    study = load_study(write_study(tmp_path, "population = 2\ngenerations = 1\nms_bound = 1.0"))
+    study = load_study(tuning_study(tmp_path, "population = 2\ngenerations = 1\nms_bound = 1.0"))
     with pytest.raises(StudyError, match=r"^tune: no candidate of sc-dc was stable with Ms <= tune.ms_bound = 1.0 "):
         run_study(study, built["ssp"], client, progress=False)
     assert not (tmp_path / "out" / "tuning" / "sc-dc.toml").exists()
@@ -67,7 +58,7 @@ def test_an_unreachable_bound_is_an_error_and_writes_no_preset(built, client, tm
 
 @pytest.mark.parametrize("value", ["inf", "nan", "0.5", '"2"', "-3.0"])
 def test_a_bound_that_is_not_finite_or_below_one_is_one_line_naming_it(tmp_path, capsys, value):
-    path = write_study(tmp_path, f"ms_bound = {value}")
+    path = tuning_study(tmp_path, f"ms_bound = {value}")
     assert main(["study", str(path), "--workers", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "tune.ms_bound = " in err[0]

@@ -2,42 +2,16 @@
 T_s) in Event Mode at every tick t0 + k T_s whatever the macro step, and gets the forces of the Event Mode
 controller (TAPMP_Controller with eventModeUsed, time events at the same instants) bit for bit."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
+from tests.support.native_fmi3_runs import T_S, fmi3, run  # noqa: F401 (fmi3 is a fixture)
+from tests.support.runs import PAPER
 
 pytestmark = pytest.mark.slow  # builds the FMI 3.0 FMUs and runs closed loops
-
-ROOT = Path(__file__).resolve().parents[3]
-PAPER = ROOT / "scenarios" / "paper_simulation.toml"
-T_S = 1e-4
-FORCES = ("controller.F1", "controller.F2", "controller.F3")
-
-
-@pytest.fixture(scope="module")
-def fmi3(tmp_path_factory):
-    """The native FMI 3.0 FMUs, their SSP and the SSP with the clocked controller, built for this machine."""
-    from orchestrator.engine.build_native import build_native
-    return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
-                        windows=False)["fmi3"]
-
-
-def run(ssp, step, n, **kw):
-    """Rows (time and every output) at t0 and after each of n macro steps of ``step`` [s], the column
-    names and the controller's updates (samples)."""
-    scenario = load(PAPER, ["stop_time=0.05"])
-    rows = []
-    with CoSimulation(ssp, scenario.parameters(), 0.0, step, "gauss-seidel", **kw, roles=ROLES) as sim:
-        rows.append(sim.row())
-        for _ in range(n):
-            sim.step()
-            rows.append(sim.row())
-        return np.array(rows), sim.columns, sim.units["controller"].n_events
 
 
 @pytest.mark.parametrize("step, n", [(T_S, 500), (1e-3, 50), (2.5e-4, 200)])

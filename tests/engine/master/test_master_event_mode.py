@@ -7,36 +7,10 @@ import pytest
 from orchestrator.engine.master import CoSimulation, CoSimulationError
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
-from pathlib import Path
+from tests.support.native_fmi3_runs import FORCES, T_S, fmi3, run  # noqa: F401 (fmi3 is a fixture)
+from tests.support.runs import PAPER
 
 pytestmark = pytest.mark.slow  # builds the FMI 3.0 FMUs and runs closed loops
-
-ROOT = Path(__file__).resolve().parents[3]
-PAPER = ROOT / "scenarios" / "paper_simulation.toml"
-T_S = 1e-4
-FORCES = ("controller.F1", "controller.F2", "controller.F3")
-
-
-@pytest.fixture(scope="module")
-def fmi3(tmp_path_factory):
-    """The native FMI 3.0 FMUs and their SSP, built for this machine."""
-    from orchestrator.engine.build_native import build_native
-    return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
-                        windows=False)["fmi3"]
-
-
-def run(ssp, step, n, ordering="gauss-seidel", **kw):
-    """Rows (time and every output) at t0 and after each of n macro steps of ``step`` [s], the
-    column names and the controller's events handled; the controller samples every T_s = 0.1 ms."""
-    scenario = load(PAPER, ["stop_time=0.05"])
-    rows = []
-    with CoSimulation(ssp, scenario.parameters(), 0.0, step, ordering, **kw, roles=ROLES) as sim:
-        rows.append(sim.row())
-        for _ in range(n):
-            sim.step()
-            rows.append(sim.row())
-        events = sim.units["controller"].n_events if "controller" in sim.units else None
-        return np.array(rows), sim.columns, events
 
 
 @pytest.mark.parametrize("ordering", ["gauss-seidel", "jacobi"])
