@@ -166,7 +166,7 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
     ours in comparison.md (report.comparison_tables)."""
     from .baselines import compare_runs  # on first use: the command line starts without the models' algebra
     from .pool import run_many
-    from .report import write_comparison
+    from .report import AnalysisAside, write_comparison
 
     runs = compare_runs(scenario)
     # before anything is written
@@ -181,12 +181,19 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
                 + ", ".join(_nm(x) for x in NOISE_LEVELS) + " nm rms)")
         bars = (lambda name: progress_bar(f"{scenario.name} {name}", True)) if progress else None
         drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
-        # One pool for the runs and the noise runs, the figures' runs first: the figures are drawn
-        # while the others go on. Only the figures' rows come back to this process.
-        records = run_many({**{name: (sc, ssp, out / name) for name, sc in runs.items()}, **noisy}, jobs,
-                           list(runs) if figures else False, bars, scenario.name,
-                           first=drawing.needed if drawing else (),
-                           on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
+        aside = AnalysisAside(runs) if jobs > 1 else None  # the robustness section, computed meanwhile
+        try:
+            # One pool for the runs and the noise runs, the figures' runs first: the figures are drawn
+            # while the others go on. Only the figures' rows come back to this process.
+            records = run_many({**{name: (sc, ssp, out / name) for name, sc in runs.items()}, **noisy}, jobs,
+                               list(runs) if figures else False, bars, scenario.name,
+                               first=drawing.needed if drawing else (),
+                               on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
+            if aside is not None:
+                aside.keep()
+        finally:
+            if aside is not None:
+                aside.close()
         results = {name: records[name]["metrics"] for name in runs}
         text = write_comparison(out / "comparison.md", scenario, results, command, runs, checks, reference)
         if noise:

@@ -91,18 +91,71 @@ def modal_note(scenario) -> str:
 _ANALYZED: dict = {}  # the last analyses by the runs' scenarios: `tapmp reproduce` shows each twice
 
 
-def _analyzed(runs: dict) -> dict:
-    """analysis.analyze_runs of ``runs`` ({name: Scenario}) on the frequency grid of the first's
-    step, computed once for the same scenarios."""
+def _analysis_key(runs: dict) -> str:
     import json
+    return json.dumps({name: sc.to_dict() for name, sc in runs.items()}, sort_keys=True, default=repr)
+
+
+def _keep_analysis(key: str, result: dict) -> None:
+    if len(_ANALYZED) >= 8:
+        _ANALYZED.pop(next(iter(_ANALYZED)))
+    _ANALYZED[key] = result
+
+
+def _analyze(runs: dict) -> dict:
+    """analysis.analyze_runs of ``runs`` ({name: Scenario}) on the frequency grid of the first's step."""
     from . import analysis
-    key = json.dumps({name: sc.to_dict() for name, sc in runs.items()}, sort_keys=True, default=repr)
+    first = next(iter(runs.values()))
+    return analysis.analyze_runs(runs, analysis.frequency_grid(first.step))
+
+
+def _analyzed(runs: dict) -> dict:
+    """_analyze(runs), computed once for the same scenarios (or taken from an AnalysisAside)."""
+    key = _analysis_key(runs)
     if key not in _ANALYZED:
-        if len(_ANALYZED) >= 8:
-            _ANALYZED.pop(next(iter(_ANALYZED)))
-        first = next(iter(runs.values()))
-        _ANALYZED[key] = analysis.analyze_runs(runs, analysis.frequency_grid(first.step))
+        _keep_analysis(key, _analyze(runs))
     return _ANALYZED[key]
+
+
+def _quiet_worker() -> None:
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the command, which ends this process
+
+
+class AnalysisAside:
+    """The robustness analysis of a comparison's runs ({name: Scenario}) computed in a forked
+    process while the runs go on (it needs none of their results and costs about as much as
+    several runs): :meth:`keep` waits for it and keeps it for robustness_section (raising its
+    error, if any); :meth:`close` ends the process whatever happened. A process that died
+    leaves the analysis to robustness_section, in this process."""
+
+    def __init__(self, runs: dict):
+        from concurrent.futures import ProcessPoolExecutor
+        from multiprocessing import get_context
+        self.key = _analysis_key(runs)
+        self.pool = None
+        if self.key not in _ANALYZED:
+            self.pool = ProcessPoolExecutor(1, mp_context=get_context("fork"), initializer=_quiet_worker)
+            self.future = self.pool.submit(_analyze, runs)
+
+    def keep(self) -> None:
+        from concurrent.futures.process import BrokenProcessPool
+        if self.pool is None:
+            return
+        try:
+            result = self.future.result()
+        except BrokenProcessPool:
+            return
+        _keep_analysis(self.key, result)
+
+    def close(self) -> None:
+        if self.pool is None:
+            return
+        for proc in list(getattr(self.pool, "_processes", {}).values()):
+            if proc.is_alive():
+                proc.kill()
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        self.pool = None
 
 
 def robustness_section(runs: dict) -> list[str]:
