@@ -181,12 +181,12 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
                 + ", ".join(_nm(x) for x in NOISE_LEVELS) + " nm rms)")
         bars = (lambda name: progress_bar(f"{scenario.name} {name}", True)) if progress else None
         drawing = _FiguresDuringRuns(out, list(runs), show) if figures else None
-        aside = AnalysisAside(runs) if jobs > 1 else None  # the robustness section, computed meanwhile
+        aside = AnalysisAside(runs, jobs) if jobs > 1 else None  # the robustness section, computed meanwhile
         try:
             # One pool for the runs and the noise runs, the figures' runs first: the figures are drawn
-            # while the others go on. Only the figures' rows come back to this process.
+            # while the others go on. Only the rows of the runs the figures need come back here.
             records = run_many({**{name: (sc, ssp, out / name) for name, sc in runs.items()}, **noisy}, jobs,
-                               list(runs) if figures else False, bars, scenario.name,
+                               drawing.needed if figures else False, bars, scenario.name,
                                first=drawing.needed if drawing else (),
                                on_record=drawing.record if drawing else None, idle=drawing.idle if drawing else None)
             if aside is not None:

@@ -102,11 +102,16 @@ def _keep_analysis(key: str, result: dict) -> None:
     _ANALYZED[key] = result
 
 
-def _analyze(runs: dict) -> dict:
-    """analysis.analyze_runs of ``runs`` ({name: Scenario}) on the frequency grid of the first's step."""
+def _grid(runs: dict):
     from . import analysis
-    first = next(iter(runs.values()))
-    return analysis.analyze_runs(runs, analysis.frequency_grid(first.step))
+    return analysis.frequency_grid(next(iter(runs.values())).step)
+
+
+def _analyze(runs: dict, freqs=None) -> dict:
+    """analysis.analyze_runs of ``runs`` ({name: Scenario}) on ``freqs`` [Hz] (default: the
+    frequency grid of the first run's step)."""
+    from . import analysis
+    return analysis.analyze_runs(runs, _grid(runs) if freqs is None else freqs)
 
 
 def _analyzed(runs: dict) -> dict:
@@ -123,30 +128,38 @@ def _quiet_worker() -> None:
 
 
 class AnalysisAside:
-    """The robustness analysis of a comparison's runs ({name: Scenario}) computed in a forked
-    process while the runs go on (it needs none of their results and costs about as much as
-    several runs): :meth:`keep` waits for it and keeps it for robustness_section (raising its
-    error, if any); :meth:`close` ends the process whatever happened. A process that died
-    leaves the analysis to robustness_section, in this process."""
+    """The robustness analysis of a comparison's runs ({name: Scenario}) computed in forked
+    processes while the runs go on (it needs none of their results and costs about as much as
+    all the runs together): the runs split between ``processes`` processes, each analyzing its
+    share (every run is analyzed on its own, so the parts are exactly the whole).
+    :meth:`keep` waits for them and keeps the analysis for robustness_section (raising an
+    error, if any); :meth:`close` ends the processes whatever happened. If a process died, the
+    analysis is left to robustness_section, in this process."""
 
-    def __init__(self, runs: dict):
+    def __init__(self, runs: dict, processes: int = 1):
         from concurrent.futures import ProcessPoolExecutor
         from multiprocessing import get_context
-        self.key = _analysis_key(runs)
-        self.pool = None
-        if self.key not in _ANALYZED:
-            self.pool = ProcessPoolExecutor(1, mp_context=get_context("fork"), initializer=_quiet_worker)
-            self.future = self.pool.submit(_analyze, runs)
+        self.key, self.names = _analysis_key(runs), list(runs)
+        self.pool, self.futures = None, []
+        if self.key in _ANALYZED:
+            return
+        n = max(1, min(processes, len(runs)))
+        self.pool = ProcessPoolExecutor(n, mp_context=get_context("fork"), initializer=_quiet_worker)
+        freqs = _grid(runs)
+        # the runs dealt out in turn: the costly ones (stable loops get every measure) spread out
+        self.futures = [self.pool.submit(_analyze, {k: runs[k] for k in self.names[i::n]}, freqs) for i in range(n)]
 
     def keep(self) -> None:
         from concurrent.futures.process import BrokenProcessPool
         if self.pool is None:
             return
+        parts = {}
         try:
-            result = self.future.result()
+            for f in self.futures:
+                parts.update(f.result())
         except BrokenProcessPool:
             return
-        _keep_analysis(self.key, result)
+        _keep_analysis(self.key, {name: parts[name] for name in self.names})
 
     def close(self) -> None:
         if self.pool is None:

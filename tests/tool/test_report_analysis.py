@@ -32,9 +32,10 @@ def _same(a, b) -> bool:
     return a == b or (a != a and b != b)  # NaN equals NaN here
 
 
-def test_the_analysis_computed_aside_is_the_one_computed_here(runs):
+@pytest.mark.parametrize("processes", [1, 2])
+def test_the_analysis_computed_aside_is_the_one_computed_here(runs, processes):
     report._ANALYZED.clear()
-    aside = report.AnalysisAside(runs)
+    aside = report.AnalysisAside(runs, processes)
     try:
         aside.keep()
     finally:
@@ -51,9 +52,9 @@ def test_the_analysis_computed_aside_is_the_one_computed_here(runs):
 
 def test_closing_the_aside_ends_its_process_at_once(runs):
     report._ANALYZED.clear()
-    aside = report.AnalysisAside(runs)
+    aside = report.AnalysisAside(runs, 2)
     procs = list(aside.pool._processes.values())
-    assert procs and all(p.is_alive() for p in procs)
+    assert len(procs) == 2 and all(p.is_alive() for p in procs)
     aside.close()  # before the analysis could end
     assert all(not p.is_alive() and p.exitcode is not None for p in procs)
     assert report._analysis_key(runs) not in report._ANALYZED
