@@ -5,8 +5,9 @@ fastest of --repeat. Run from the repository root after `bash build_fmus.sh`:
     .venv/bin/python benchmarks/bench_compare.py [--scenario scenarios/paper_simulation.toml] [--repeat 3]
                                                  [--jobs N] [--stop-time S] [--ssp FILE]
 
-Prints the wall time of each command (`tapmp run`, `tapmp compare`, `tapmp compare --no-figures`)
-and the ratios compare / run (target <= 3) and compare --no-figures / run. --stages
+Prints the wall time of each command (`tapmp run`, `tapmp compare`, `tapmp compare --no-figures`,
+`tapmp compare --no-noise`) and the ratios compare / run (target <= 3), compare --no-figures / run
+and compare --no-noise / run. --stages
 instead times the stages of one comparison in this process (imports, stability checks, the
 runs, the figures): "runs" without the figures this process drew while the runs went on,
 "figures" all of them, "figures during the runs" the part drawn meanwhile.
@@ -39,6 +40,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     start = time.perf_counter()
     sys.path.insert(0, str(ROOT))
     from orchestrator import cli
+    cli.single_threaded_blas()  # as the command does, before numpy is loaded
     from orchestrator.tool import compare, plots, pool
     from orchestrator.tool.scenario import load
     times = {"imports": time.perf_counter() - start}
@@ -97,14 +99,17 @@ def main(argv=None) -> int:
         from orchestrator.tool.pool import parse_jobs
         stages(args.scenario, parse_jobs(args.jobs), args.stop_time, args.ssp)
         return 0
-    best = {"tapmp run": float("inf"), "tapmp compare": float("inf"), "tapmp compare --no-figures": float("inf")}
+    best = {"tapmp run": float("inf"), "tapmp compare": float("inf"), "tapmp compare --no-figures": float("inf"),
+            "tapmp compare --no-noise": float("inf")}
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         for r in range(args.repeat):
             for name, cmd in (("tapmp run", ["run", args.scenario, "--out", f"{tmp}/run", *extra]),
                               ("tapmp compare", ["compare", args.scenario, "--out", f"{tmp}/compare", *extra,
                                                  *jobs]),
                               ("tapmp compare --no-figures", ["compare", args.scenario, "--out", f"{tmp}/compare",
-                                                              *extra, *jobs, "--no-figures"])):
+                                                              *extra, *jobs, "--no-figures"]),
+                              ("tapmp compare --no-noise", ["compare", args.scenario, "--out", f"{tmp}/compare",
+                                                            *extra, *jobs, "--no-noise"])):
                 wall = timed(cmd)
                 best[name] = min(best[name], wall)
                 print(f"run {r + 1}/{args.repeat} {name:26s} {wall:7.2f} s", file=sys.stderr)
@@ -116,6 +121,7 @@ def main(argv=None) -> int:
         print(f"{name:26s}  {wall:8.2f}  {load:5.2f}")
     print(f"compare / run: {best['tapmp compare'] / best['tapmp run']:.2f}")
     print(f"compare --no-figures / run: {best['tapmp compare --no-figures'] / best['tapmp run']:.2f}")
+    print(f"compare --no-noise / run: {best['tapmp compare --no-noise'] / best['tapmp run']:.2f}")
     return 0
 
 

@@ -150,10 +150,11 @@ def test_bench_compare_prints_compare_against_one_run(native_built, tmp_path):
     out = bench("bench_compare.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02", "--repeat", "1",
                 tmp_path=tmp_path)
     rows = table(out, "command")
-    assert [r[0] for r in rows] == ["tapmp run", "tapmp compare", "tapmp compare --no-figures"]
+    assert [r[0] for r in rows] == ["tapmp run", "tapmp compare", "tapmp compare --no-figures",
+                                    "tapmp compare --no-noise"]
     assert all(float(r[1]) > 0 for r in rows)
     # the ratios of the printed (rounded) times: as close as their last digits allow
-    for label, row in (("compare", rows[1]), ("compare --no-figures", rows[2])):
+    for label, row in (("compare", rows[1]), ("compare --no-figures", rows[2]), ("compare --no-noise", rows[3])):
         m = re.search(rf"^{label} / run: ({NUMBER})$", out, re.M)
         assert m and float(m.group(1)) == pytest.approx(float(row[1]) / float(rows[0][1]), rel=0.03)
 
@@ -167,6 +168,17 @@ def test_bench_compare_times_the_stages_of_a_comparison(native_built, tmp_path):
     parts = sum(float(rows[k]) for k in ("stability checks", "runs", "figures"))
     assert 0 < parts <= float(rows["whole comparison"]) + 0.02
     assert 0 <= float(rows["figures during the runs"]) <= float(rows["figures"])
+
+
+def test_bench_reproduce_prints_the_tour_command_against_one_run(built, tmp_path):
+    out = bench("bench_reproduce.py", "--repeat", "1", "--stop-time", "0.02", "--paper-gains-stop-time", "0.0005",
+                tmp_path=tmp_path)
+    rows = table(out, "command")
+    assert [r[0] for r in rows] == ["tapmp run", "tapmp reproduce"]
+    for _, wall, cpu, load in rows:
+        assert float(wall) > 0 and float(cpu) > 0 and float(load) >= 0
+    m = re.search(rf"^reproduce / run: ({NUMBER})$", out, re.M)
+    assert m and float(m.group(1)) == pytest.approx(float(rows[1][1]) / float(rows[0][1]), rel=0.03, abs=0.05)
 
 
 def test_bench_quick_start_prints_the_build_time_and_the_load(tmp_path):
