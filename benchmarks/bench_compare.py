@@ -40,7 +40,6 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     start = time.perf_counter()
     sys.path.insert(0, str(ROOT))
     from orchestrator import cli
-    cli.single_threaded_blas()  # as the command does, before numpy is loaded
     from orchestrator.tool import compare, plots, pool
     from orchestrator.tool.scenario import load
     times = {"imports": time.perf_counter() - start}
@@ -96,6 +95,8 @@ def main(argv=None) -> int:
     jobs = ["--jobs", args.jobs] if args.jobs else []
     if args.stages:
         sys.path.insert(0, str(ROOT))
+        from orchestrator.cli import single_threaded_blas
+        single_threaded_blas()  # as the command does, before numpy is loaded
         from orchestrator.tool.pool import parse_jobs
         stages(args.scenario, parse_jobs(args.jobs), args.stop_time, args.ssp)
         return 0
