@@ -54,6 +54,12 @@ def test_compare_on_a_pool_writes_the_same_files_as_one_run_after_the_other(buil
         for f in ("results.csv", "metrics.json"):
             assert (tmp_path / "1" / name / f).read_bytes() == (tmp_path / pool / name / f).read_bytes(), (name, f)
         assert json.loads((tmp_path / pool / name / "run.json").read_text())["status"] == "completed"
+    # the noise runs, on the same pool's workers (FMUs kept loaded and reset between runs)
+    noisy = sorted(p.name for p in (tmp_path / "1" / "noise").iterdir())
+    assert len(noisy) == 10 and noisy == sorted(p.name for p in (tmp_path / pool / "noise").iterdir())
+    for name in noisy:
+        assert ((tmp_path / "1" / "noise" / name / "metrics.json").read_bytes()
+                == (tmp_path / pool / "noise" / name / "metrics.json").read_bytes()), name
     md = {j: (tmp_path / j / "comparison.md").read_text().replace(str(tmp_path / j), "OUT")
           .replace(f"--jobs {j}", "--jobs N") for j in ("1", pool)}
     assert md["1"] == md[pool] and "SC-DC" in md["1"]
