@@ -2,7 +2,8 @@
 beside the same co-simulation without calibration, and the experiment tables run with the
 experiment's own gains.
 
-Runs (each a co-simulation through the FMUs, orchestrator.paper.calibration.run_metrics):
+Runs (each a co-simulation through the FMUs keeping its first and last rows, as
+orchestrator.paper.calibration.run_metrics; on the command's processes, tool.pool.run_many):
 
 * uncalibrated: the base scenarios (paper_simulation, paper_experiment) with the gains the
   calibrated scenarios use (Eq. 40 with Lambda_p, Lambda_v x 0.36/150), the base plant;
@@ -56,32 +57,39 @@ def values_for(reductions: dict[tuple, float]) -> list[float]:
     return [reductions.get((c.table, c.quantity, c.stat), float("nan")) for c in paper_cells()]
 
 
-def run_extra(scenarios_dir: Path, work: Path, ssp: Path, horizon: float | None = None) -> dict:
-    """The uncalibrated and experiment-gain runs (module doc). ``horizon`` [s] shortens every run
-    (None: each scenario's own). Returns {label: {"reductions": {...}, "checks": {law: verdict},
-    "metrics": {law: metrics}}}."""
+def run_extra(scenarios_dir: Path, work: Path, ssp: Path, horizon: float | None = None, jobs: int = 1) -> dict:
+    """The uncalibrated and experiment-gain runs (module doc) on ``jobs`` processes. ``horizon`` [s]
+    shortens every run (None: each scenario's own). Returns {label: {"reductions": {...},
+    "checks": {law: verdict}, "metrics": {law: metrics}}}."""
+    from ..tool.pool import run_many
     scenarios_dir, work = Path(scenarios_dir), Path(work)
-    jobs = {}
+    runs = {}
     for name in SCENARIO_TABLES:
         base = load(scenarios_dir / f"{name}.toml")
-        jobs[("uncalibrated", name)] = base.with_changes(
+        runs[("uncalibrated", name)] = base.with_changes(
             gains=calibration.GAIN_PRESET, gain_overrides=calibration.scaled_gains(), name=f"{name}_uncalibrated",
             description=f"{base.description} (base plant, the calibrated scenarios' gains)")
     exp = load(scenarios_dir / "paper_experiment_calibrated.toml")
-    jobs[("experiment gains", "paper_experiment")] = exp.with_changes(
+    runs[("experiment gains", "paper_experiment")] = exp.with_changes(
         gains=EXPERIMENT_PRESET, gain_overrides=experiment_gains(), name="paper_experiment_experiment_gains",
         description=f"{exp.description.split(' (')[0]} (calibrated plant, Eq. 42-43 scaled)")
-    out = {}
-    for (label, name), sc in jobs.items():
+    out, tasks = {}, {}
+    for (label, name), sc in runs.items():
         if horizon is not None:
             sc = sc.with_changes(stop_time=sc.start_time + round(horizon / sc.step) * sc.step)
         entry = out.setdefault(label, {"reductions": {}, "checks": {}, "metrics": {}})
-        metrics = {}
         for law in ("apd-dc", "sc-dc"):
             run = sc.with_changes(law=law)
             entry["checks"][f"{name} {law}"] = stability.check(run).verdict
-            metrics[law] = calibration.run_metrics(run, ssp, work / label.replace(" ", "_") / name / law)
-            entry["metrics"][f"{name} {law}"] = metrics[law]
+            # as calibration.run_metrics: only the first and last rows on disk
+            tasks[(label, name, law)] = (run.with_changes(record_every=run.n_steps, format="csv"), ssp,
+                                         work / label.replace(" ", "_") / name / law)
+    records = run_many({"/".join(k): task for k, task in tasks.items()}, jobs, keep=False)
+    for label, name in runs:
+        metrics = {law: records[f"{label}/{name}/{law}"]["metrics"] for law in ("apd-dc", "sc-dc")}
+        entry = out[label]
+        for law, m in metrics.items():
+            entry["metrics"][f"{name} {law}"] = m
         entry["reductions"].update(cell_reductions(metrics["apd-dc"], metrics["sc-dc"], SCENARIO_TABLES[name]))
     return out
 

@@ -379,7 +379,7 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
                   *_reduction_note(calibrated, "SC-DC predicted on the calibrated plants"), ""]
         if ssp is not None and len(calibrated) == len(SCENARIOS):
             say("the prediction's null models and extra runs")
-            extra = run_extra(scenarios_dir, Path(results_dir) / "predictors", ssp)
+            extra = run_extra(scenarios_dir, Path(results_dir) / "predictors", ssp, jobs=jobs)
             parts += ["## What the prediction is worth: null models, no calibration, the experiment's gains", "",
                       *prediction_lines({k: v[2] for k, v in calibrated.items()}, extra), ""]
     else:

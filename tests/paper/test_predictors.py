@@ -15,15 +15,26 @@ from tests.support.shared import ROOT
 
 
 @pytest.fixture(scope="module")
-def extra(built, tmp_path_factory):
+def short_scenarios(tmp_path_factory):
     scenarios = tmp_path_factory.mktemp("scenarios")
     for name in ("paper_simulation", "paper_experiment", "paper_experiment_calibrated"):
         text = (ROOT / "scenarios" / f"{name}.toml").read_text()
         text, n = re.subn(r"(?m)^stop_time = [0-9.]+", "stop_time = 0.05", text)
         assert n == 1
         (scenarios / f"{name}.toml").write_text(text)
+    return scenarios
+
+
+@pytest.fixture(scope="module")
+def extra(built, short_scenarios, tmp_path_factory):
     work = tmp_path_factory.mktemp("work")
-    return pr.run_extra(scenarios, work, built["ssp"]), work
+    return pr.run_extra(short_scenarios, work, built["ssp"]), work
+
+
+@pytest.mark.slow
+def test_the_extra_runs_on_two_processes_are_the_runs_one_after_the_other(built, short_scenarios, extra,
+                                                                          tmp_path):
+    assert pr.run_extra(short_scenarios, tmp_path, built["ssp"], jobs=2) == extra[0]
 
 
 def test_the_experiment_gains_are_eq_42_scaled_to_the_default_damping():
