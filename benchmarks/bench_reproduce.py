@@ -2,12 +2,13 @@
 `tapmp run` of the paper scenario, each a fresh command, timed one after the other (the fastest
 of --repeat of each). Run from the repository root after `bash build_fmus.sh`:
 
-    .venv/bin/python benchmarks/bench_reproduce.py [--repeat 2] [--stop-time S] [--paper-gains-stop-time S]
+    .venv/bin/python benchmarks/bench_reproduce.py [--repeat 2] [--stop-time S] [--paper-gains-stop-time S] [--ssp FILE]
 
 Prints the wall and CPU time (the command and its child processes) of each and the ratio
 reproduce / run (target <= 15). --stop-time S runs every scenario for S seconds (a smoke
 test: copies of the four paper scenarios with that horizon); --paper-gains-stop-time is passed
-on to `tapmp reproduce`.
+on to `tapmp reproduce`; --ssp FILE runs both commands on that SSP file (default: tapmp's, the
+built native FMUs).
 """
 
 import argparse
@@ -54,6 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=2, help="runs of each command (default 2)")
     ap.add_argument("--stop-time", type=float, help="run every scenario for this many seconds (smoke test)")
     ap.add_argument("--paper-gains-stop-time", type=float, help="passed on to tapmp reproduce")
+    ap.add_argument("--ssp", help="SSP file of both commands (default: tapmp's)")
     args = ap.parse_args(argv)
     best = {"tapmp run": (float("inf"), 0.0), "tapmp reproduce": (float("inf"), 0.0)}
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_reproduce_") as tmp:
@@ -64,7 +66,9 @@ def main(argv=None) -> int:
             scenario, extra = str(folder / "paper_simulation.toml"), ["--scenarios", str(folder)]
         if args.paper_gains_stop_time:
             extra += ["--paper-gains-stop-time", str(args.paper_gains_stop_time)]
-        commands = {"tapmp run": ["run", scenario, "--out", f"{tmp}/run"],
+        ssp = ["--ssp", args.ssp] if args.ssp else []
+        extra += ssp
+        commands = {"tapmp run": ["run", scenario, "--out", f"{tmp}/run", *ssp],
                     "tapmp reproduce": ["reproduce", "--format", "mat", "--record-every", "10",
                                         "--results", f"{tmp}/results", *extra]}
         for r in range(args.repeat):

@@ -170,9 +170,9 @@ def test_bench_compare_times_the_stages_of_a_comparison(native_built, tmp_path):
     assert 0 <= float(rows["figures during the runs"]) <= float(rows["figures"])
 
 
-def test_bench_reproduce_prints_the_tour_command_against_one_run(built, tmp_path):
+def test_bench_reproduce_prints_the_tour_command_against_one_run(native_built, tmp_path):
     out = bench("bench_reproduce.py", "--repeat", "1", "--stop-time", "0.02", "--paper-gains-stop-time", "0.0005",
-                tmp_path=tmp_path)
+                "--ssp", native_built["fmi2"]["ssp"], tmp_path=tmp_path)
     rows = table(out, "command")
     assert [r[0] for r in rows] == ["tapmp run", "tapmp reproduce"]
     for _, wall, cpu, load in rows:
