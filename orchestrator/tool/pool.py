@@ -88,6 +88,12 @@ def _worker_init(cancel) -> None:
     forget_process_fmus()
 
 
+def ignore_interrupts() -> None:
+    """A helper process's initializer: Ctrl-C (SIGINT to the terminal's process group) is left to
+    the command, which ends its helpers itself, so that no helper prints a traceback of its own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -> dict:
     """One run (results.run_scenario, overwrite; ``held``: its folder's lock is held by the
     parent process, and this is a pool's worker, which keeps the SSP's FMUs loaded for its next
@@ -118,8 +124,9 @@ def run_many(tasks: dict, jobs: int, keep=True, progress=None, label: str = "", 
     """Run ``tasks`` ({name: (scenario, ssp, out folder)}) on ``jobs`` processes (in this
     process if jobs == 1 or there is one task); {name: record of run_one} in the order of
     ``tasks``. ``keep``: whether the runs' rows come back (run_one), True or False for every
-    task or the names of the tasks whose rows do. The first failure is raised (see the module docstring). ``progress(name)``
-    makes a per-run progress callback when running in this process; a pool shows one bar
+    task or the names of the tasks whose rows do. The first failure is raised (see the module
+    docstring). ``progress(name)`` makes a per-run progress callback when running in this
+    process; a pool shows one bar
     of completed runs instead (when ``progress`` is given). Every run folder is locked by this
     process from the start to the end of the set (a pool's workers run in them).
     ``first``: names of tasks to start before the others; ``on_record(name, record)`` is called

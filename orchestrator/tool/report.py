@@ -122,11 +122,6 @@ def _analyzed(runs: dict) -> dict:
     return _ANALYZED[key]
 
 
-def _quiet_worker() -> None:
-    import signal
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the command, which ends this process
-
-
 class AnalysisAside:
     """The robustness analysis of a comparison's runs ({name: Scenario}) computed in forked
     processes while the runs go on (it needs none of their results and costs about as much as
@@ -139,12 +134,13 @@ class AnalysisAside:
     def __init__(self, runs: dict, processes: int = 1):
         from concurrent.futures import ProcessPoolExecutor
         from multiprocessing import get_context
+        from .pool import ignore_interrupts
         self.key, self.names = _analysis_key(runs), list(runs)
         self.pool, self.futures = None, []
         if self.key in _ANALYZED:
             return
         n = max(1, min(processes, len(runs)))
-        self.pool = ProcessPoolExecutor(n, mp_context=get_context("fork"), initializer=_quiet_worker)
+        self.pool = ProcessPoolExecutor(n, mp_context=get_context("fork"), initializer=ignore_interrupts)
         freqs = _grid(runs)
         # the runs dealt out in turn: the costly ones (stable loops get every measure) spread out
         self.futures = [self.pool.submit(_analyze, {k: runs[k] for k in self.names[i::n]}, freqs) for i in range(n)]
