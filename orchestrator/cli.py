@@ -250,7 +250,7 @@ def cmd_analyze(args) -> int:
           "input force, one motor or mode at a time")
     print(table(result))
     print("robustness on the same loop: disk margins (symmetric), all three motors' forces scaled at once, "
-          "a delay in one loop, a first-order actuator on every motor")
+          "a delay in one loop and on all three motors at once, a first-order actuator on every motor")
     print(robustness_table(result))
     if args.delay or args.actuator_bandwidth is not None:
         from .tool.analysis import inserted_radius
