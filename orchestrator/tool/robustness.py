@@ -233,7 +233,8 @@ def worst_case(runs: dict, study, poses: int = 8, points: int = analysis.POINTS,
     unchanged). Returns {"left_out": [factor names], "points": count per run, "runs": {name: {measure:
     {"value", "where"}, "unstable": [labels]}}} with the measures of point_margins, each at its worst
     (WORSE: the largest Ms and lower gain margin, the smallest of the others) over the stable points.
-    ``say`` gets a progress line at least every 20 s of work (one per point and run)."""
+    ``say`` gets a progress line at the end of each run and after any point that ends 20 s or more
+    after the last line (a point takes a few seconds, so a line comes well within 30 s)."""
     import time
     out, left = {}, []
     last = time.monotonic()
