@@ -240,6 +240,11 @@ def cmd_analyze(args) -> int:
     scenario = load(scenario_file(args.scenario), args.set)
     out = Path(args.out) if args.out else result_base(scenario) / "analysis"
     from .tool.baselines import compare_runs
+    if args.worst_case:
+        return _analyze_worst_case(args, scenario, out)
+    given = [k for k, v in (("--box", args.box), ("--poses", args.poses), ("--runs", args.runs)) if v is not None]
+    if given:
+        raise UsageError(f"{given[0]} is invalid without --worst-case: allowed only with --worst-case")
     for key, v in (("--delay", args.delay), ("--actuator-bandwidth", args.actuator_bandwidth)):
         if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
             raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
@@ -250,7 +255,7 @@ def cmd_analyze(args) -> int:
           "input force, one motor or mode at a time")
     print(table(result))
     print("robustness on the same loop: disk margins (symmetric), all three motors' forces scaled at once, "
-          "a delay in one loop, a first-order actuator on every motor")
+          "a delay in one loop and on all three motors at once, a first-order actuator on every motor")
     print(robustness_table(result))
     if args.delay or args.actuator_bandwidth is not None:
         from .tool.analysis import inserted_radius
@@ -263,6 +268,34 @@ def cmd_analyze(args) -> int:
             print(f"  {name}: " + ", ".join(f"{k} {v:.6f} ({verdict_for(v)})" for k, v in r.items() if v is not None))
     print(pole_table(result))
     print(f"analysis.json and figures in {out}")
+    return 0
+
+
+def _analyze_worst_case(args, scenario, out) -> int:
+    """`tapmp analyze --worst-case`: the worst margins of each run over poses, envelope corners and a
+    study's parameter box (orchestrator.tool.robustness.worst_case), printed and written to out."""
+    import json
+    from .studies.study_file import load_study
+    from .tool import robustness
+    from .tool.progress import say
+    poses = robustness.check_poses(8 if args.poses is None else args.poses)
+    box = args.box or "robustness"
+    try:
+        study = load_study(study_file(box))
+    except UsageError as err:
+        raise UsageError(f"--box = {box!r}: {err}") from None
+    runs = robustness.worst_case_runs(scenario, study, args.runs)
+    result = robustness.worst_case(runs, study, poses, args.points, say=say)
+    left = f"; left out (no effect on the linearized loop): {', '.join(result['left_out'])}" if result["left_out"] else ""
+    head = (f"{scenario.name}: worst case of each run over {result['points']} points: the start, {poses} poses along "
+            f"the trajectory, the 8 corners of the envelope and the vertices of the parameter box of {box}{left}")
+    table = robustness.worst_case_table(result)
+    print(head)
+    print(table)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "worst_case.json").write_text(json.dumps(result, indent=1) + "\n")
+    (out / "worst_case.md").write_text(f"{head}\n\n{table}\n")
+    print(f"worst_case.json and worst_case.md in {out}")
     return 0
 
 
@@ -822,6 +855,14 @@ def parser() -> argparse.ArgumentParser:
     an.add_argument("--actuator-bandwidth", type=float, default=None, metavar="HZ",
                     help="also report each run's spectral radius with a first-order actuator (current loop) of "
                     "this bandwidth on every motor")
+    an.add_argument("--worst-case", action="store_true", help="instead: the worst Ms, all-loops gain margin, disk "
+                    "margin and all-motor delay margin of each run over poses along the trajectory, the corners of "
+                    "the envelope and the vertices of a study's parameter box, and where each occurs")
+    an.add_argument("--box", default=None, metavar="STUDY", help="with --worst-case: the study whose uniform "
+                    "Monte Carlo factors span the parameter box (default: the shipped robustness study)")
+    an.add_argument("--poses", type=int, default=None, help="with --worst-case: poses along the trajectory (default 8)")
+    an.add_argument("--runs", default=None, metavar="NAMES", help="with --worst-case: comma-separated runs of "
+                    "`compare` (default: the box study's baselines)")
     an.add_argument("--responses", action="store_true", help="also write frequency_response.csv: magnitude and "
                     "phase of L, S, T and e/d per run and break point at every frequency")
     an.set_defaults(func=cmd_analyze)

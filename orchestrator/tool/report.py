@@ -171,16 +171,16 @@ def robustness_section(runs: dict) -> list[str]:
     """Markdown lines: each run's robustness on the sampled loop of `tapmp check` (tapmp analyze's
     measures, orchestrator.tool.analysis): Ms per mode, disk margins per loop and for all
     motors at once, the all-loops gain margin with the K_T error it covers, the smallest delay margin
-    and the lowest actuator bandwidth. runs: {name: Scenario}."""
+    of one loop, the delay margin of all motors at once and the lowest actuator bandwidth. runs: {name: Scenario}."""
     from . import analysis
     result = {"runs": _analyzed(runs)}
     lines = ["| run | Ms common, diff. Z, diff. B | disk margin per loop: " + ", ".join(analysis.BREAK_POINTS)
              + " | all loops: disk margin (gain dB, phase deg) | all-loops gain margin (K_T error) "
-             "| delay margin [ms] (loop) | lowest actuator bandwidth [Hz] |", "|---" * 7 + "|"]
+             "| " + analysis.DELAY_COLUMNS + " | lowest actuator bandwidth [Hz] |", "|---" * 8 + "|"]
     for run, r in result["runs"].items():
         if r["verdict"] != "stable":
             lines.append(f"| {run} | the closed loop is {r['verdict']} (spectral radius {r['spectral_radius']:.4g}) "
-                         "| - | - | - | - | - |")
+                         "| - | - | - | - | - | - |")
             continue
         cells = analysis.robustness_cells(run, r)
         ms = ", ".join(f"{r['loops'][m]['Ms']:.3f}" for m in ("common", "diff. Z", "diff. B"))
@@ -189,8 +189,9 @@ def robustness_section(runs: dict) -> list[str]:
             "Ms = peak sensitivity at the plant input with one mode open; disk margin alpha (symmetric): any "
             "simultaneous gain in [(2 - alpha)/(2 + alpha), (2 + alpha)/(2 - alpha)] or phase within "
             "+-2 atan(alpha/2) on the opened loops keeps the loop stable; the all-loops gain margin scales all three "
-            "motor forces at once (a K_T error, F = u / K_T); the delay margin is the smallest delay in one loop that "
-            "destabilizes it; the actuator bandwidth is that of a first-order lag on every motor below which the "
+            "motor forces at once (a K_T error, F = u / K_T); the delay margin (loop) is the smallest delay in one loop that "
+            "destabilizes it, the delay margin (all motors) that of one delay on all three motors' forces at once (a "
+            "shared computation delay); the actuator bandwidth is that of a first-order lag on every motor below which the "
             "loop is unstable.", "", *lines]
 
 

@@ -272,3 +272,20 @@ def test_a_negative_delay_or_bandwidth_is_one_line_naming_it(tmp_path, capsys, o
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"error: {option} = {float(value)!r} is invalid: allowed is {allowed}"]
     assert not (tmp_path / "a").exists()
+
+
+@pytest.mark.slow
+def test_the_robustness_table_gives_the_all_motor_delay_margin_beside_the_one_direction_margin():
+    runs = compare_runs(load(ROOT / "scenarios" / "paper_simulation.toml"))
+    result = analysis.analyze(runs["sc-dc"], None, points=40, runs={k: runs[k] for k in ("sc-dc", "apd-dc")},
+                              figures=False)
+    table = analysis.robustness_table(result).splitlines()
+    assert "| delay margin [ms] (loop) | delay margin, all motors [ms] |" in table[0]
+    assert table[1] == "|---" * 7 + "|" and all(len(x.split("|")) == len(table[0].split("|")) for x in table)
+    apd = next(x for x in table if x.startswith("| apd-dc |"))
+    scdc = next(x for x in table if x.startswith("| sc-dc |"))
+    # one delay on every motor at once destabilizes APD-DC sooner than one in its weakest direction
+    assert "| 0.4591 (common) | 0.4551 |" in apd
+    assert "| 0.1802 (diff. Z) | 0.1802 |" in scdc
+    a = result["runs"]["apd-dc"]
+    assert a["all_loops"]["delay_margin_all_s"] < min(x["delay_margin_s"] for x in a["loops"].values())
