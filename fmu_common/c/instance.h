@@ -55,11 +55,13 @@ typedef struct tapmp_instance {
     int event_mode_used;       /* FMI 3.0 co-simulation: the host handles the model's events in Event Mode */
     int early_return_allowed;  /* FMI 3.0 co-simulation: doStep may return early at an event */
     int model_exchange;        /* instantiated for Model Exchange (the host integrates the state) */
-    int me_continuous;         /* Model Exchange after initialization: Continuous-Time Mode (1) or Event Mode (0) */
-    int clock_active;          /* MODEL_CLOCK: the input clock was activated in this Event Mode (fmi3SetClock) */
     int interval_reported;     /* MODEL_CLOCK: fmi3GetInterval* has reported the interval once */
     /* everything below is the FMU state */
     tapmp_mode mode;
+    int me_continuous;         /* Model Exchange after initialization: Continuous-Time Mode (1) or Event Mode (0) */
+    double me_floor;           /* Model Exchange: the last accepted time [s] (initialization, an event or a
+                                * completed integrator step); fmi*SetTime refuses a time before it */
+    int clock_active;          /* MODEL_CLOCK: the input clock was activated in this Event Mode (fmi3SetClock) */
     double time;            /* current communication point [s] */
     int failed;             /* an error was reported: doStep is refused from then on */
     int retune;             /* a tunable parameter changed in Step Mode */
