@@ -9,7 +9,11 @@
  *   finite h > 0 whose end t + h lies after the previous end: time only moves forward;
  *   outputs are computed, checked to be finite and only then published;
  * - an FMU state is checked whole (its mode, settings, outputs and the model's hidden
- *   values, model_check_hidden) before any of it is applied. */
+ *   values, model_check_hidden) before any of it is applied;
+ * - Model Exchange: a continuous state is inside the model's domain (model_me_set_states) and the
+ *   outputs it gives finite, a derivative returned is finite, SetTime never goes before the last
+ *   accepted time; Continuous-Time / Event Mode, that time and a clock's tick are part of the state;
+ * - a clock's tick belongs to its event: EnterStepMode with a tick not handled is an error. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
