@@ -9,7 +9,11 @@
  *   finite h > 0 whose end t + h lies after the previous end: time only moves forward;
  *   outputs are computed, checked to be finite and only then published;
  * - an FMU state is checked whole (its mode, settings, outputs and the model's hidden
- *   values, model_check_hidden) before any of it is applied. */
+ *   values, model_check_hidden) before any of it is applied;
+ * - Model Exchange: a continuous state is inside the model's domain (model_me_set_states) and the
+ *   outputs it gives finite, a derivative returned is finite, SetTime never goes before the last
+ *   accepted time; Continuous-Time / Event Mode, that time and a clock's tick are part of the state;
+ * - a clock's tick belongs to its event: EnterStepMode with a tick not handled is an error. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -405,6 +409,7 @@ int tapmp_enter_event_mode(tapmp_instance *inst)
     if (inst->failed) return tapmp_fail(inst, "%sEnterEventMode refused after an earlier error: %s", inst->fmi,
                                         inst->error);
     inst->mode = MODE_EVENT;
+    inst->clock_active = 0;  /* a tick belongs to the event it was set in: none carries into this one */
     return ST_OK;
 }
 
@@ -446,6 +451,21 @@ int tapmp_update_discrete_states(tapmp_instance *inst, int *values_changed, int 
 int tapmp_enter_step_mode(tapmp_instance *inst)
 {
     if (inst->mode != MODE_EVENT) return tapmp_mode_error(inst, "EnterStepMode", "Event Mode");
+#ifdef MODEL_CLOCK
+    /* A tick set in this event and not handled by fmi3UpdateDiscreteStates is refused, not discarded
+     * with a warning: the tick is the host's order to sample at this instant, so leaving the event
+     * without the sample loses a control sample (the command would hold a period or more), and keeping
+     * it would sample at a later event, at the wrong instant. The error shows the host's omission at
+     * the call that makes it; the tick never outlives its event either way. */
+    if (inst->clock_active) {
+        char v[40];
+        inst->clock_active = 0;
+        return tapmp_fail(inst, "%sEnterStepMode at t = %s s is not allowed: the tick of the clock " MODEL_CLOCK_NAME
+                          " set in this event (%sSetClock) was not handled: allowed is %sUpdateDiscreteStates "
+                          "before leaving Event Mode (a tick belongs to its event)", inst->fmi,
+                          tapmp_repr(inst->time, v), inst->fmi, inst->fmi);
+    }
+#endif
     inst->mode = MODE_STEP;
     return ST_OK;
 }
@@ -585,6 +605,7 @@ int tapmp_terminate(tapmp_instance *inst)
     if (!MODE_RUNNING(inst->mode) && !inst->failed)
         return tapmp_mode_error(inst, "Terminate", inst->event_mode_used ? "Step Mode or Event Mode" : "Step Mode");
     inst->mode = MODE_TERMINATED;
+    inst->clock_active = 0;  /* a tick lives in its event only */
     return ST_OK;
 }
 
@@ -596,6 +617,7 @@ int tapmp_reset(tapmp_instance *inst)
     inst->failed = inst->retune = inst->has_model = inst->dirty = 0;
     inst->error[0] = 0;
     inst->me_continuous = 0;
+    inst->me_floor = 0.0;
     memset(&inst->m, 0, sizeof inst->m);
     for (int vr = 0; vr < N_VARS; vr++) {
         inst->reals[vr] = VARS[vr].type == 'R' ? VARS[vr].start : 0.0;
@@ -774,13 +796,15 @@ struct tapmp_state {
     tapmp_instance copy;
 };
 #define STATE_MAGIC 0x5EA7E001u
-static const char SERIAL_MAGIC[8] = {'T', 'A', 'P', 'M', 'P', 'S', 'T', '1'};
+/* Format 2 adds the Model Exchange mode flag and time floor and the clock's tick: a state of
+ * format 1 has another size and magic and is refused as not this FMU's. */
+static const char SERIAL_MAGIC[8] = {'T', 'A', 'P', 'M', 'P', 'S', 'T', '2'};
 
 typedef struct {
     char magic[8];
     char model[32];
-    int n_vars, n_hidden, mode, failed, retune, has_model;
-    double time;
+    int n_vars, n_hidden, mode, failed, retune, has_model, me_continuous, clock_active;
+    double time, me_floor;
     double reals[N_VARS];
     int ints[N_VARS];
     double hidden[MODEL_N_HIDDEN > 0 ? MODEL_N_HIDDEN : 1];
@@ -880,6 +904,25 @@ static int validate_values(const tapmp_instance *c, char *msg, size_t size)
     }
     if (!isfinite(c->time)) return tapmp_invalid_text(msg, size, "FMU state: time", tapmp_repr(c->time, v),
                                                       "a finite number", 0, 0.0);
+    /* Continuous-Time Mode is a mode of a Model Exchange instance after initialization */
+    if (c->me_continuous && !(c->model_exchange && c->mode == MODE_STEP)) {
+        snprintf(msg, size, "FMU state: Continuous-Time Mode = 1 is invalid in %s of a %s instance: allowed is 0 "
+                 "(only a Model Exchange instance after initialization is in Continuous-Time Mode)",
+                 MODE_NAMES[c->mode], c->model_exchange ? "Model Exchange" : "Co-Simulation");
+        return 0;
+    }
+    if (c->model_exchange && c->mode == MODE_STEP &&
+        !(isfinite(c->me_floor) && c->me_floor <= c->time + time_tolerance(c->time))) {
+        char allowed[96], t[40];
+        snprintf(allowed, sizeof allowed, "a finite time <= the state's time, %s s", tapmp_repr(c->time, t));
+        return tapmp_invalid_text(msg, size, "FMU state: last accepted time", tapmp_repr(c->me_floor, v), allowed,
+                                  0, 0.0);
+    }
+    if (c->clock_active && c->mode != MODE_EVENT) {  /* a tick lives in the event it was set in */
+        snprintf(msg, size, "FMU state: clock tick = 1 is invalid in %s: allowed is 0 (a tick exists only in the "
+                 "Event Mode it was set in)", MODE_NAMES[c->mode]);
+        return 0;
+    }
     for (int vr = 0; vr < N_VARS; vr++)
         if (VARS[vr].type == 'R' && !isfinite(c->reals[vr]))
             return tapmp_invalid_text(msg, size, VARS[vr].name, tapmp_repr(c->reals[vr], v),
@@ -919,6 +962,9 @@ static void apply_state(tapmp_instance *inst, const tapmp_instance *c)
 {
     inst->mode = c->mode;
     inst->time = c->time;
+    inst->me_continuous = c->me_continuous;
+    inst->me_floor = c->me_floor;
+    inst->clock_active = c->clock_active;
     inst->failed = c->failed;
     inst->retune = c->retune;
     inst->has_model = c->has_model;
@@ -975,7 +1021,10 @@ int tapmp_serialize(tapmp_instance *inst, const tapmp_state *state, char *bytes,
     s->failed = c->failed;
     s->retune = c->retune;
     s->has_model = c->has_model;
+    s->me_continuous = c->me_continuous;
+    s->clock_active = c->clock_active;
     s->time = c->time;
+    s->me_floor = c->me_floor;
     memcpy(s->reals, c->reals, sizeof s->reals);
     memcpy(s->ints, c->ints, sizeof s->ints);
     if (c->has_model) model_get_hidden(c, s->hidden);
@@ -1016,7 +1065,10 @@ int tapmp_deserialize(tapmp_instance *inst, const char *bytes, size_t size, tapm
         c->failed = s->failed != 0;
         c->retune = s->retune != 0;
         c->has_model = s->has_model != 0;  /* as claimed: validate_values checks it against the mode */
+        c->me_continuous = s->me_continuous != 0;  /* as claimed: validate_values checks them against the mode */
+        c->clock_active = s->clock_active != 0;
         c->time = s->time;
+        c->me_floor = s->me_floor;
         memcpy(c->reals, s->reals, sizeof c->reals);
         memcpy(c->ints, s->ints, sizeof c->ints);
         s->error[sizeof s->error - 1] = 0;
@@ -1093,6 +1145,7 @@ int tapmp_me_exit_initialization(tapmp_instance *inst)
     char msg[TAPMP_MESSAGE_MAX];
     if (!model_me_check(inst, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
     inst->me_continuous = 0;  /* Model Exchange leaves initialization into Event Mode */
+    inst->me_floor = inst->time;
     return status;
 }
 
@@ -1118,8 +1171,16 @@ int tapmp_me_set_time(tapmp_instance *inst, double time)
 {
     int status = tapmp_me_allowed(inst, "SetTime", ME_AFTER_INIT);
     if (status != ST_OK) return status;
-    char v[40];
+    char v[40], w[40], allowed[200];
     if (!isfinite(time)) return tapmp_invalid(inst, "time", tapmp_repr(time, v), "a finite number", 0);
+    /* An integrator may go back over a step it rejects, but never before the last point it accepted:
+     * the end of initialization, an event, or a completed integrator step (FMI's CompletedIntegratorStep). */
+    double tol = time_tolerance(inst->me_floor);
+    if (time < inst->me_floor - tol) {
+        snprintf(allowed, sizeof allowed, "a time >= %s s, the last accepted time (the end of initialization, an "
+                 "event or a completed integrator step; time only moves forward)", tapmp_repr(inst->me_floor, w));
+        return tapmp_invalid(inst, "time", tapmp_repr(time, v), allowed, 0);
+    }
     inst->time = time;
     return ST_OK;
 }
@@ -1130,7 +1191,14 @@ int tapmp_me_set_states(tapmp_instance *inst, const double x[], size_t nx)
     if (status == ST_OK) status = me_array(inst, "SetContinuousStates", x, nx, MODEL_N_STATES, "nx");
     if (status != ST_OK) return status;
     char msg[TAPMP_MESSAGE_MAX];
+    ModelData before = inst->m;
+    double saved[MODEL_N_OUT];
+    memcpy(saved, inst->reals + MODEL_OUT_FIRST, sizeof saved);
     if (!model_me_set_states(inst, x, msg, sizeof msg)) return tapmp_fail(inst, "%s", msg);
+    if (!outputs_finite(inst, saved, inst->time, msg, sizeof msg)) {  /* the outputs put back; the state too */
+        inst->m = before;
+        return tapmp_fail(inst, "%sSetContinuousStates: %s", inst->fmi, msg);
+    }
     return ST_OK;
 }
 
@@ -1212,14 +1280,20 @@ int tapmp_me_nominals(tapmp_instance *inst, double nominals[], size_t nx)
 int tapmp_me_enter_event_mode(tapmp_instance *inst)
 {
     int status = tapmp_me_allowed(inst, "EnterEventMode", ME_AFTER_INIT);
-    if (status == ST_OK) inst->me_continuous = 0;
+    if (status == ST_OK) {
+        inst->me_continuous = 0;
+        inst->me_floor = inst->time;  /* an event is a point the host accepted */
+    }
     return status;
 }
 
 int tapmp_me_enter_continuous_time_mode(tapmp_instance *inst)
 {
     int status = tapmp_me_allowed(inst, "EnterContinuousTimeMode", ME_EVENT);
-    if (status == ST_OK) inst->me_continuous = 1;
+    if (status == ST_OK) {
+        inst->me_continuous = 1;
+        inst->me_floor = inst->time;
+    }
     return status;
 }
 
@@ -1227,6 +1301,7 @@ int tapmp_me_completed_integrator_step(tapmp_instance *inst, int *enter_event_mo
 {
     int status = tapmp_me_allowed(inst, "CompletedIntegratorStep", ME_CONTINUOUS);
     if (status != ST_OK) return status;
+    inst->me_floor = inst->time;  /* the integrator accepted the step that ends here */
     *enter_event_mode = 0;
     *terminate = 0;
     return ST_OK;

@@ -55,11 +55,13 @@ typedef struct tapmp_instance {
     int event_mode_used;       /* FMI 3.0 co-simulation: the host handles the model's events in Event Mode */
     int early_return_allowed;  /* FMI 3.0 co-simulation: doStep may return early at an event */
     int model_exchange;        /* instantiated for Model Exchange (the host integrates the state) */
-    int me_continuous;         /* Model Exchange after initialization: Continuous-Time Mode (1) or Event Mode (0) */
-    int clock_active;          /* MODEL_CLOCK: the input clock was activated in this Event Mode (fmi3SetClock) */
     int interval_reported;     /* MODEL_CLOCK: fmi3GetInterval* has reported the interval once */
     /* everything below is the FMU state */
     tapmp_mode mode;
+    int me_continuous;         /* Model Exchange after initialization: Continuous-Time Mode (1) or Event Mode (0) */
+    double me_floor;           /* Model Exchange: the last accepted time [s] (initialization, an event or a
+                                * completed integrator step); fmi*SetTime refuses a time before it */
+    int clock_active;          /* MODEL_CLOCK: the input clock was activated in this Event Mode (fmi3SetClock) */
     double time;            /* current communication point [s] */
     int failed;             /* an error was reported: doStep is refused from then on */
     int retune;             /* a tunable parameter changed in Step Mode */
@@ -123,7 +125,8 @@ TAPMP_LINKAGE int tapmp_do_step_events(tapmp_instance *inst, double t, double h,
  * controller). Its value reference is MODEL_CLOCK_VR, its interval model_clock_interval() [s] (a fixed
  * parameter), its shift 0 (ticks at t0 + k interval). Set: only in Event Mode, and only the clock; an
  * activation holds until fmi3UpdateDiscreteStates, where the model samples (model_event_update sees
- * inst->clock_active), and ends there. Interval: read any time after instantiation; set only before
+ * inst->clock_active), and ends there; fmi3EnterStepMode with an activation not handled is an error
+ * (tapmp_enter_step_mode), so no tick outlives its event. Interval: read any time after instantiation; set only before
  * Step Mode and only to the interval the model has. Shift: 0, settable only to 0. */
 #ifdef MODEL_CLOCK
 TAPMP_LINKAGE int tapmp_set_clock(tapmp_instance *inst, const unsigned vr[], size_t n, const int v[]);
@@ -219,7 +222,9 @@ TAPMP_LINKAGE int tapmp_me_allowed(tapmp_instance *inst, const char *call, int m
 /* ExitInitializationMode of a Model Exchange instance: as tapmp_exit_initialization, then the
  * settings checked for Model Exchange (model_me_check); it leaves into Event Mode. */
 TAPMP_LINKAGE int tapmp_me_exit_initialization(tapmp_instance *inst);
-/* SetTime [s]: Event Mode and Continuous-Time Mode. */
+/* SetTime [s]: Event Mode and Continuous-Time Mode; finite and never before inst->me_floor, the last
+ * accepted time (the end of initialization, an event, EnterContinuousTimeMode or CompletedIntegratorStep
+ * sets it): an integrator may go back over a step it rejects, not before the last point it accepted. */
 TAPMP_LINKAGE int tapmp_me_set_time(tapmp_instance *inst, double time);
 /* The continuous state (nx = MODEL_N_STATES values): set (after initialization), get (from
  * Initialization Mode on); their derivatives at the instance's time for the inputs set now. */

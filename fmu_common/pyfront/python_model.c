@@ -98,7 +98,8 @@ static int resources_dir(const char *location, char *path, size_t size, char *wh
 {
     if (location && uri_to_path(location, path, size)) return 1;
     snprintf(why, why_size, "fmuResourceLocation = '%s' is invalid: allowed is a file:// URI of the FMU's "
-             "resources folder (each %% followed by two hex digits, not %%00)", location ? location : "(null)");
+             "resources folder on this machine (file:///path or file://localhost/path; each %% followed by two "
+             "hex digits, not %%00)", location ? location : "(null)");
     return 0;
 }
 

@@ -16,13 +16,15 @@ static int hex_digit(char c)
 
 /* file:///a%20b/ -> /a b/ (RFC 8089 local file URIs, as FMI 2.0 prescribes) into path (size
  * bytes with the terminating zero). 0 for a URI that is malformed (a '%' not followed by two hex
- * digits, or %00: a path cannot hold a zero byte) or whose path is empty or does not fit; the URI
- * is never read past its terminating zero. */
+ * digits, or %00: a path cannot hold a zero byte), that names another host (file://host/x: an
+ * authority other than empty or localhost is a remote file, not the relative path host/x) or whose
+ * path is empty or does not fit; the URI is never read past its terminating zero. */
 static int uri_to_path(const char *uri, char *path, size_t size)
 {
     if (strncmp(uri, "file://", 7) == 0) {
         uri += 7;
         if (strncmp(uri, "localhost/", 10) == 0) uri += 9;
+        else if (*uri != '/') return 0;  /* an authority that is not this machine */
     } else if (strncmp(uri, "file:", 5) == 0) {
         uri += 5;
     }

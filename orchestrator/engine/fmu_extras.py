@@ -424,6 +424,14 @@ piecewise-constant function of the state (quantized to <code>encoder_resolution<
 derivative, so they need no event, and are declared continuous. The measurement noise is drawn once per
 communication step, so <code>noise_rms</code> must be 0 in Model Exchange. OMSimulator picks Model Exchange
 when an FMU offers both (<code>--mode=cs</code> selects the FMU's own RK4).</p>
+<p>What the host sets is checked. A state set by <code>fmi2SetContinuousStates</code> (or an FMU state set) must
+be finite with |X|, |Z| &lt;= 3 m (the initial pose's range [-1, 1] m widened by its 2 m stroke on each side),
+|B| &lt; pi/2 and each rate within what the plant's forces can reach across that domain: 1e3 (the initial
+rates' range) plus sqrt(2 (F/m) D) m/s, F the sum of the force bounds the settings allow, m the lightest body,
+D = 6 m (the message names the bound). Otherwise, and for a derivative or output that is not finite, the call
+is an error naming the state, its value and what is allowed. <code>fmi2SetTime</code> never goes before the
+last accepted time (the end of initialization, an event or a completed integrator step). An FMU state keeps
+Continuous-Time Mode or Event Mode.</p>
 <pre>fmusim --interface-type me --solver cvode --tolerance 1e-10 --stop-time {REFERENCE_STOP!r} --output-interval 1e-4 --output-file out.csv {model}.fmu
 simulate_fmu('{model}.fmu', fmi_type='ModelExchange', solver='CVode', relative_tolerance=1e-10, stop_time={REFERENCE_STOP!r})</pre>
 """

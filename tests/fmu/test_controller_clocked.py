@@ -369,3 +369,75 @@ def test_the_clocked_fmu_carries_its_sources_its_binary_and_the_license(fmus):
             "sources/buildDescription.xml", LICENSE_FILE} <= names
     build = ET.fromstring(zipfile.ZipFile(fmus[CLOCKED]).read("sources/buildDescription.xml"))
     assert {c.get("modelIdentifier") for c in build.iter("BuildConfiguration")} == {CLOCKED}
+
+
+def test_a_tick_not_handled_before_leaving_event_mode_is_refused_and_never_samples_later(fmus, tmp_path):
+    """fmi3SetClock, then fmi3EnterStepMode without fmi3UpdateDiscreteStates: an error naming the tick; the
+    command holds (no sample at this event or any later one)."""
+    r = Host(fmus[CLOCKED], tmp_path)
+    r.start()
+    first = r.outputs()
+    r.slave.doStep(0.0, T_S)
+    r.slave.enterEventMode()
+    r.inputs(T_S)
+    r.slave.setClock([r.vr["sample_clock"]], [True])
+    assert refused(r, r.slave.enterStepMode) == (
+        3, "fmi3EnterStepMode at t = 0.0001 s is not allowed: the tick of the clock sample_clock set in this event "
+           "(fmi3SetClock) was not handled: allowed is fmi3UpdateDiscreteStates before leaving Event Mode (a tick "
+           "belongs to its event)")
+    assert r.slave.getClock([r.vr["sample_clock"]]) == [False]  # the tick is gone
+    assert r.outputs() == first
+    r.slave.freeInstance()
+
+
+def test_an_event_off_the_grid_without_a_tick_is_fine_after_a_tick_handled_at_the_last_instant(fmus, tmp_path):
+    """A tick at t = T_s handled, then an event of another FMU at t = 1.5 T_s (off the grid) with no tick:
+    GetClock is inactive, the update holds the command with OK, and the next tick samples."""
+    r = Host(fmus[CLOCKED], tmp_path)
+    r.start()
+    r.inputs(0.0)
+    r.slave.doStep(0.0, T_S)
+    r.slave.enterEventMode()
+    r.update(T_S)
+    held = r.outputs()
+    r.slave.doStep(T_S, 0.5 * T_S)
+    r.slave.enterEventMode()
+    assert r.slave.getClock([r.vr["sample_clock"]]) == [False]
+    r.update(1.5 * T_S, tick=False)
+    assert r.outputs() == held
+    r.slave.doStep(1.5 * T_S, 0.5 * T_S)
+    r.slave.enterEventMode()
+    r.update(2 * T_S)
+    assert r.outputs() != held and r.log == []
+    r.free()
+
+
+def test_a_tick_is_part_of_the_fmu_state_of_its_event(fmus, tmp_path):
+    """A state got after fmi3SetClock in Event Mode comes back with the tick (the update samples); a
+    state's tick outside Event Mode, crafted into its serialized bytes, is refused."""
+    r = Host(fmus[CLOCKED], tmp_path)
+    r.start()
+    r.inputs(0.0)
+    r.slave.doStep(0.0, T_S)
+    r.slave.enterEventMode()
+    r.inputs(T_S)
+    held = r.outputs()
+    r.slave.setClock([r.vr["sample_clock"]], [True])
+    ticked = r.slave.getFMUState()
+    r.slave.updateDiscreteStates()
+    sampled = r.outputs()
+    assert sampled != held
+    r.slave.setFMUState(ticked)
+    assert r.slave.getClock([r.vr["sample_clock"]]) == [True]
+    r.slave.updateDiscreteStates()
+    assert r.outputs() == sampled
+    r.slave.enterStepMode()
+    from tests.support.fmu_states import SerializedState
+    state = SerializedState(r.slave.serializeFMUState(r.slave.getFMUState()))
+    assert state.header("clock_active") == 0
+    state.set_header("clock_active", 1)
+    with pytest.raises(Exception):
+        r.slave.deserializeFMUState(bytes(state))
+    assert r.log[-1] == (3, "fmi3DeserializeFMUState: FMU state: clock tick = 1 is invalid in Step Mode: allowed is 0 "
+                            "(a tick exists only in the Event Mode it was set in); nothing was changed")
+    r.slave.freeInstance()

@@ -3,12 +3,19 @@ both FMI versions (its sources/all.c in the same translation unit) through arbit
 sequences, and fuzz_states.c hands each FMI 2.0 FMU mutated serialized states (seeded with real
 ones of the model, :func:`state_seeds`) and steps what it accepts, checking every output is
 finite and inside its declared range; built with clang -fsanitize=fuzzer,address,undefined
-(Debian's clang and libclang-rt-14-dev, installed by tests/run.sh).
+(Debian's clang and libclang-rt-14-dev, installed by tests/run.sh). The FMI 3.0 target also drives
+Model Exchange and the clocked controller (fmi3_TAPMP_ControllerClocked), the state target also a
+Model Exchange instance of the plant; both abort (a finding) when a call returns OK with a
+non-finite or out-of-range output, a Model Exchange state outside the plant's domain, or a clock
+tick that outlives its event.
 
 * Every target runs for TAPMP_FUZZ_SECONDS seconds (default 60) with no finding: no
   AddressSanitizer, LeakSanitizer or UndefinedBehaviorSanitizer report, no crash, no timeout.
 * Every input on which the fuzzer found a defect is kept in tests/fmu/fuzz/regressions/<target>/
   and replayed here: each must run clean.
+* tests/fmu/fuzz/seeds/<target>/ holds call sequences that reach the oracle's checks at once (a
+  Model Exchange state of 1.8e308 m, a tick not handled before EnterStepMode): the fuzzer starts
+  from them, and each runs clean.
 
 A finding is kept by libFuzzer in the test's temporary folder; the failure message names the
 file: copy it into tests/fmu/fuzz/regressions/<target>/ when the bug is fixed.
@@ -27,9 +34,11 @@ pytestmark = pytest.mark.slow  # libFuzzer runs each target for TAPMP_FUZZ_SECON
 
 FUZZ = Path(__file__).parent / "fuzz"
 REGRESSIONS = FUZZ / "regressions"
+SEEDS = FUZZ / "seeds"
 FAMILIES = ("fmi2", "fmi3", "states")
 SOURCES = {"fmi2": "fmi2", "fmi3": "fmi3", "states": "fmi2"}  # the FMUs whose sources each target includes
-TARGETS = [f"{family}_{model}" for family in FAMILIES for model in FMU_NAMES]
+CLOCKED = "TAPMP_ControllerClocked"  # FMI 3.0 only
+TARGETS = [f"{family}_{model}" for family in FAMILIES for model in FMU_NAMES] + [f"fmi3_{CLOCKED}"]
 SECONDS = int(os.environ.get("TAPMP_FUZZ_SECONDS", "60"))
 FLAGS = ["-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-fno-sanitize-recover=undefined"]
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "print_stacktrace=1"}
@@ -89,9 +98,23 @@ def finding(output: str) -> bool:
 
 
 def test_every_native_fmu_of_both_versions_has_a_fuzz_target():
-    assert sorted(TARGETS) == sorted(f"{f}_{m}" for f in ("fmi2", "fmi3", "states") for m in
-                                     ("TAPMP_Plant", "TAPMP_Controller", "TAPMP_Trajectory"))
+    assert sorted(TARGETS) == sorted([f"{f}_{m}" for f in ("fmi2", "fmi3", "states") for m in
+                                      ("TAPMP_Plant", "TAPMP_Controller", "TAPMP_Trajectory")]
+                                     + ["fmi3_TAPMP_ControllerClocked"])
     assert {p.name for p in REGRESSIONS.iterdir()} <= set(TARGETS)
+    assert {p.name for p in SEEDS.iterdir()} == {"fmi3_TAPMP_Plant", "fmi3_TAPMP_ControllerClocked"}
+
+
+@pytest.mark.parametrize("target", ["fmi3_TAPMP_Plant", "fmi3_TAPMP_ControllerClocked"])
+def test_the_oracle_seeds_reach_model_exchange_and_the_clock_and_run_clean(fuzz_targets, target):
+    """The seeds call SetContinuousStates(1.8e308, 1.8e308, 0, 0, 0, 0) and SetTime backwards on the
+    plant, and SetClock then EnterStepMode without an update on the clocked controller: the FMUs refuse
+    them, so the oracle, which aborts on an OK with an inf output or a tick left behind, stays quiet."""
+    seeds = sorted((SEEDS / target).iterdir())
+    proc = subprocess.run([str(fuzz_targets[target]), *map(str, seeds)], capture_output=True, text=True,
+                          timeout=300, env=ENV)
+    assert proc.returncode == 0 and not finding(proc.stderr) and "oracle" not in proc.stderr, proc.stderr[-4000:]
+    assert proc.stderr.count("Executed ") == len(seeds)
 
 
 @pytest.mark.parametrize("target", TARGETS)
@@ -121,11 +144,9 @@ def test_the_inputs_the_fuzzer_found_defects_with_stay():
 def test_fuzzing_finds_nothing(fuzz_targets, state_seeds, target, tmp_path):
     corpus = tmp_path / "corpus"
     corpus.mkdir()
-    seeds = REGRESSIONS / target
     args = [str(fuzz_targets[target]), f"-max_total_time={SECONDS}", "-timeout=10", "-rss_limit_mb=2048",
             f"-artifact_prefix={tmp_path}/", "-print_final_stats=1", str(corpus)]
-    if seeds.is_dir():
-        args.append(str(seeds))
+    args += [str(seeds / target) for seeds in (REGRESSIONS, SEEDS) if (seeds / target).is_dir()]
     if target.startswith("states_"):
         args.append(str(state_seeds[target.split("_", 1)[1]]))
     proc = subprocess.run(args, capture_output=True, text=True, timeout=SECONDS + 300, env=ENV)

@@ -4,6 +4,7 @@ states and derivatives are the C model's, the external force step is a time even
 that does not fit is an error with its message. The controller and the trajectory stay
 Co-Simulation only. Third-party integrators on it: tests/interop/test_model_exchange.py."""
 
+import re
 import zipfile
 from pathlib import Path
 from ctypes import POINTER, byref, c_double, c_int, c_void_p
@@ -204,8 +205,7 @@ def test_calls_that_do_not_fit_model_exchange_are_errors_with_their_message(nati
     outside.fmu.enterContinuousTimeMode()
     x, px = array([0.0, 0.0, 2.0, 0.0, 0.0, 0.0])
     assert outside.error(lambda: outside.fmu.setContinuousStates(px, 6)) == (
-        "plant state (X, Z, B, dX, dZ, dB) = (0.0, 0.0, 2.0, 0.0, 0.0, 0.0) at t = 0 s is invalid: allowed is "
-        "finite values with |B| < pi/2 rad")
+        "plant state B = 2.0 at t = 0 s is invalid: allowed is |B| < pi/2 rad (the kinematic domain)")
     stepping = next(fresh)
     stepping.initialize()
     if family == "fmi2":
@@ -285,3 +285,157 @@ def test_the_controller_and_the_trajectory_refuse_model_exchange(native_built, m
         me.instantiate(logMessage=lambda env, status, cat, msg: logged.append(msg.decode()))
     assert logged == [f"fmi3InstantiateModelExchange: {model} is a co-simulation FMU only: allowed is "
                       "fmi3InstantiateCoSimulation"], logged
+
+
+def fresh_plant(native_built, tmp_path, family, name):
+    """A new Model Exchange plant of ``family``, initialized with the defaults, in Continuous-Time Mode."""
+    plant = MEPlant(native_built[family][PLANT], tmp_path / name, family)
+    plant.initialize()
+    plant.fmu.enterContinuousTimeMode()
+    return plant
+
+
+BOUND = re.compile(r"allowed is \|value\| <= (\S+) (m|m/s|rad/s) ")
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+@pytest.mark.parametrize("state, message", [
+    ((1e308, 1e308, 0.0, 0.0, 0.0, 0.0), "plant state X = 1e+308 at t = 0 s is invalid: allowed is |value| <= 3.0 m "
+     "(the platform's domain: the initial pose's range widened by its stroke)"),
+    ((1e154, 0.0, 0.0, 0.0, 0.0, 0.0), "plant state X = 1e+154 at t = 0 s is invalid: allowed is |value| <= 3.0 m "
+     "(the platform's domain: the initial pose's range widened by its stroke)"),
+    ((0.0, -3.5, 0.0, 0.0, 0.0, 0.0), "plant state Z = -3.5 at t = 0 s is invalid: allowed is |value| <= 3.0 m "
+     "(the platform's domain: the initial pose's range widened by its stroke)"),
+    ((0.0, 0.0, 0.0, 1e200, 0.0, 0.0), "plant state dX = 1e+200 at t = 0 s is invalid: allowed is |value| <= {v} m/s "
+     "(the speed the plant's forces can reach across its domain)"),
+    ((0.0, 0.0, 0.0, 0.0, float("nan"), 0.0), "plant state dZ = nan at t = 0 s is invalid: allowed is |value| <= {v} "
+     "m/s (the speed the plant's forces can reach across its domain)"),
+    ((0.0, 0.0, 0.0, 0.0, 0.0, -float("inf")), "plant state dB = -inf at t = 0 s is invalid: allowed is |value| <= "
+     "{w} rad/s (the speed the plant's forces can reach across its domain)"),
+], ids=["X_1e308", "X_1e154", "Z_beyond_the_stroke", "dX_1e200", "dZ_nan", "dB_minus_inf"])
+def test_a_continuous_state_outside_the_domain_is_refused_naming_the_state_and_its_bound(native_built, tmp_path,
+                                                                                      family, state, message):
+    """SetContinuousStates checks each state against the Model Exchange domain (plant.c, me_limits): an error
+    naming the first state outside, its value and its bound; the outputs keep the values they had."""
+    plant = fresh_plant(native_built, tmp_path, family, "u")
+    before = plant.get_real(["q1", "q2", "q3", *STATES])
+    got = plant.error(lambda: plant.fmu.setContinuousStates(array(state)[1], 6))
+    speed = BOUND.search(got)
+    assert got == message.format(v=speed and speed.group(1), w=speed and speed.group(1))
+    assert plant.get_real(["q1", "q2", "q3", *STATES]) == before
+    plant.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+@pytest.mark.parametrize("index", [0, 3, 5], ids=["X", "dX", "dB"])
+def test_a_state_on_its_bound_is_accepted_and_one_past_it_refused(native_built, tmp_path, family, index):
+    """The bound a message names is the domain's edge: the state on it is accepted with finite outputs and
+    derivatives, the next double past it refused."""
+    probe = fresh_plant(native_built, tmp_path, family, "probe")
+    x = np.zeros(6)
+    x[index] = 1e300
+    bound = float(BOUND.search(probe.error(lambda: probe.fmu.setContinuousStates(array(x)[1], 6))).group(1))
+    probe.fmu.freeInstance()
+    assert {0: 3.0 <= bound <= 3.0, 3: 1.1e3 < bound < 1.3e3, 5: 1.6e3 < bound < 1.8e3}[index]  # the defaults
+    on = fresh_plant(native_built, tmp_path, family, "on")
+    x[index] = bound
+    on.fmu.setContinuousStates(array(x)[1], 6)
+    dx, pdx = array(np.zeros(6))
+    on.derivatives(pdx, 6)
+    assert np.all(np.isfinite(dx)) and np.all(np.isfinite(on.get_real(["q1", "q2", "q3", *STATES])))
+    on.fmu.freeInstance()
+    past = fresh_plant(native_built, tmp_path, family, "past")
+    x[index] = np.nextafter(bound, np.inf)
+    with pytest.raises(FMICallException):
+        past.fmu.setContinuousStates(array(x)[1], 6)
+    past.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_setTime_never_goes_before_the_last_accepted_time(native_built, tmp_path, family):
+    """1 -> -1e300 and 1e300 -> -0.5 are refused; an integrator may go back over a step it has not
+    completed (1 -> 0.5), but not before a completed integrator step (0.5 -> 0.4) or an event."""
+    allowed = ("allowed is a time >= {floor} s, the last accepted time (the end of initialization, an event or a "
+               "completed integrator step; time only moves forward) (at t = {now} s)")
+    back = fresh_plant(native_built, tmp_path, family, "back")
+    back.fmu.setTime(1.0)
+    assert back.error(lambda: back.fmu.setTime(-1e300)) == (
+        "time = -1e+300 is invalid: " + allowed.format(floor="0.0", now="1"))
+    back.fmu.freeInstance()
+    far = fresh_plant(native_built, tmp_path, family, "far")
+    far.fmu.setTime(1e300)
+    assert far.error(lambda: far.fmu.setTime(-0.5)) == (
+        "time = -0.5 is invalid: " + allowed.format(floor="0.0", now="1e+300"))
+    far.fmu.freeInstance()
+    retry = fresh_plant(native_built, tmp_path, family, "retry")
+    retry.fmu.setTime(1.0)
+    retry.fmu.setTime(0.5)  # a rejected step tried again, shorter
+    retry.fmu.completedIntegratorStep()
+    assert retry.error(lambda: retry.fmu.setTime(0.4)) == (
+        "time = 0.4 is invalid: " + allowed.format(floor="0.5", now="0.5"))
+    retry.fmu.freeInstance()
+    event = fresh_plant(native_built, tmp_path, family, "event")
+    event.fmu.setTime(0.25)
+    event.fmu.enterEventMode()
+    assert event.error(lambda: event.fmu.setTime(0.2)) == (
+        "time = 0.2 is invalid: " + allowed.format(floor="0.25", now="0.25"))
+    event.fmu.freeInstance()
+
+
+def state_calls(plant):
+    """(get, set, free, serialize, deserialize) of the plant's FMI version."""
+    f = plant.fmu
+    if plant.family == "fmi2":
+        return f.getFMUstate, f.setFMUstate, f.freeFMUstate, f.serializeFMUstate, f.deSerializeFMUstate
+    return f.getFMUState, f.setFMUState, f.freeFMUState, f.serializeFMUState, f.deserializeFMUState
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+@pytest.mark.parametrize("serialized", [False, True], ids=["state", "serialized"])
+def test_an_fmu_state_keeps_continuous_time_mode_and_event_mode(native_built, tmp_path, family, serialized):
+    """A state got in Continuous-Time Mode comes back in Continuous-Time Mode (CompletedIntegratorStep is
+    allowed), one got in Event Mode in Event Mode (it is not); also through its serialized bytes."""
+    plant = fresh_plant(native_built, tmp_path, family, "modes")
+    get, set_, free, serialize, deserialize = state_calls(plant)
+
+    def keep():
+        state = get()
+        if not serialized:
+            return state
+        data = serialize(state)
+        free(state)
+        return deserialize(data)
+    continuous = keep()
+    plant.fmu.enterEventMode()
+    event = keep()
+    set_(continuous)
+    plant.fmu.completedIntegratorStep()  # Continuous-Time Mode again
+    set_(event)
+    assert plant.error(lambda: plant.fmu.completedIntegratorStep()) == (
+        f"{family}CompletedIntegratorStep is not allowed in Event Mode: allowed in Continuous-Time Mode")
+    plant.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_a_serialized_state_claiming_continuous_time_mode_in_co_simulation_is_refused(native_built, tmp_path,
+                                                                                     family):
+    """The flag (tests.support.fmu_states' layout) set to 1 in a Co-Simulation plant's serialized state:
+    refused with a message, nothing changed."""
+    from tests.support.fmu_host import Host
+    from tests.support.fmu_states import SerializedState
+    host = Host(native_built[family][PLANT], tmp_path / "cs", name="cs")
+    host.enter_initialization(0.0)
+    host.fmu.exitInitializationMode()
+    calls = ((host.fmu.getFMUstate, host.fmu.serializeFMUstate, host.fmu.deSerializeFMUstate) if family == "fmi2"
+             else (host.fmu.getFMUState, host.fmu.serializeFMUState, host.fmu.deserializeFMUState))
+    state = SerializedState(calls[1](calls[0]()))
+    assert state.header("me_continuous") == 0
+    state.set_header("me_continuous", 1)
+    with pytest.raises(FMICallException):
+        calls[2](bytes(state))
+    deserialize = "fmi2DeSerializeFMUstate" if family == "fmi2" else "fmi3DeserializeFMUState"
+    assert host.messages[-1][-1] == (
+        f"{deserialize}: FMU state: Continuous-Time Mode = 1 is invalid in Step Mode of a Co-Simulation instance: "
+        "allowed is 0 (only a Model Exchange instance after initialization is in Continuous-Time Mode); nothing was "
+        "changed")
+    host.fmu.freeInstance()

@@ -48,6 +48,9 @@ URIS = {
     "file:///tmp/a%00b": "refused",         # a zero byte cannot be part of a path
     "file:///tmp/a%20b%2F": "/tmp/a b/",
     "file://localhost/tmp/x": "/tmp/x",
+    "file://host/x": "refused",             # another machine's file: was the relative path host/x
+    "file://localhostx/y": "refused",       # not localhost either
+    "file://localhost": "refused",          # this machine, but no path
     "file:/tmp/%c3%a9": "/tmp/\u00e9",
     "file:///" + "a" * 80: "refused",       # longer than the path buffer: refused, not cut
 }
@@ -63,8 +66,10 @@ def test_uri_to_path_refuses_short_escapes_and_never_reads_past_the_end(tmp_path
     assert run.stdout.splitlines() == [f"{uri} -> {path}" for uri, path in URIS.items()]
 
 
-def test_a_malformed_resource_location_is_refused_at_instantiation_with_a_message(built, tmp_path):
-    """The pythonfmu FMU's binary itself, given fmuResourceLocation = 'file:///...%4'."""
+@pytest.mark.parametrize("kind", ["short_escape", "other_host"])
+def test_a_malformed_resource_location_is_refused_at_instantiation_with_a_message(built, tmp_path, kind):
+    """The pythonfmu FMU's binary itself, given fmuResourceLocation = 'file:///...%4' or a URI of the
+    resources folder on another host, 'file://host/...'."""
     import ctypes
 
     from fmpy import extract, read_model_description
@@ -78,9 +83,11 @@ def test_a_malformed_resource_location_is_refused_at_instantiation_with_a_messag
     callbacks = fmi2CallbackFunctions()
     callbacks.logger = fmi2CallbackLoggerTYPE(lambda env, inst, status, cat, msg: messages.append(msg.decode()))
     addLoggerProxy(ctypes.byref(callbacks))
-    location = (tmp_path / "u" / "resources").as_uri() + "%4"
+    location = (tmp_path / "u" / "resources").as_uri()
+    location = location + "%4" if kind == "short_escape" else location.replace("file://", "file://host", 1)
     component = slave.fmi2Instantiate(b"uri", 1, md.guid.encode(), location.encode(), ctypes.byref(callbacks),
                                       0, 0)
     assert not component
     assert any(f"fmuResourceLocation = '{location}' is invalid: allowed is a file:// URI of the FMU's resources "
-               "folder (each % followed by two hex digits, not %00)" in m for m in messages), messages
+               "folder on this machine (file:///path or file://localhost/path; each % followed by two hex digits, "
+               "not %00)" in m for m in messages), messages

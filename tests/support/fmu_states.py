@@ -1,8 +1,10 @@
 """Serialized FMU states of the TAPMP runtime (fmu_common/c/instance.c, serial_layout), read and
 edited field by field, to craft the states a hostile or careless host may hand back.
 
-The layout, in the native byte order: 8 bytes magic, 32 bytes model identifier, the ints n_vars,
-n_hidden, mode, failed, retune, has_model, the double time, the doubles reals[n_vars], the ints
+The layout (format 2, magic TAPMPST2), in the native byte order: 8 bytes magic, 32 bytes model
+identifier, the ints n_vars, n_hidden, mode, failed, retune, has_model, me_continuous (Model Exchange's
+Continuous-Time Mode), clock_active (a tick of the input clock in this event), the doubles time and
+me_floor (Model Exchange's last accepted time), the doubles reals[n_vars], the ints
 ints[n_vars], the doubles hidden[n_hidden] (8-byte aligned) and 1024 bytes of the first error.
 The native models' hidden values are numbers (the plant: X, Z, B, dX, dZ, dB, sample count; the
 controller: integral 1-3, previous q 1-3, has previous q, t0, k_last, has sample, warned); the
@@ -12,7 +14,7 @@ pythonfmu family's are the character codes of its JSON text.
 import json
 import struct
 
-HEADER = ("mode", "failed", "retune", "has_model")
+HEADER = ("mode", "failed", "retune", "has_model", "me_continuous", "clock_active")
 NATIVE_HIDDEN = {
     "TAPMP_Plant": ("X", "Z", "B", "dX", "dZ", "dB", "sample"),
     "TAPMP_Controller": ("integral1", "integral2", "integral3", "q_prev1", "q_prev2", "q_prev3", "has_q_prev",
@@ -26,8 +28,8 @@ class SerializedState:
     def __init__(self, data: bytes):
         self.data = bytearray(data)
         self.n_vars, self.n_hidden = struct.unpack_from("=ii", self.data, 40)
-        self.reals_at = 72
-        self.hidden_at = (72 + 12 * self.n_vars + 7) // 8 * 8
+        self.reals_at = 88
+        self.hidden_at = (88 + 12 * self.n_vars + 7) // 8 * 8
         assert (self.hidden_at + 8 * self.n_hidden + 1024 + 7) // 8 * 8 == len(self.data), "not the runtime's layout"
 
     def __bytes__(self) -> bytes:
