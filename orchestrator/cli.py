@@ -244,8 +244,9 @@ def cmd_analyze(args) -> int:
         if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
             raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
                 "a delay >= 0 s" if key == "--delay" else "a bandwidth > 0 Hz (finite)"))
-    result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
-                     responses=args.responses)
+    with heartbeat() as tell:  # a line per run and step, repeated every 10 s (seconds to minutes)
+        result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
+                         responses=args.responses, say=tell)
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
           "input force, one motor or mode at a time")
     print(table(result))
