@@ -101,8 +101,18 @@ def named_file(name: str, kind: str) -> str:
 
 def scenario_file(name: str) -> str:
     """A scenario argument: a file path, or the name of a scenario shipped with the package
-    (e.g. ``paper_simulation``, found in its scenarios folder); see :func:`named_file`."""
-    return named_file(name, "scenarios")
+    (e.g. ``paper_simulation``, found in its scenarios folder); see :func:`named_file`. A study
+    file (a [study] table) is refused with one line saying to run it with `tapmp study`."""
+    path = named_file(name, "scenarios")
+    from .tool.scenario import tomllib
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return path  # the scenario loader says what is wrong with it
+    if isinstance(data.get("study"), dict):
+        raise UsageError(f"{name} is a study file (it has a [study] table), not a scenario: run it with "
+                         f"tapmp study {name}")
+    return path
 
 
 def study_file(name: str) -> str:

@@ -208,6 +208,16 @@ def _load_run(path: Path, rows=None, window=None) -> dict:
                                            "force_limit": force_limit(path), "horizon": horizon(path)}
 
 
+def not_a_result_folder(path: Path) -> "ResultFolderError":
+    """The one-line error for a result-folder argument ``path`` that is no folder: missing, or a
+    file (a run's results.csv given for its folder: the folder is named)."""
+    allowed = "allowed is a folder written by tapmp run or tapmp compare"
+    if path.is_file():
+        return ResultFolderError(f"result folder {path} is a file, not a folder: {allowed}"
+                                 + (f" (this file's folder is {path.parent})" if path.parent.name else ""))
+    return ResultFolderError(f"result folder {path} does not exist: {allowed}")
+
+
 def load_folder(folder: Path, rows: dict | None = None, show: list[str] | None = None,
                 window: tuple | None = None) -> tuple[str, dict[str, dict]]:
     """(kind, {label: run}) of a result folder, kind "run" or "comparison"; each run is the
@@ -218,8 +228,7 @@ def load_folder(folder: Path, rows: dict | None = None, show: list[str] | None =
     ``window``: (start, stop) [s] of the rows to keep."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise ResultFolderError(f"result folder {folder} does not exist{' (a file)' if folder.exists() else ''}: "
-                                "allowed is a folder written by tapmp run or tapmp compare")
+        raise not_a_result_folder(folder)
     kind = folder_kind(folder)
     if kind == "run":
         paths = {label(folder.name, _run_info(folder).get("law")): folder}
@@ -607,8 +616,7 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
                          "--label per folder, or none (labels from the folder names)")
     for f in folders:
         if not f.is_dir():
-            raise ResultFolderError(f"result folder {f} does not exist{' (a file)' if f.exists() else ''}: "
-                                    "allowed is a folder written by tapmp run or tapmp compare")
+            raise not_a_result_folder(f)
         kind = folder_kind(f)
         if kind is None:
             raise ResultFolderError(f"result folder {f} holds no results of tapmp run or tapmp compare (no "
