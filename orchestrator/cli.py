@@ -564,7 +564,9 @@ def cmd_study(args) -> int:
         print(f"wrote {f}")
     c = s["counts"]
     counts = (f"{c['completed']} completed, {c['diverged']} diverged, {c['failed']} failed"
-              + (f", {c['rejected']} rejected (not stable, not run)" if c["rejected"] else ""))
+              + (f", {c['rejected']} rejected (not stable, not run)" if c["rejected"] else "")
+              + (f"; {s['unstable']} of them unstable by the stability check (flag in study.csv)"
+                 if s.get("unstable") else ""))
     if study.tune:
         for law, r in s["tuning"].items():
             start = f"{r['start']:.4f} um" if r["start"] is not None else "not run (start gains rejected)"
@@ -935,7 +937,8 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--runs", metavar="R1,R2,...", help="runs of a comparison folder to show (folder names, e.g. "
                     "sc-dc,apd-dc,pid-dc-mode-matched, or all)")
     pl.add_argument("--out", help="output folder (default: the folder itself for one folder; "
-                    f"results/plots/<label>_vs_<label>... for several run folders); {RELATIVE}")
+                    "results/plots/<label>_vs_<label>... for several run folders, and for --runs, which leaves "
+                    f"the comparison's own figures as they are); {RELATIVE}")
     pl.add_argument("--svg", action="store_true", help="also write each figure as SVG")
     pl.add_argument("--allow-different-horizons", action="store_true",
                     help="overlay runs of different start time, stop time or step")

@@ -658,8 +658,9 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
                 if isinstance(src, str) and src not in run["columns"]:
                     raise UsageError(f"--signals: {key!r} needs the column {src}, which run {name} did not record")
     figs = {"signals": signals_figure(runs, keys)} if keys else figures(runs)
-    if out is None:
-        out = folders[0] if len(folders) == 1 else default_out(folders, list(runs))
+    if out is None:  # a comparison's chosen runs beside it, not over the comparison's own figures
+        out = (folders[0] if len(folders) == 1 and show is None
+               else default_out(folders, [p.name for p in paths] if show is not None else list(runs)))
     out = Path(out)
     prefix = "run_" if kind == "run" and not keys else ""
     written = []
