@@ -68,6 +68,8 @@ def _run_cases(study: Study, case_list: list, ssp: Path, client, out: Path, resu
     finally:
         table.close()
     wall = time.perf_counter() - start
+    if progress:
+        print(f"{study.name}: the figures -> {out}", file=sys.stderr, flush=True)  # seconds on a loaded machine
     figures = plot_study(out, study, params)
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     # ran, but the stability check finds their sampled loop unstable (study.csv's flag column)
