@@ -48,6 +48,7 @@ from fmpy.validation import validate_fmu
 failed = False
 for fmu in sys.argv[1:]:
     problems = validate_fmu(fmu)
+    print(f"fmpy validate: {fmu}: {'failed' if problems else 'ok'}", flush=True)  # a line per FMU: seconds each
     if problems:
         failed = True
         print(f"fmpy validate failed for {fmu}:", *problems, sep="\n  ", file=sys.stderr)

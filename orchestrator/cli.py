@@ -101,8 +101,18 @@ def named_file(name: str, kind: str) -> str:
 
 def scenario_file(name: str) -> str:
     """A scenario argument: a file path, or the name of a scenario shipped with the package
-    (e.g. ``paper_simulation``, found in its scenarios folder); see :func:`named_file`."""
-    return named_file(name, "scenarios")
+    (e.g. ``paper_simulation``, found in its scenarios folder); see :func:`named_file`. A study
+    file (a [study] table) is refused with one line saying to run it with `tapmp study`."""
+    path = named_file(name, "scenarios")
+    from .tool.scenario import tomllib
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return path  # the scenario loader says what is wrong with it
+    if isinstance(data.get("study"), dict):
+        raise UsageError(f"{name} is a study file (it has a [study] table), not a scenario: run it with "
+                         f"tapmp study {name}")
+    return path
 
 
 def study_file(name: str) -> str:
@@ -249,8 +259,9 @@ def cmd_analyze(args) -> int:
         if v is not None and not (math.isfinite(v) and v >= 0.0 if key == "--delay" else math.isfinite(v) and v > 0.0):
             raise UsageError(f"{key} = {v!r} is invalid: allowed is " + (
                 "a delay >= 0 s" if key == "--delay" else "a bandwidth > 0 Hz (finite)"))
-    result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
-                     responses=args.responses)
+    with heartbeat() as tell:  # a line per run and step, repeated every 10 s (seconds to minutes)
+        result = analyze(scenario, out, args.f_min, args.f_max, args.points, runs=compare_runs(scenario),
+                         responses=args.responses, say=tell)
     print(f"{scenario.name}: the sampled loop (h = {scenario.step:g} s, {scenario.ordering}) broken at the plant "
           "input force, one motor or mode at a time")
     print(table(result))
@@ -586,7 +597,9 @@ def cmd_study(args) -> int:
         print(f"wrote {f}")
     c = s["counts"]
     counts = (f"{c['completed']} completed, {c['diverged']} diverged, {c['failed']} failed"
-              + (f", {c['rejected']} rejected (not stable, not run)" if c["rejected"] else ""))
+              + (f", {c['rejected']} rejected (not stable, not run)" if c["rejected"] else "")
+              + (f"; {s['unstable']} of them unstable by the stability check (flag in study.csv)"
+                 if s.get("unstable") else ""))
     if study.tune:
         for law, r in s["tuning"].items():
             start = f"{r['start']:.4f} um" if r["start"] is not None else "not run (start gains rejected)"
@@ -965,7 +978,8 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--runs", metavar="R1,R2,...", help="runs of a comparison folder to show (folder names, e.g. "
                     "sc-dc,apd-dc,pid-dc-mode-matched, or all)")
     pl.add_argument("--out", help="output folder (default: the folder itself for one folder; "
-                    f"results/plots/<label>_vs_<label>... for several run folders); {RELATIVE}")
+                    "results/plots/<label>_vs_<label>... for several run folders, and for --runs, which leaves "
+                    f"the comparison's own figures as they are); {RELATIVE}")
     pl.add_argument("--svg", action="store_true", help="also write each figure as SVG")
     pl.add_argument("--allow-different-horizons", action="store_true",
                     help="overlay runs of different start time, stop time or step")

@@ -22,14 +22,12 @@ from orchestrator.engine.build import build_all  # noqa: E402
 from tests.support.fmus import LoadedFMU  # noqa: E402
 from tests.support.shared import shared  # noqa: E402
 
-# The compatibility rows (tests/interop/compatibility.py): its check after every test
-pytest_plugins = ("tests.interop.compatibility",)
+# The compatibility rows (tests/interop/compatibility.py): its check after every test; the session's
+# own temporary folder (tests/support/temp_folder.py), which tests/project/test_temp_folder.py measures
+pytest_plugins = ("tests.interop.compatibility", "tests.support.temp_folder")
 
 
 def pytest_configure(config):
-    # the system's temporary folder and what it held before any test (tests/project/test_temp_folder.py)
-    config.system_temp = tempfile.gettempdir()
-    config.system_temp_before = set(os.listdir(config.system_temp))
     config.addinivalue_line("markers", "needs_shared(path, ...): the test needs ../shared/<path> (relative to the "
                                        "repository root); skipped without it, failed without it in CI")
 

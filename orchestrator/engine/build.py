@@ -18,7 +18,10 @@ import site
 import sys
 import sysconfig
 import tempfile
+import threading
+import time
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -231,10 +234,28 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
     return fmu
 
 
-def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
+@contextmanager
+def still_running(log, what: str, every: float = 10.0):
+    """While the block runs, ``log`` a line saying ``what`` is still running (with the seconds
+    since it started) every ``every`` seconds, so a long compile is never silent."""
+    start, done = time.monotonic(), threading.Event()
+
+    def beat():
+        while not done.wait(every):
+            log(f"{what}: still compiling ({time.monotonic() - start:.0f} s)")
+    watcher = threading.Thread(target=beat, daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        done.set()
+        watcher.join()
+
+
+def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print, every: float = 10.0) -> dict[str, Path]:
     """Build the three FMUs, TAPMP.ssp and the closed-loop container FMU into out_dir;
     return their paths by model name (``"ssp"`` for TAPMP.ssp, ``TAPMP_ClosedLoop`` for
-    the container)."""
+    the container). While the compiler runs, a line every ``every`` seconds [s]."""
     from .container import CONTAINER, build_container
     from .ssp import write_ssp
 
@@ -243,7 +264,8 @@ def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print) -> dict[str, Path]:
     paths = {}
     with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:
         log(f"pythonfmu: compiling the FMI front and the three Python bindings ({toolchain.HOST})")
-        binaries = compile_binaries(Path(tmp))
+        with still_running(log, "pythonfmu", every):
+            binaries = compile_binaries(Path(tmp))
         for model in (PLANT, CONTROLLER, TRAJECTORY):
             paths[model] = build_fmu(model, out_dir, binaries)
             log(f"built {paths[model]}")

@@ -288,7 +288,8 @@ def scenario_text(target: str, fit: dict, pred: dict) -> str:
         f"# Base: scenarios/{base_file(target).name} (trajectory, step, horizon); see docs/calibration.md.",
         f"# Gains: Eq. 40 with Lambda_p, Lambda_v x {GAIN_SCALE:g} (= 0.36 / 150); APD-DC reads them by Eq. 41.",
         f"# Fit: least squares on ln(ours/paper) of APD-DC tracking and sync MAE (6 residuals), "
-        f"{fit['evaluations']} co-simulations of {fit['horizon_s']:g} s, {fit['wall_s']:.0f} s wall.",
+        # no wall time here: the file is tracked, and a rerun that finds the same fit leaves it unchanged
+        f"{fit['evaluations']} co-simulations of {fit['horizon_s']:g} s.",
         "#   fitted: " + ", ".join(f"{p.name} = {fit['values'][p.name]:.6g} {p.unit}" for p in PARAMETERS),
         f"#   J = {pred['objective_full']:.4f} on the full {sc.stop_time:g} s ({fit['objective']:.4f} on the fit horizon)",
         f"#   APD-DC tracking MAE [um]: {_fmt(apd['tracking_mae_um'])}  (paper {_fmt(paper['tracking_mae_um'], 2)})",

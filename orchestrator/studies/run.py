@@ -68,7 +68,11 @@ def _run_cases(study: Study, case_list: list, ssp: Path, client, out: Path, resu
     finally:
         table.close()
     wall = time.perf_counter() - start
+    if progress:
+        print(f"{study.name}: the figures -> {out}", file=sys.stderr, flush=True)  # seconds on a loaded machine
     figures = plot_study(out, study, params)
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    # ran, but the stability check finds their sampled loop unstable (study.csv's flag column)
+    unstable = sum("unstable" in str(r.get("flag") or "").split("+") for r in rows)
     return {"out": out, "cases": len(case_list), "ran": len(case_list) - done_before, "counts": counts,
-            "wall_time_s": wall, "figures": figures, "bytes_received": runner.bytes_received}
+            "unstable": unstable, "wall_time_s": wall, "figures": figures, "bytes_received": runner.bytes_received}

@@ -435,15 +435,16 @@ class CaseRunner:
     def run(self, cases: list, reject_unstable: bool = False) -> list:
         """Rows of ``cases`` in their order; cases that have a row already are not run again."""
         from dask.distributed import as_completed
-        from tqdm import tqdm
-
+        from ..tool.progress import Progress
 
         rows = {c["case"]: self.table.rows[c["case"]] for c in cases if c["case"] in self.table.rows}
         todo = [c for c in cases if c["case"] not in rows]
         gain_files = gain_values_of(c["changes"].get("gains_file") for c in todo)
-        bar = tqdm(total=len(cases), initial=len(rows), desc=self.desc, unit="case",
-                   disable=not (self.progress and sys.stderr.isatty()),  # a bar on a terminal only
-                   file=sys.stderr, leave=False)
+        # a bar on a terminal; elsewhere a line as cases complete (each tenth, or any case 10 s after
+        # the last line) and the count again every 10 s while none does
+        bar = Progress(self.desc, "case", len(cases), quiet_s=0.0, every_s=10.0) if self.progress else None
+        if bar is not None:
+            bar(len(rows))
         futures = {}
         try:
             for c in todo:
@@ -469,14 +470,16 @@ class CaseRunner:
                         continue
                     self._record(c, row)
                     rows[c["case"]] = self.table.rows[c["case"]]
-                    bar.update(1)
+                    if bar is not None:
+                        bar.update(1)
         except BaseException as err:
             self._stop(futures, getattr(err, "signum", signal.SIGTERM))
             raise
         finally:
             for fut in futures:
                 fut.cancel()
-            bar.close()
+            if bar is not None:
+                bar.close()
         return [rows.get(c["case"], {"case": c["case"], "status": "interrupted"}) for c in cases]
 
 

@@ -307,16 +307,20 @@ def analyze_loop(split: SplitLoop, freqs: np.ndarray) -> dict:
     return out
 
 
-def analyze_runs(runs: dict, freqs: np.ndarray) -> dict:
-    """{run name: {"law", "spectral_radius", "poles", "loops"}} for the scenarios of ``runs``."""
+def analyze_runs(runs: dict, freqs: np.ndarray, say=None) -> dict:
+    """{run name: {"law", "spectral_radius", "poles", "loops"}} for the scenarios of ``runs``;
+    ``say(line)``, if given, is told each run's step as it starts (seconds each on a long grid)."""
     out = {}
-    for name, sc in runs.items():
+    say = say or (lambda line: None)
+    for i, (name, sc) in enumerate(runs.items(), 1):
         split = SplitLoop(sc)
         rho = float(max(abs(linalg.eigvals(split.closed_loop()))))
         verdict = verdict_for(rho)
+        say(f"analyze: run {i}/{len(runs)} {name}: the loop at {len(freqs)} frequencies per break point")
         loops = analyze_loop(split, freqs)
         every = None
         if verdict == "stable":
+            say(f"analyze: run {i}/{len(runs)} {name}: disk, gain and delay margins and the actuator bandwidth")
             rob = robustness(split, freqs)
             for b, x in rob["loops"].items():
                 loops[b].update(x)
@@ -448,27 +452,29 @@ def write_responses(result: dict, path: Path) -> Path:
 
 def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: float | None = None,
             points: int = POINTS, runs: dict | None = None, figures: bool = True,
-            responses: bool = False) -> dict:
+            responses: bool = False, say=None) -> dict:
     """Analyze the sampled loops of ``runs`` ({name: Scenario}; `tapmp analyze` passes SC-DC and the
     baselines of `tapmp compare`, None: the scenario alone under its own law) at the scenario's step.
 
     Returns {"scenario", "h", "nyquist_hz", "frequencies_hz", "runs"} (each break point's complex
     responses under "response"); with ``out`` writes out/analysis.json (everything but the
     responses), the Bode figures (``figures``) and frequency_response.csv (``responses``),
-    listed under "files".
+    listed under "files". ``say(line)``: progress, a line as each run's step starts.
     """
     freqs = frequency_grid(scenario.step, f_min, f_max, points)
     runs = {scenario.law: scenario} if runs is None else runs
     result = {"scenario": scenario.name, "h": scenario.step, "nyquist_hz": 0.5 / scenario.step,
               "ordering": scenario.ordering, "break": "plant input force, one direction at a time, the others "
               "closed; L = -y_v / w_v (negative feedback)",
-              "frequencies_hz": freqs, "runs": analyze_runs(runs, freqs)}
+              "frequencies_hz": freqs, "runs": analyze_runs(runs, freqs, say)}
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         files = []
         if figures:
             from .analysis_plots import plot_analysis
+            if say:
+                say(f"analyze: the figures -> {out}")
             files = [str(p) for p in plot_analysis(result, out)]
         if responses:
             files.append(str(write_responses(result, out / "frequency_response.csv")))

@@ -208,6 +208,16 @@ def _load_run(path: Path, rows=None, window=None) -> dict:
                                            "force_limit": force_limit(path), "horizon": horizon(path)}
 
 
+def not_a_result_folder(path: Path) -> "ResultFolderError":
+    """The one-line error for a result-folder argument ``path`` that is no folder: missing, or a
+    file (a run's results.csv given for its folder: the folder is named)."""
+    allowed = "allowed is a folder written by tapmp run or tapmp compare"
+    if path.is_file():
+        return ResultFolderError(f"result folder {path} is a file, not a folder: {allowed}"
+                                 + (f" (this file's folder is {path.parent})" if path.parent.name else ""))
+    return ResultFolderError(f"result folder {path} does not exist: {allowed}")
+
+
 def load_folder(folder: Path, rows: dict | None = None, show: list[str] | None = None,
                 window: tuple | None = None) -> tuple[str, dict[str, dict]]:
     """(kind, {label: run}) of a result folder, kind "run" or "comparison"; each run is the
@@ -218,8 +228,7 @@ def load_folder(folder: Path, rows: dict | None = None, show: list[str] | None =
     ``window``: (start, stop) [s] of the rows to keep."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise ResultFolderError(f"result folder {folder} does not exist{' (a file)' if folder.exists() else ''}: "
-                                "allowed is a folder written by tapmp run or tapmp compare")
+        raise not_a_result_folder(folder)
     kind = folder_kind(folder)
     if kind == "run":
         paths = {label(folder.name, _run_info(folder).get("law")): folder}
@@ -607,8 +616,7 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
                          "--label per folder, or none (labels from the folder names)")
     for f in folders:
         if not f.is_dir():
-            raise ResultFolderError(f"result folder {f} does not exist{' (a file)' if f.exists() else ''}: "
-                                    "allowed is a folder written by tapmp run or tapmp compare")
+            raise not_a_result_folder(f)
         kind = folder_kind(f)
         if kind is None:
             raise ResultFolderError(f"result folder {f} holds no results of tapmp run or tapmp compare (no "
@@ -650,8 +658,9 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
                 if isinstance(src, str) and src not in run["columns"]:
                     raise UsageError(f"--signals: {key!r} needs the column {src}, which run {name} did not record")
     figs = {"signals": signals_figure(runs, keys)} if keys else figures(runs)
-    if out is None:
-        out = folders[0] if len(folders) == 1 else default_out(folders, list(runs))
+    if out is None:  # a comparison's chosen runs beside it, not over the comparison's own figures
+        out = (folders[0] if len(folders) == 1 and show is None
+               else default_out(folders, [p.name for p in paths] if show is not None else list(runs)))
     out = Path(out)
     prefix = "run_" if kind == "run" and not keys else ""
     written = []

@@ -76,14 +76,16 @@ def _raise(record: dict):
 
 
 _CANCEL = None  # in a worker: the parent's event "start no more runs"
+_SHARES = None  # in a worker: the parent's array of each run's share done (0 to 1), for its progress
 
 
-def _worker_init(cancel) -> None:
-    """A worker keeps the parent's cancel event. Stop signals reach its run through the command
-    line's handler, which the forked worker inherits (an idle worker ignores them). FMUs the
-    parent kept loaded stay the parent's: the worker loads its own."""
-    global _CANCEL
-    _CANCEL = cancel
+def _worker_init(cancel, shares=None) -> None:
+    """A worker keeps the parent's cancel event (and the array its runs' shares done go into).
+    Stop signals reach its run through the command line's handler, which the forked worker
+    inherits (an idle worker ignores them). FMUs the parent kept loaded stay the parent's: the
+    worker loads its own."""
+    global _CANCEL, _SHARES
+    _CANCEL, _SHARES = cancel, shares
     from ..engine.loaded import forget_process_fmus
     forget_process_fmus()
 
@@ -117,6 +119,13 @@ def run_one(scenario, ssp, out, keep: bool, progress=None, held: bool = False) -
         import numpy as np
         rows = np.vstack(rows)
     return {"metrics": metrics, "rows": rows if keep and len(rows) else None}
+
+
+def _run_shared(index: int, scenario, ssp, out, keep: bool) -> dict:
+    """run_one in a pool's worker, its share of steps done going into the parent's array at ``index``."""
+    def share(done, total):
+        _SHARES[index] = done / total if total else 1.0
+    return run_one(scenario, ssp, out, keep, share if _SHARES is not None else None, True)
 
 
 def run_many(tasks: dict, jobs: int, keep=True, progress=None, label: str = "", first=(),
@@ -156,23 +165,29 @@ def _run_many(tasks: dict, jobs: int, keep, progress, label: str, first=(), on_r
                 on_record(name, records[name])
         return records
     bar = None
+    context = get_context("fork")
+    # the runs' shares of steps done, written by the workers: the progress moves with the runs' steps
+    shares = context.Array("d", len(tasks), lock=False)
     if progress:
         from .progress import Progress  # a bar on a terminal only
-        bar = Progress(f"{label} runs", "run", len(tasks))
-    context = get_context("fork")
+        bar = Progress(f"{label} runs", "run", len(tasks), every_s=10.0, count=lambda: round(sum(shares), 1))
     cancel = context.Event()  # queued runs that a worker has already taken must not start either
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context,
-                               initializer=_worker_init, initargs=(cancel,))
+                               initializer=_worker_init, initargs=(cancel, shares))
     order = [n for n in first if n in tasks] + [n for n in tasks if n not in first]
-    futures = {pool.submit(run_one, *tasks[name][:3], name in kept, None, True): name for name in order}
+    index = {name: i for i, name in enumerate(tasks)}
+    futures = {pool.submit(_run_shared, index[name], *tasks[name][:3], name in kept): name for name in order}
     try:
         pending = set(futures)
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED, timeout=0.2)
+            if bar is not None:
+                bar(round(sum(shares), 1))
             for f in done:
                 record = records[futures[f]] = f.result()
                 if bar is not None:
-                    bar.update(1)
+                    shares[index[futures[f]]] = 1.0  # a failed or skipped run is done too
+                    bar(round(sum(shares), 1))
                 if "error" in record:
                     cancel.set()
                     for p in pending:

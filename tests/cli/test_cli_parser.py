@@ -104,6 +104,15 @@ def test_a_shipped_study_is_found_by_name_like_a_shipped_scenario(tmp_path):
     assert res.returncode == 0 and res.stdout.startswith("paper_simulation: "), res.stderr
 
 
+@pytest.mark.parametrize("command", ["check", "run", "analyze"])
+def test_a_study_file_given_as_a_scenario_says_to_run_it_with_tapmp_study(tmp_path, command):
+    study = data_dir("studies") / "gain_sweep.toml"
+    res = _tapmp(command, str(study), cwd=tmp_path)
+    assert (res.returncode, res.stdout) == (2, "")
+    assert res.stderr == (f"error: {study} is a study file (it has a [study] table), not a scenario: run it with "
+                          f"tapmp study {study}\n")
+
+
 def test_check_prints_a_growth_factor_just_above_1_with_the_digits_that_show_it(tmp_path):
     # Theorem 1's counterexample at a 1 us step: the worst mode grows by about 2e-5 per step
     from tests.paper.test_theorem1 import COUNTER

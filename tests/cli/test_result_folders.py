@@ -136,8 +136,12 @@ def test_plot_writes_only_the_figures_of_the_folders_kind(built, tmp_path, capsy
 
 def test_plot_of_a_missing_or_empty_folder_is_one_line_exit_2(tmp_path):
     (tmp_path / "empty").mkdir()
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "results.csv").write_text("time\n0\n")
     cases = {"results/nope": "error: result folder results/nope does not exist: allowed is a folder written by "
                              "tapmp run or tapmp compare\n",
+             "run/results.csv": "error: result folder run/results.csv is a file, not a folder: allowed is a folder "
+                                "written by tapmp run or tapmp compare (this file's folder is run)\n",
              "empty": "error: result folder empty holds no results of tapmp run or tapmp compare (no run.json, "
                       "comparison.json or run folders)\n"}
     for folder, message in cases.items():

@@ -196,6 +196,7 @@ def test_documentation_lists_every_variable_and_the_license_is_the_repositorys(h
         assert member(fmu, "documentation/licenses/license.txt") == (ROOT / "LICENSE").read_bytes()
 
 
+@pytest.mark.slow  # starts chromium twice; the fast subset's run of tests/run.sh does not install it
 def test_documentation_renders_in_headless_chromium_with_every_image(host_built, tmp_path):
     """Chromium prints the page's DOM after load: every <img> has its natural size (an image
     that is missing or broken has naturalWidth 0), and the screenshot is not blank."""

@@ -1,6 +1,6 @@
 """The README's short tour, run as typed in a fresh clone of the repository (shorter horizons:
 the runs with --set stop_time=0.05, reproduce on copies of the paper scenarios cut to 0.02 s),
-leaves `git status` empty: every command writes under ignored folders. Only
+leaves `git status` empty: every command writes under ignored folders; it runs again as typed. Only
 `tapmp reproduce --write-docs` changes a tracked file, docs/paper-reproduction.md."""
 
 import os
@@ -75,6 +75,13 @@ def test_the_readme_tour_leaves_a_fresh_clone_clean_and_write_docs_changes_only_
         res = subprocess.run(_short(cmd, short), cwd=repo, env=env, capture_output=True, text=True, timeout=900)
         assert res.returncode == (1 if cmd[1] == "check" else 0), (cmd, res.stderr)  # paper gains: unstable
         assert _porcelain(repo) == [], cmd
+    # the tour runs again as typed (each line replaces what it wrote), the reproduction aside (its
+    # --overwrite replaces its own comparisons: tests/cli/test_cli_commands.py)
+    for cmd in tour_commands():
+        if cmd[1] != "reproduce":
+            res = subprocess.run(_short(cmd, short), cwd=repo, env=env, capture_output=True, text=True, timeout=900)
+            assert res.returncode == (1 if cmd[1] == "check" else 0), ("again", cmd, res.stderr)
+    assert _porcelain(repo) == []
     page = repo / "results" / "paper-reproduction.md"
     assert page.read_text().startswith("# Reproducing the paper's Tables 1-6")
     assert "0.02 s at a 0.0001 s step" in page.read_text()

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.engine import build_native
+from orchestrator.engine.build import build_all
 from tapmp import toolchain
 
 pytestmark = pytest.mark.slow  # a clone, a build, child processes
@@ -54,6 +55,22 @@ def test_the_quick_start_builds_in_a_fresh_clone_with_empty_caches_saying_what_i
     assert sorted(p.name for p in cache.glob("tapmp_model_*.so")), "the C model was compiled into the empty cache"
     for family in ("fmi2", "fmi3"):
         assert (repo / "build" / "native" / family / "TAPMP.ssp").is_file()
+
+
+def test_the_pythonfmu_compile_says_it_is_still_compiling_while_it_runs(tmp_path, monkeypatch):
+    # every compile of the pythonfmu binaries waits 2 s: a line at least every second meanwhile
+    slow = tmp_path / "slow-cc"
+    zig = " ".join(toolchain.zig_command())
+    slow.write_text(f"#!/bin/sh\nsleep 2\nexec {zig} -target x86_64-linux-gnu.2.17 \"$@\"\n")
+    slow.chmod(0o755)
+    monkeypatch.setenv("CC", str(slow))
+    lines = []
+    paths = build_all(tmp_path / "fmus", lines.append, every=1.0)
+    assert paths["ssp"].is_file()
+    start = lines.index(next(line for line in lines if line.startswith("pythonfmu: compiling ")))
+    beats = [line for line in lines if line.startswith("pythonfmu: still compiling (")]
+    assert len(beats) >= 4 and lines[start + 1].startswith("pythonfmu: still compiling ("), lines
+    assert all(lines.index(b) < lines.index(next(x for x in lines if x.startswith("built "))) for b in beats)
 
 
 def test_a_compile_longer_than_the_interval_is_reported_while_it_runs(tmp_path, monkeypatch):

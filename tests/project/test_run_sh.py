@@ -14,7 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev", "chromium"]  # libFuzzer and the sanitizers; the FMU docs' renderer
 PACKAGES = ["libtbb12", "wine64", "qemu-user", "libc6-arm64-cross", "libminizip1", "libxml2", *FUZZ_PACKAGES]
-TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod")  # the real programs the script and stand-ins use
+TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod", "sleep")  # the real programs the script and stand-ins use
 
 STANDINS = {
     "dpkg": '[ "$1" = -s ] || exit 2\ncase " $INSTALLED " in *" $2 "*) exit 0;; esac\nexit 1\n',
@@ -27,13 +27,16 @@ STANDINS = {
                'echo "python3 $* in $PWD" >> "$LOG"\nmkdir -p .venv/bin\n'
                'printf \'#!/bin/bash\\necho "pip $*" >> "$LOG"\\n\' > .venv/bin/pip\n'
                'printf \'#!/bin/bash\\necho "python $*" >> "$LOG"\\nexit 7\\n\' > .venv/bin/python\n'
-               'chmod +x .venv/bin/pip .venv/bin/python\n',
+               'chmod +x .venv/bin/pip .venv/bin/python\n'
+               'if [ -n "$VENV_SECONDS" ]; then sleep "$VENV_SECONDS"; fi\n',
 }
 
 
-def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once=False, args=(), headers=True):
+def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once=False, args=(), headers=True,
+           venv_seconds=None, heartbeat_s=None):
     """Run a copy of tests/run.sh; returns (exit code, stderr, lines of the command log).
-    ``headers``: whether the stand-in python3's include folder holds Python.h."""
+    ``headers``: whether the stand-in python3's include folder holds Python.h; ``venv_seconds``: how
+    long its venv creation takes; ``heartbeat_s``: TAPMP_HEARTBEAT_S."""
     repo, bin_dir, log = tmp_path / "repo", tmp_path / "bin", tmp_path / "log"
     include = tmp_path / "include"
     include.mkdir()
@@ -52,6 +55,10 @@ def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once
     log.write_text("")
     env = {"PATH": str(bin_dir), "LOG": str(log), "INSTALLED": " ".join(installed), "STANDIN_UID": str(uid),
            "APT_FAILS_ONCE": "1" if apt_fails_once else "", "HOME": str(tmp_path), "PYTHON_INCLUDE": str(include)}
+    if venv_seconds is not None:
+        env["VENV_SECONDS"] = str(venv_seconds)
+    if heartbeat_s is not None:
+        env["TAPMP_HEARTBEAT_S"] = str(heartbeat_s)
     res = subprocess.run([str(bin_dir / "bash"), str(repo / "tests" / "run.sh"), *args], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=60)
     return res.returncode, res.stderr, log.read_text().splitlines()
@@ -101,6 +108,36 @@ def test_a_user_without_sudo_gets_one_line_naming_the_packages_and_nothing_runs(
     assert code == 1 and log == []
     assert err == ("tests/run.sh: the Debian packages libtbb12 wine64 libminizip1 libxml2 are missing and this user is not root and "
                    "has no sudo: install them as root (apt-get install libtbb12 wine64 libminizip1 libxml2) and run this again\n")
+
+
+def test_the_fast_subset_does_not_install_chromium(tmp_path):
+    code, err, log = run_sh(tmp_path, installed=[], args=("-m", "not slow"))
+    assert code == 7, err
+    assert log[0] == f"apt-get install -y {' '.join(p for p in PACKAGES if p != 'chromium')} [noninteractive]"
+
+
+def test_every_setup_step_says_what_it_starts_and_when_it_is_done(tmp_path):
+    code, err, log = run_sh(tmp_path, installed=["wine64"], args=("-k", "ssp"))
+    assert code == 7, err
+    said = [line.split(": done in ")[0] + (": done" if ": done in " in line else "") for line in err.splitlines()]
+    missing = " ".join(p for p in PACKAGES if p != "wine64")
+    assert said == [f"tests/run.sh: installing the Debian packages {missing} (apt-get)",
+                    f"tests/run.sh: installing the Debian packages {missing} (apt-get): done",
+                    "tests/run.sh: creating .venv (python3 -m venv)",
+                    "tests/run.sh: creating .venv (python3 -m venv): done",
+                    *[line for line in said if "pip install" in line],
+                    "tests/run.sh: running the tests (pytest -q -k ssp)"]
+    assert len([line for line in said if "pip install" in line]) == 2
+
+
+def test_a_long_setup_step_repeats_its_line_while_it_runs(tmp_path):
+    # a venv creation of 3 s with a heartbeat every second: its line again, with the seconds so far
+    code, err, log = run_sh(tmp_path, venv_seconds=3, heartbeat_s=1)
+    assert code == 7, err
+    beats = [line for line in err.splitlines() if line.startswith("tests/run.sh: creating .venv (python3 -m venv) "
+                                                                 "(still running, ")]
+    assert beats and all(line.endswith(" s)") for line in beats), err
+    assert log == the_tests(tmp_path / "repo", "")  # the heartbeat ends with the step
 
 
 @pytest.mark.parametrize("path", ["README.md", ".ci/run"])

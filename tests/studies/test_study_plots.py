@@ -37,12 +37,15 @@ def client():
     close_client(c)
 
 
+SUMMARIES = {}  # study name: what run_study returned
+
+
 def run(folder: Path, name: str, text: str, ssp, client):
     path = folder / f"{name}.toml"
     path.write_text(f'[study]\nname = "{name}"\nbase = "{BASE}"\noutput = "{folder / name}"\n[set]\n'
                     f'stop_time = 0.01\n{text}')
     study = load_study(path)
-    run_study(study, ssp, client, progress=False)
+    SUMMARIES[name] = run_study(study, ssp, client, progress=False)
     return folder / name, study
 
 
@@ -80,6 +83,7 @@ def test_sweep_axes_carry_units_and_cell_labels_stay_inside_their_cells(sweep):
     assert (out / "sweep.png").stat().st_size > 10_000
     rows = read_study_csv(out / "study.csv")
     assert [r["flag"] for r in rows if r["flag"]] == ["unstable+saturated"] * 2
+    assert SUMMARIES["s"]["unstable"] == 2  # the summary line counts them (`tapmp study` prints it)
     (path, fig), = study_figures(out, study).items()
     assert path == out / "sweep.png"
     renderer = fig.canvas.get_renderer()

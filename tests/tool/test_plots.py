@@ -183,9 +183,13 @@ def test_a_comparison_shows_sc_dc_apd_dc_and_the_better_fair_baseline_by_default
     assert all((comparison / n / "metrics.json").is_file() for n in names)
 
 
-def test_plot_writes_pngs_of_the_chosen_runs(comparison, capsys):
+def test_plot_writes_pngs_of_the_chosen_runs_beside_the_comparisons_own(comparison, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    own = {p.name: p.read_bytes() for p in comparison.glob("*.png")}
     assert main(["plot", str(comparison), "--runs", "sc-dc,pid-dc-mode-matched", "--svg"]) == 0
     written = capsys.readouterr().out.split()
+    assert {p.name: p.read_bytes() for p in comparison.glob("*.png")} == own  # the comparison's figures stay
+    assert all(Path(w).parent == Path("results/plots/sc-dc_vs_pid-dc-mode-matched") for w in written if "." in w)
     pngs = [Path(w) for w in written if w.endswith(".png")]
     svgs = [Path(w) for w in written if w.endswith(".svg")]
     assert len(pngs) == 5 and all(p.stat().st_size > 10000 and p.read_bytes()[:4] == b"\x89PNG" for p in pngs)

@@ -14,8 +14,8 @@ import sys
 import pytest
 
 from tests.support.runs import PAPER
-from orchestrator.tool.estimate import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_STEP, DiskSpaceError,
-                                               check_output_size, output_estimate, recorded_rows)
+from orchestrator.tool.estimate import (BYTES_PER_VALUE, RECORDED_COLUMNS, SECONDS_PER_ROW, SECONDS_PER_STEP,
+                                        DiskSpaceError, check_output_size, output_estimate, recorded_rows)
 from orchestrator.tool.reading import read_results
 from orchestrator.tool.scenario import load
 
@@ -51,7 +51,7 @@ def test_the_estimate_matches_the_files_a_run_writes(built, tmp_path, fmt, every
     size = (out / f"results.{fmt}").stat().st_size
     estimate, seconds = output_estimate([sc])
     assert estimate == recorded_rows(sc) * RECORDED_COLUMNS * BYTES_PER_VALUE[fmt]
-    assert seconds == pytest.approx(500 * SECONDS_PER_STEP)
+    assert seconds == pytest.approx(500 * SECONDS_PER_STEP + recorded_rows(sc) * SECONDS_PER_ROW)
     assert 0.8 < size / estimate < 1.25, (size, estimate)
 
 
@@ -81,9 +81,13 @@ def test_the_estimate_is_printed_above_100_mb_and_warned_about_above_1_gb(tmp_pa
         text = stream.getvalue().splitlines()
         assert len(text) == lines
         if lines:
-            assert text[0] == (f"paper_simulation: about {size / 1e6 if size < 1e9 else size / 1e9:.3g} "
-                               f"{'MB' if size < 1e9 else 'GB'} of results ({rows} rows x 40 columns, csv) and about "
-                               f"{sc.n_steps * SECONDS_PER_STEP:.0f} s of runs")
+            assert text[0].startswith(f"paper_simulation: about {size / 1e6 if size < 1e9 else size / 1e9:.3g} "
+                                      f"{'MB' if size < 1e9 else 'GB'} of results ({rows} rows x 40 columns, csv) "
+                                      "and about ")
+            # the CPU time, and the wall time it takes on this machine's CPUs at its load (one process)
+            cpu = sc.n_steps * SECONDS_PER_STEP + rows * SECONDS_PER_ROW
+            assert re.fullmatch(rf".* \d+ s of runs \(1 process\(es\) on {os.cpu_count()} CPU\(s\) at a load of "
+                                rf"[\d.]+, {cpu:.0f} s of CPU\)", text[0]), text[0]
         if lines == 2:
             assert text[1].startswith("warning: paper_simulation: the results will take about 1.68 GB of ")
     assert not (tmp_path / "out").exists()
