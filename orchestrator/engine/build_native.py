@@ -519,7 +519,11 @@ def write_clocked_ssp(path: Path, fmus: dict) -> Path:
     only in Event Mode)."""
     from .ssp import system_structure
     path = Path(path)
-    ssd = system_structure().replace(f'source="resources/{CONTROLLER}.fmu"'.encode(),
+    note = ("The TAPMP closed loop with the clocked controller (FMI 3.0): run it with Event Mode, activating the "
+            f"controller's input clock {CLOCK_NAME} at every tick (tapmp run --set event_mode=true; FMPy's FMI 3.0 "
+            "API: the TAPMP repository's examples/clocked_fmpy_host.py). Tools that do not tick input clocks "
+            "(OMSimulator 3.0.0, fmusim, FMPy's simulate_fmu) cannot run it: use TAPMP.ssp.")
+    ssd = system_structure(description=note).replace(f'source="resources/{CONTROLLER}.fmu"'.encode(),
                                      f'source="resources/{CLOCKED}.fmu"'.encode(), 1)
     tmp = path.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
@@ -764,7 +768,7 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     Binaries for every platform of toolchain.PLATFORMS (``platforms`` to choose; ``windows=False``
     keeps the host's x86_64-linux alone). Returns {family: {model or "ssp": path}}.
     """
-    from .ssp import write_ssp
+    from .ssp import FMI3_NOTE, write_ssp
 
     if platforms is None:
         platforms = ALL_PLATFORMS if windows is not False else (toolchain.HOST,)
@@ -791,7 +795,7 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
                  for model in FMU_NAMES}
         for model in FMU_NAMES:
             log(f"built {paths[model]}")
-        paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths)
+        paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths, FMI3_NOTE if family == "fmi3" else None)
         log(f"wrote {paths['ssp']}")
         if family == "fmi3":
             paths[CLOCKED] = build_clocked_controller(folder, platforms, built[(CLOCKED, family)], stimulus)

@@ -4,12 +4,15 @@ types it, gives `tapmp run` of the paper scenario on TAPMP_Clocked.ssp bit for b
 element at all 25,001 ticks."""
 
 import csv
+import signal
 import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from orchestrator.cli import main
+from tests.interop import compatibility
 from tests.support.native_fmi3_runs import fmi3  # noqa: F401 (a fixture)
 from tests.support.runs import PAPER
 from tests.support.shared import ROOT
@@ -23,7 +26,8 @@ def read(path):
     return rows[0], np.array([[float(x) for x in r] for r in rows[1:]])
 
 
-def test_the_fmpy_clocked_host_example_equals_tapmp_run_on_the_clocked_ssp_bit_for_bit(fmi3, tmp_path):  # noqa: F811
+def test_the_fmpy_clocked_host_example_equals_tapmp_run_on_the_clocked_ssp_bit_for_bit(fmi3, tmp_path,  # noqa: F811
+                                                                                      request):
     ssp = fmi3["clocked_ssp"]
     done = subprocess.run([sys.executable, str(EXAMPLE), str(ssp), "--stop-time", "2.5", "--out",
                            str(tmp_path / "clocked_fmpy.csv")], capture_output=True, text=True, timeout=900,
@@ -39,6 +43,35 @@ def test_the_fmpy_clocked_host_example_equals_tapmp_run_on_the_clocked_ssp_bit_f
     np.testing.assert_array_equal(rows, expected)
     forces = [names.index(f"controller.F{i}") for i in (1, 2, 3)]
     assert len(np.unique(rows[:, forces[0]])) > 1000  # the clock ticks: the command changes
+    compatibility.record(
+        request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="3.0", interface="CS, input clock",
+        command="python examples/clocked_fmpy_host.py native/fmi3/TAPMP_Clocked.ssp --stop-time 2.5 (fmpy.fmi3."
+                "FMU3Slave: enterEventMode, setClock, updateDiscreteStates, enterStepMode, doStep at every tick)",
+        difference=compatibility.difference(float(np.abs(rows - expected).max()), "",
+                                            "tapmp run, event_mode = true (every output, 25,001 ticks)"))
+
+
+@pytest.mark.needs_shared("tools/OMSimulator/bin/OMSimulator")
+def test_omsimulator_refuses_the_clocked_ssp_and_aborts(fmi3, tmp_path, request):  # noqa: F811
+    """OMSimulator 3.0.0 knows no FMI 3.0 clocks: it instantiates the clocked controller without Event Mode,
+    which the FMU refuses with its message, and aborts without a result file (docs/other-tools.md)."""
+    from tests.support.shared import shared
+    program = shared("tools/OMSimulator/bin/OMSimulator")
+    done = subprocess.run([str(program), "--stopTime=0.01", str(fmi3["clocked_ssp"])], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    log = done.stdout + done.stderr
+    assert done.returncode == -signal.SIGABRT, log  # a shell reports exit code 134
+    assert "warning: Unknown FMI3 base type for var : sample_clock" in log
+    assert ("fmi3InstantiateCoSimulation: eventModeUsed = false is invalid: allowed is true (TAPMP_ControllerClocked "
+            "has the input clock sample_clock, which ticks only in Event Mode)") in log
+    assert "info:    fmi3Instantiate() failed" in log
+    assert not list(tmp_path.glob("*_res.*"))
+    compatibility.record(
+        request, tool="OMSimulator", version=compatibility.omsimulator_version(program), fmi="3.0",
+        interface="SSP 1.0, CS, input clock", command="OMSimulator --stopTime=0.01 native/fmi3/TAPMP_Clocked.ssp",
+        result="refused: instantiates the clocked controller without Event Mode (the FMU says eventModeUsed = false "
+               "is invalid), then aborts (exit code 134, no result file)",
+        difference="not comparable: no run; use TAPMP.ssp")
 
 
 def test_the_fmpy_clocked_host_refuses_a_missing_ssp_in_one_line(tmp_path):
