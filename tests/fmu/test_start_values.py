@@ -66,10 +66,24 @@ def test_both_native_families_and_the_clocked_controller_declare_those_start_val
             assert declared == expected, (family, model)
 
 
-def test_the_pythonfmu_family_declares_those_start_values(built):
+def test_the_pythonfmu_family_starts_its_inputs_there_too(built, tmp_path):
+    """The pythonfmu FMUs hold those doubles as their inputs' defaults (read back with nothing set); their
+    modelDescription writes them as pythonfmu does every start value, to 16 significant digits."""
     for model in ("TAPMP_Controller", "TAPMP_Plant"):
+        starts = {v.name: v.start for v in VARIABLES[model] if v.causality == "input"}
         declared = {n: float(x) for n, x in start_attributes(built[model]).items()}
-        assert declared == {v.name: v.start for v in VARIABLES[model] if v.causality == "input"}, model
+        assert declared == {n: float(f"{x:.16g}") for n, x in starts.items()}, model
+        md = read_model_description(str(built[model]))
+        refs = {v.name: v.valueReference for v in md.modelVariables}
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(built[model]), unzipdir=str(tmp_path / model)),
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=model)
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        assert slave.getReal([refs[n] for n in starts]) == list(starts.values()), model
+        slave.terminate()
+        slave.freeInstance()
 
 
 def jacobi_without_propagation(ssp, folder, order) -> tuple[list[str], np.ndarray]:
