@@ -1,5 +1,6 @@
-"""Every command block of docs/other-tools.md and docs/compatibility.md runs as typed from the repository
-root after the quick start: here in a scratch copy of the repository (its files linked, the quick start's
+"""Every command block of docs/other-tools.md and docs/compatibility.md, and every command in their tables
+(a code span starting with .venv/bin/ or ../shared/tools/), runs as typed from the repository root after
+the quick start: here in a scratch copy of the repository (its files linked, the quick start's
 `.venv` the test's own interpreter's, `../shared` beside it, `build/` built fresh by `tapmp build`), one
 block after the other in the page's order, each with `bash -e -o pipefail`; a block that ends with an exit
 code other than 0 fails the test, naming the page and line."""
@@ -24,7 +25,17 @@ def blocks(page: str) -> list[tuple[int, str]]:
     return [(text.count("\n", 0, m.start()) + 1, m.group(1)) for m in BLOCK.finditer(text)]
 
 
+CELL = re.compile(r"`((?:\.venv/bin/|\.\./shared/tools/)[^`]*)`")
+
+
+def table_commands(page: str) -> list[tuple[int, str]]:
+    """(line, command) of every command in a table row of ``page``, in order."""
+    lines = (ROOT / page).read_text().splitlines()
+    return [(n, m) for n, line in enumerate(lines, 1) if line.startswith("|") for m in CELL.findall(line)]
+
+
 CASES = [(page, line, code) for page in PAGES for line, code in blocks(page)]
+CELLS = [(page, line, code) for page in PAGES for line, code in table_commands(page)]
 
 
 @pytest.fixture(scope="module")
@@ -55,3 +66,11 @@ def test_the_command_block_runs_as_typed_from_the_repository_root(repository, pa
     done = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", code], cwd=repository, capture_output=True,
                           text=True, timeout=1800, env=env)
     assert done.returncode == 0, f"{page}:{line}: exit code {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+
+
+@pytest.mark.needs_shared("tools/OMSimulator/bin/OMSimulator", "tools/fmusim/bin/fmusim", "tools/fmil/fmil_check",
+                          "tools/fmuCheck/fmuCheck.linux64")
+@pytest.mark.parametrize("page,line,code", CELLS, ids=[f"{p.removeprefix('docs/')}:{n}:table" for p, n, _ in CELLS])
+def test_the_command_in_a_table_runs_as_typed_from_the_repository_root(repository, page, line, code):
+    """After the page's blocks (which create results/), in the same scratch repository."""
+    test_the_command_block_runs_as_typed_from_the_repository_root(repository, page, line, code)
