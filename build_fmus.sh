@@ -18,7 +18,7 @@ set -euo pipefail
 cd "$(dirname "$0")"
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] && PY=.venv/bin/python
-platforms=()
+platforms=(--all-platforms)
 if [ "${1:-}" = "--host" ]; then
     platforms=(--platform x86_64-linux)
     shift

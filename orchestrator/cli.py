@@ -193,21 +193,49 @@ def cmd_build(args) -> int:
 
     def log(line):
         print(line, flush=True)  # progress, also when the output is a pipe
-    build_all(out, log)
-    native = build_native(out / "native", platforms=args.platform, log=log)
+    built = build_platforms(args)
+    if set(built) == set(PLATFORMS):
+        print(f"building every platform: {ALL_PLATFORMS_TIME}", flush=True)
     if args.cross_check:
-        from .engine.fmu_extras import cross_check_tree
-        fmus = {m: p for m, p in native["fmi2"].items() if m != "ssp"}
-        for folder in cross_check_tree(fmus, out / "cross-check"):
-            print(f"wrote {folder}")
+        return build_cross_check(Path(args.out or "cross-check"), built, log)
+    build_all(out, log)
+    build_native(out / "native", platforms=built, log=log)
     from .engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
         print(f"compiled stepping core in {stepper.library_path()}")
-    built = args.platform or PLATFORMS
     if set(built) != set(PLATFORMS):
         print(f"the native FMUs hold binaries for {', '.join(p for p in PLATFORMS if p in built)} only (and their "
-              f"C sources); `tapmp build` without --platform adds {', '.join(p for p in PLATFORMS if p not in built)}")
+              f"C sources); `tapmp build --all-platforms` adds {', '.join(p for p in PLATFORMS if p not in built)} "
+              f"({ALL_PLATFORMS_TIME})")
     return 0
+
+
+def build_cross_check(out: Path, platforms, log) -> int:
+    """`tapmp build --cross-check`: the native FMI 2.0 FMUs (built in a temporary folder, for ``platforms``)
+    in the FMI Cross-Check layout under ``out``, and nothing else."""
+    import tempfile
+    from .engine.build_native import build_native
+    from .engine.fmu_extras import cross_check_tree
+    with tempfile.TemporaryDirectory(prefix="tapmp_cross_check_") as tmp:
+        native = build_native(Path(tmp), families=("fmi2",), platforms=platforms, log=log)
+        fmus = {m: p for m, p in native["fmi2"].items() if m != "ssp"}
+        for folder in cross_check_tree(fmus, out):
+            print(f"wrote {folder}", flush=True)
+    return 0
+
+
+# What --all-platforms costs (docs/native-fmus.md#build-time)
+ALL_PLATFORMS_TIME = ("4 to 13 min the first time on a machine (Zig builds each target's C runtime once, the two "
+                      "Windows ones longest), seconds afterwards")
+
+
+def build_platforms(args) -> tuple[str, ...]:
+    """The platforms `tapmp build` compiles the native FMUs for: --platform's, every one with
+    --all-platforms, else this machine's alone (as `bash build_fmus.sh --host`, the quick start)."""
+    from tapmp.toolchain import HOST
+    if args.platform:
+        return tuple(args.platform)
+    return tuple(PLATFORMS) if args.all_platforms else (HOST,)
 
 
 def cache_sources() -> list[Path]:
@@ -789,17 +817,21 @@ def parser() -> argparse.ArgumentParser:
                        description="Build the pythonfmu family (TAPMP_Plant.fmu, TAPMP_Controller.fmu, "
                        "TAPMP_Trajectory.fmu, TAPMP.ssp and the closed-loop container FMU TAPMP_ClosedLoop.fmu) "
                        "into OUT and the native FMI 2.0 and 3.0 families into OUT/native/fmi2 and OUT/native/fmi3, "
-                       "with binaries for Linux, Windows and macOS on x86-64 and ARM, compiled by zig cc from the "
-                       "ziglang package ($CC for x86_64-linux if set). No system compiler needed.")
+                       "with this machine's binaries and their C sources (--all-platforms: Linux, Windows and macOS on x86-64 "
+                       "and ARM), compiled by zig cc from the ziglang package ($CC for x86_64-linux if set). No "
+                       "system compiler needed.")
     b.add_argument("--out", help=f"output folder (default: ${FMUS_DIR_ENV}, else the repository's build/ in a "
                    "checkout, else ./build)")
     b.add_argument("--platform", action="append", metavar="P",
                    help="build the native FMUs' binaries for these platforms only (repeatable): "
-                   f"{', '.join(PLATFORM_NAMES)} (default: all)")
+                   f"{', '.join(PLATFORM_NAMES)} (default: this machine's)")
+    b.add_argument("--all-platforms", action="store_true",
+                   help="binaries for every platform (the FMUs to hand to other machines): 4 to 13 min the first "
+                   "time on a machine, seconds afterwards")
     b.add_argument("--cross-check", action="store_true",
-                   help="also write the FMI Cross-Check layout of the native FMI 2.0 FMUs into OUT/cross-check: "
-                   "fmus/2.0/cs/<platform>/tapmp/<version>/<model>/ with the FMU, its reference experiment "
-                   "(_ref.csv, _in.csv, _ref.opt) and ReadMe.txt")
+                   help="instead of the families, write the native FMI 2.0 FMUs in the FMI Cross-Check layout into "
+                   "OUT (default: ./cross-check): fmus/2.0/cs/<platform>/tapmp/<version>/<model>/ with the FMU, its "
+                   "reference experiment (_ref.csv, _in.csv, _ref.opt) and ReadMe.txt; nothing else is built")
     b.add_argument("--clean-cache", action="store_true", help="first remove from the compiled-code cache "
                    "($TAPMP_CACHE, else ~/.cache/tapmp) the libraries and lock files older than this package's C "
                    "sources (left by earlier versions, checkouts and environments; rebuilt when used again)")

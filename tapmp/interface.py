@@ -293,6 +293,27 @@ def _ranged(model: str, table: tuple[Var, ...]) -> tuple[Var, ...]:
                  for v in table)
 
 
+# The connected outputs' values at the start of the paper's run (t = START_TIME, every FMU at its defaults,
+# the outputs propagated in Initialization Mode): the start values of the inputs they feed, so that a host
+# that initializes each FMU alone, in any order and without propagating, computes the paper run's first
+# command and steps the plant with it. The reference is the circle formula's (the C trajectory's doubles);
+# the encoder positions and joint velocities (the plant's at INITIAL_STATE) and the first command (the
+# controller's from those) are the C models' doubles, written out here because this table must not load
+# the C library, and compared with the models' own outputs by tests/fmu/test_start_values.py.
+START_OUTPUTS: dict[str, float] = {
+    **{v.name: x for v, x in zip(_pose("_d", "output", ""), circle_reference(START_TIME, TrajectoryParams()))},
+    "q1": 0.0, "q2": 0.0, "q3": 0.0,
+    "dq1": 0.03652917874424646, "dq2": 0.025132741228718346, "dq3": 0.03652917874424646,
+    "F1": 15.319857683838286, "F2": 1.7763568394002505e-15, "F3": -15.319889823145402,
+}
+
+
+def _started(table: tuple[Var, ...]) -> tuple[Var, ...]:
+    """``table`` with every input starting at the value of the output connected to it (START_OUTPUTS)."""
+    return tuple(v._replace(start=START_OUTPUTS[v.name]) if v.causality == "input" else v for v in table)
+
+
+PLANT_VARS, CONTROLLER_VARS = _started(PLANT_VARS), _started(CONTROLLER_VARS)
 PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(m, t) for m, t in (
     (PLANT, PLANT_VARS), (CONTROLLER, CONTROLLER_VARS), (TRAJECTORY, TRAJECTORY_VARS)))
 VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECTORY_VARS}

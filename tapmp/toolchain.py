@@ -20,6 +20,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 # FMI 3.0 platform name -> Zig target. Linux against glibc 2.17 (CentOS 7, 2014) so that the
@@ -133,8 +134,7 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
     # the output appears under its name only when complete.
     with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:
         try:
-            proc = subprocess.run(args, capture_output=True, text=True, cwd=tmp,
-                                  env=zig_environment())
+            proc = _run_compiler(args, tmp, label, platform)
         except FileNotFoundError:
             raise ToolchainError(f"{label} ({platform}): C compiler {cmd[0]!r} not found "
                                  "(unset CC to use zig cc from the ziglang package)") from None
@@ -147,6 +147,50 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
     partial.chmod(0o755)
     partial.replace(output)
     return output
+
+
+# The compiler processes running now, so that a stopped build ends them at once (stop_compilers)
+# instead of waiting minutes for a target's C runtime; after a stop no compiler starts until
+# allow_compilers.
+_COMPILERS: set = set()
+_COMPILERS_LOCK = threading.Lock()
+_STOPPED = threading.Event()
+
+
+def _run_compiler(args, cwd, label: str, platform: str) -> subprocess.CompletedProcess:
+    """Run one compiler command in ``cwd`` (its own process group, which :func:`stop_compilers` kills)."""
+    with _COMPILERS_LOCK:
+        if _STOPPED.is_set():
+            raise ToolchainError(f"{label} ({platform}): the build was stopped")
+        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                                env=zig_environment(), start_new_session=True)
+        _COMPILERS.add(proc)
+    try:
+        out, err = proc.communicate()
+    finally:
+        with _COMPILERS_LOCK:
+            _COMPILERS.discard(proc)
+    if _STOPPED.is_set():
+        raise ToolchainError(f"{label} ({platform}): the build was stopped")
+    return subprocess.CompletedProcess(args, proc.returncode, out, err)
+
+
+def stop_compilers() -> None:
+    """Kill every compiler process :func:`compile_c` runs now (with its children) and start no other."""
+    import signal
+    with _COMPILERS_LOCK:
+        _STOPPED.set()
+        running = list(_COMPILERS)
+    for proc in running:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def allow_compilers() -> None:
+    """Let :func:`compile_c` start compilers again after :func:`stop_compilers`."""
+    _STOPPED.clear()
 
 
 def cache_dir() -> Path:

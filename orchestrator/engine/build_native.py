@@ -475,34 +475,37 @@ def model_description_clocked() -> bytes:
     return to_bytes(root)
 
 
-def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None = None) -> Path:
+def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None = None,
+                             stimulus: dict | None = None) -> Path:
     """Build TAPMP_ControllerClocked.fmu (FMI 3.0) into ``out_dir``; atomic. ``platforms`` as for
-    :func:`build_native_fmu` (default: all); ``built`` ({platform: bytes}) the binaries compiled already."""
+    :func:`build_native_fmu` (default: all); ``built`` ({platform: bytes}) the binaries compiled already;
+    ``stimulus``: fmu_extras.closed_loop_stimulus() (computed if None)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     fmu = out_dir / f"{CLOCKED}.fmu"
     platforms = check_platforms(ALL_PLATFORMS if platforms is None else platforms)
     files = clocked_source_files()
+    md = model_description_clocked()
+    from .fmu_extras import clocked_extra_members
     with tempfile.TemporaryDirectory(prefix="tapmp_native_") as tmp:
         src = staged_sources(files, CLOCKED, "fmi3")
         built = dict(built or {})
         for p in platforms:
             if p not in built:
                 built[p] = _compile_one(Path(tmp), src, CLOCKED, "fmi3", p)
-    binaries = _members({p: built[p] for p in platforms}, CLOCKED, "fmi3")
-    from .fmu_extras import LICENSE_FILE, license_text
-    # the license only: a reference experiment (FMI-LS-REF) needs an importer that ticks the clock, which
-    # fmusim, its replayer, does not; the controller's documentation is TAPMP_Controller.fmu's
-    extra = {LICENSE_FILE: license_text()}
+        binaries = _members({p: built[p] for p in platforms}, CLOCKED, "fmi3")
+        # the reference experiment (with its tick schedule), documentation, license, terminals and icon
+        host = _host_fmu(Path(tmp), src, CLOCKED, "fmi3", md, binaries)
+        extra = clocked_extra_members(host, platforms, stimulus)
     partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
     try:
         with zipfile.ZipFile(partial, "w") as z:
-            _zip_write(z, "modelDescription.xml", model_description_clocked())
+            _zip_write(z, "modelDescription.xml", md)
             for name, data in sorted(files.items()):
                 _zip_write(z, f"sources/{name}", data)
             for name, data in binaries.items():
                 _zip_write(z, name, data)
-            for name, data in extra.items():
+            for name, data in sorted(extra.items()):
                 _zip_write(z, name, data)
         partial.replace(fmu)
     finally:
@@ -516,7 +519,11 @@ def write_clocked_ssp(path: Path, fmus: dict) -> Path:
     only in Event Mode)."""
     from .ssp import system_structure
     path = Path(path)
-    ssd = system_structure().replace(f'source="resources/{CONTROLLER}.fmu"'.encode(),
+    note = ("The TAPMP closed loop with the clocked controller (FMI 3.0): run it with Event Mode, activating the "
+            f"controller's input clock {CLOCK_NAME} at every tick (tapmp run --set event_mode=true; FMPy's FMI 3.0 "
+            "API: the TAPMP repository's examples/clocked_fmpy_host.py). Tools that do not tick input clocks "
+            "(OMSimulator 3.0.0, fmusim, FMPy's simulate_fmu) cannot run it: use TAPMP.ssp.")
+    ssd = system_structure(description=note).replace(f'source="resources/{CONTROLLER}.fmu"'.encode(),
                                      f'source="resources/{CLOCKED}.fmu"'.encode(), 1)
     tmp = path.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
@@ -668,13 +675,23 @@ def compile_every_binary(units: dict, platforms, tmp: Path, log=print, every: fl
 
     watcher = threading.Thread(target=heartbeat, daemon=True)
     watcher.start()
+    toolchain.allow_compilers()
+    # one compiler process per core beside the one waiting for its target's C runtime
+    pool = ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1) + 1)
     try:
-        # one compiler process per core beside the one waiting for its target's C runtime
-        with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1) + 1) as pool:
-            list(pool.map(one, jobs))
+        list(pool.map(one, jobs))
+    except BaseException:
+        # stopped (Ctrl-C, SIGTERM) or failed: drop the queued compiles and kill the running ones, so the
+        # command ends now rather than after a target's C runtime (minutes)
+        pool.shutdown(wait=False, cancel_futures=True)
+        toolchain.stop_compilers()
+        pool.shutdown()  # the killed compiles return at once
+        toolchain.allow_compilers()
+        raise
     finally:
         done.set()
         watcher.join()
+    pool.shutdown()
     return built
 
 
@@ -751,7 +768,7 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
     Binaries for every platform of toolchain.PLATFORMS (``platforms`` to choose; ``windows=False``
     keeps the host's x86_64-linux alone). Returns {family: {model or "ssp": path}}.
     """
-    from .ssp import write_ssp
+    from .ssp import FMI3_NOTE, write_ssp
 
     if platforms is None:
         platforms = ALL_PLATFORMS if windows is not False else (toolchain.HOST,)
@@ -778,10 +795,10 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
                  for model in FMU_NAMES}
         for model in FMU_NAMES:
             log(f"built {paths[model]}")
-        paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths)
+        paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths, FMI3_NOTE if family == "fmi3" else None)
         log(f"wrote {paths['ssp']}")
         if family == "fmi3":
-            paths[CLOCKED] = build_clocked_controller(folder, platforms, built[(CLOCKED, family)])
+            paths[CLOCKED] = build_clocked_controller(folder, platforms, built[(CLOCKED, family)], stimulus)
             log(f"built {paths[CLOCKED]}")
             paths["clocked_ssp"] = write_clocked_ssp(folder / "TAPMP_Clocked.ssp", paths)
             log(f"wrote {paths['clocked_ssp']}")

@@ -583,3 +583,172 @@ def cross_check_tree(fmus: dict[str, Path], out_dir: Path, version: str | None =
             (folder / "ReadMe.txt").write_bytes(cross_check_readme(model, platform, version))
             written.append(folder)
     return written
+
+
+# --- the clocked controller (TAPMP_ControllerClocked.fmu, FMI 3.0) ---------------------------
+
+CLOCKED = "TAPMP_ControllerClocked"  # build_native.CLOCKED (not imported: build_native imports this module)
+CLOCK = "sample_clock"               # build_native.CLOCK_NAME
+TICKS_FILE = f"{SCENARIO}_ticks.csv"
+
+# How an importer replays the clocked controller's reference experiment on FMPy's FMI 3.0 API, from the folder
+# the FMU is in (its documentation shows this text; the tests run it as it stands there). Every communication
+# point t_k: Event Mode, the inputs of t_k, the clock activated if t_k is in the tick schedule,
+# updateDiscreteStates, Step Mode, doStep over [t_k, t_k + h]; the outputs after each step are the rows of
+# the expected results after the first, which holds those after the tick at the start time.
+REPLAY_PY = """import csv, zipfile
+from fmpy import extract, read_model_description
+from fmpy.fmi3 import FMU3Slave
+
+fmu_path, ref = 'TAPMP_ControllerClocked.fmu', 'extra/org.fmi-standard.fmi-ls-ref/'
+zipfile.ZipFile(fmu_path).extractall('reference')
+read = lambda name: list(csv.reader(open('reference/' + ref + name)))
+stimulus = read('paper_simulation_in.csv')
+names, rows = stimulus[0][1:], [[float(x) for x in r] for r in stimulus[1:]]
+ticks = {float(r[0]) for r in read('paper_simulation_ticks.csv')[1:]}
+h = float(dict(read('paper_simulation_ref.opt'))['StepSize'])
+md = read_model_description(fmu_path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+outputs = [v.name for v in md.modelVariables if v.causality == 'output']
+fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(fmu_path),
+                modelIdentifier=md.coSimulation.modelIdentifier, instanceName='controller')
+fmu.instantiate(eventModeUsed=True)        # a clocked FMU needs Event Mode
+fmu.enterInitializationMode(startTime=0.0)
+fmu.exitInitializationMode()               # now in Event Mode at the start time
+result = []
+for k, (t, *u) in enumerate(rows[:-1]):
+    if k > 0:
+        fmu.enterEventMode()
+    fmu.setFloat64([vr[n] for n in names], u)
+    if t in ticks:
+        fmu.setClock([vr['sample_clock']], [True])
+    fmu.updateDiscreteStates()
+    if k == 0:
+        result.append([t, *fmu.getFloat64([vr[n] for n in outputs])])
+    fmu.enterStepMode()
+    fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+    result.append([rows[k + 1][0], *fmu.getFloat64([vr[n] for n in outputs])])
+fmu.terminate()
+fmu.freeInstance()
+expected = [[float(x) for x in r] for r in read('paper_simulation_ref.csv')[1:]]
+print('equal to the reference results:', result == expected)
+"""
+
+
+def ticks_csv(rows) -> bytes:
+    """The tick schedule: every time [s] at which the host activates the input clock, one per row, under
+    the header time,sample_clock (1: active); the clock ticks at every t0 + k T_s, here every stimulus row."""
+    return ("\n".join(["time," + CLOCK, *(f"{float(r[0])!r},1" for r in rows)]) + "\n").encode()
+
+
+def clocked_expected_outputs(fmu: Path, stimulus_rows, h: float = SERVO_STEP) -> list[tuple]:
+    """The outputs of the clocked controller ``fmu`` replayed as :data:`REPLAY_PY` does (FMPy's FMI 3.0 API, the
+    clock ticking at every stimulus row t_k = k h [s]): rows (t, outputs...), the first after the tick at the
+    start time, then one after each step."""
+    import shutil
+    import tempfile as tmp
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Slave
+
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    names, outs = inputs(CONTROLLER), outputs(CONTROLLER)
+    folder = extract(str(fmu), unzipdir=tmp.mkdtemp(prefix="tapmp_clocked_"))
+    instance = FMU3Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=CLOCKED, instanceName="controller")
+    rows = []
+    try:
+        instance.instantiate(eventModeUsed=True)
+        instance.enterInitializationMode(startTime=0.0)
+        instance.exitInitializationMode()
+        for k, (t, *u) in enumerate(stimulus_rows[:-1]):
+            if k > 0:
+                instance.enterEventMode()
+            instance.setFloat64([vr[n] for n in names], u)
+            instance.setClock([vr[CLOCK]], [True])
+            instance.updateDiscreteStates()
+            if k == 0:
+                rows.append((t, *instance.getFloat64([vr[n] for n in outs])))
+            instance.enterStepMode()
+            instance.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            rows.append((stimulus_rows[k + 1][0], *instance.getFloat64([vr[n] for n in outs])))
+        instance.terminate()
+    finally:
+        instance.freeInstance()
+        shutil.rmtree(folder, ignore_errors=True)
+    return rows
+
+
+def clocked_manifest() -> bytes:
+    """The clocked controller's FMI-LS-REF manifest: the controller's, with the tick schedule."""
+    root = ET.fromstring(manifest(CONTROLLER))
+    at = [r.get("source") for r in root.iter("Related")].index(f"{SCENARIO}_ref.opt")
+    ticks = ET.Element("Related", type="text/csv", source=TICKS_FILE, role="experiment/validation",
+                       description=f"Tick schedule: every time at which the host activates the input clock {CLOCK} "
+                                   "(Event Mode, fmi3SetClock, fmi3UpdateDiscreteStates), one per row")
+    ET.SubElement(ticks, "Label", name="scenario:paper_simulation",
+                  description="the paper's simulation (Section 5.2), scenarios/paper_simulation.toml")
+    root.insert(at, ticks)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def clocked_documentation_html(platforms=None) -> bytes:
+    """documentation/index.html of the clocked controller: the controller's page under its own name, with
+    the input clock, how to tick it (FMPy, the FMI Library, tapmp), which tools cannot, and the replay of
+    its reference experiment (:data:`REPLAY_PY`)."""
+    page = documentation_html(CONTROLLER, "fmi3", platforms).decode()
+    page = page.replace(f"<title>{CONTROLLER} ", f"<title>{CLOCKED} ").replace(f"<h1>{CONTROLLER}</h1>",
+                                                                              f"<h1>{CLOCKED}</h1>")
+    page = page.replace(f"model identifier <code>{CONTROLLER}</code>", f"model identifier <code>{CLOCKED}</code>")
+    head, rest = page.split("<h2>How to run it</h2>", 1)
+    tail = rest[rest.index("<h2>License</h2>"):]
+    head = head.replace(f"the options <code>{SCENARIO}_ref.opt</code>",
+                        f"the tick schedule <code>{TICKS_FILE}</code>, the options <code>{SCENARIO}_ref.opt</code>")
+    e = html.escape
+    clock = f"""<h2>The input clock</h2>
+<p><code>{CLOCK}</code> is a periodic input clock (interval <code>T_s</code> = {_n(CONTROLLER, 'T_s')} s, first tick
+at the start time, <code>intervalVariability="fixed"</code>). Every output is clocked by it: the controller samples
+its inputs at a tick, computes the command and holds it until the next tick. Instantiate it with
+<code>eventModeUsed = true</code> (without it the FMU refuses to instantiate); at every tick t0 + k T_s the host
+enters Event Mode, sets the inputs, activates the clock (<code>fmi3SetClock</code>),
+calls <code>fmi3UpdateDiscreteStates</code>, reads the outputs and enters Step Mode. After
+<code>fmi3ExitInitializationMode</code> the FMU is in Event Mode at the start time: the first tick happens there.
+A host that never activates the clock gets the command of initialization throughout and one warning.</p>
+<h2>How to run it</h2>
+<p>FMPy's FMI 3.0 API (<code>fmpy.fmi3.FMU3Slave</code>): this replays the reference experiment with its tick
+schedule and prints whether the result equals the expected outputs (run it in the folder of the FMU):</p>
+<pre>{e(REPLAY_PY)}</pre>
+<p>The closed loop (the plant and trajectory FMUs with this one, <code>TAPMP_Clocked.ssp</code>) the same way, one
+macro step per tick: the TAPMP repository's <code>examples/clocked_fmpy_host.py</code> gives
+<code>tapmp run</code> on that SSP bit for bit. The FMI Library (C) and any C host: the same calls
+(<code>fmi3EnterEventMode</code>, <code>fmi3SetClock</code>, <code>fmi3UpdateDiscreteStates</code>,
+<code>fmi3EnterStepMode</code>, <code>fmi3DoStep</code>). tapmp: <code>tapmp run ... --ssp TAPMP_Clocked.ssp
+--set event_mode=true</code>.</p>
+<p>FMPy's <code>simulate_fmu</code>, fmusim and FMU Manipulation Toolbox's container do not activate input
+clocks: they run it with the command of initialization held. Use <code>TAPMP_Controller.fmu</code> there, the same
+controller with its samples as time events (Event Mode) or at every communication point.</p>
+"""
+    return (head + clock + tail).encode()
+
+
+def clocked_extra_members(host_fmu: Path, platforms=None, stimulus: dict | None = None) -> dict[str, bytes]:
+    """{member name: bytes} of what the clocked controller carries besides its model, as the other native FMUs:
+    its reference experiment (the controller's stimulus, with the tick schedule), documentation, license,
+    terminals and icon. ``host_fmu``: the FMU as built so far with a binary this machine runs."""
+    stimulus = stimulus if stimulus is not None else closed_loop_stimulus()
+    rows = stimulus[CONTROLLER]
+    return {
+        f"{LS_REF}/fmi-ls-manifest.xml": clocked_manifest(),
+        f"{LS_REF}/{SCENARIO}.ssv": default_parameter_set(CONTROLLER),
+        f"{LS_REF}/{SCENARIO}_in.csv": csv_text(inputs(CONTROLLER), rows),
+        f"{LS_REF}/{TICKS_FILE}": ticks_csv(rows[:-1]),
+        f"{LS_REF}/{SCENARIO}_ref.opt": options_text(),
+        f"{LS_REF}/{SCENARIO}_ref.csv": csv_text(outputs(CONTROLLER), clocked_expected_outputs(host_fmu, rows)),
+        "documentation/index.html": clocked_documentation_html(platforms),
+        "documentation/diagram.svg": diagram_svg(CONTROLLER),
+        LICENSE_FILE: license_text(),
+        "terminalsAndIcons/terminalsAndIcons.xml": terminals(CONTROLLER),
+        "terminalsAndIcons/icon.svg": icon_svg(CONTROLLER),
+        "terminalsAndIcons/icon.png": icon_png(CONTROLLER),
+    }

@@ -71,11 +71,23 @@ def set_system_step(system: ET.Element, step: float) -> None:
     ET.SubElement(info, qname(OMS, "FixedStepMaster"), description="oms-ma", stepSize=repr(float(step)))
 
 
-def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP) -> bytes:
+# What an importer of the FMI 3.0 SSPs must know, in their SSD's description: OMSimulator reads its loop
+# solver from its command line only (Flags::AlgLoopSolver; no SSP annotation sets it).
+FMI3_NOTE = ("The TAPMP closed loop of FMI 3.0 FMUs. OMSimulator 3.0.0: run it with --algLoopSolver=fixedpoint "
+             "(OMSimulator reads no output dependencies from FMI 3.0 FMUs and assumes an algebraic loop, which its "
+             "default solver KINSOL cannot solve without directional derivatives: without the flag it exits 0 with "
+             "KINSol errors and writes no result file; the fixed-point solver converges at once, as there is no "
+             "loop, and gives the FMI 2.0 results bit for bit). Its result file has two rows per time, before and "
+             "after it passes the outputs on to the inputs: the outputs are equal in both.")
+
+
+def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP, description: str | None = None) -> bytes:
     """The SystemStructure.ssd document of the three-FMU closed loop, run from 0 to
     ``stop_time`` [s] at the fixed communication step ``step`` [s] (given for OMSimulator and
-    libcosim in their vendor annotations)."""
+    libcosim in their vendor annotations); ``description``: the SSD's own (what an importer must know)."""
     root = ET.Element(qname(SSD, "SystemStructureDescription"), version="1.0", name="TAPMP")
+    if description:
+        root.set("description", description)
     system = ET.SubElement(root, qname(SSD, "System"), name="TAPMP",
                            description="TAPMP closed loop: trajectory -> controller -> plant -> controller")
     elements = ET.SubElement(system, qname(SSD, "Elements"))
@@ -104,12 +116,13 @@ def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def write_ssp(path: Path, fmus: dict) -> Path:
-    """Write the SSP archive to ``path`` with the FMUs given by model name; atomic."""
+def write_ssp(path: Path, fmus: dict, description: str | None = None) -> Path:
+    """Write the SSP archive to ``path`` with the FMUs given by model name (``description``: the SSD's);
+    atomic."""
     path = Path(path)
     tmp = path.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("SystemStructure.ssd", system_structure())
+        z.writestr("SystemStructure.ssd", system_structure(description=description))
         for model in FMU_NAMES:
             z.write(fmus[model], f"resources/{model}.fmu")
     tmp.replace(path)

@@ -13,6 +13,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
+from tapmp.interface import CONTROLLER, VARIABLES
 from tapmp.control import ControllerModel, Gains
 from tapmp.params import PAPER_MODEL, gain_preset
 
@@ -170,7 +171,8 @@ def test_event_mode_python_model_samples_as_the_fmu(fmu, tmp_path):
     """ControllerModel.event and next_event_time: the Python model's Event Mode, the same doubles."""
     r = Run(fmu, tmp_path, event_mode=True).run(random_partition(seed=2))
     model = ControllerModel(PAPER_MODEL, Gains.from_preset(gain_preset("default")), T_s=T_S)
-    ref, dq = (0.0,) * 9, (0.0, 0.0, 0.0)
+    start = [v.start for v in VARIABLES[CONTROLLER] if v.causality == "input"]  # the FMU's unset inputs
+    ref, dq = start[:9], start[12:15]
     t, got = 0.0, []
     while t <= STOP + 1e-12:
         assert model.next_event_time() == t

@@ -6,7 +6,7 @@ import pytest
 from tests.support.fmus import call_status
 
 from tapmp.control import ControllerModel, Gains
-from tapmp.interface import CONTROLLER, TRAJECTORY
+from tapmp.interface import CONTROLLER, TRAJECTORY, VARIABLES
 from tapmp.kinematics import inverse
 from tapmp.params import PAPER_MODEL, gain_preset
 from tapmp.trajectory import TrajectoryParams, reference
@@ -145,8 +145,10 @@ def test_controller_reports_its_command_in_initialization_mode_once_inputs_are_s
     fmu.slave.setupExperiment(startTime=0.0)
     fmu.slave.enterInitializationMode()
     model = ControllerModel(PAPER_MODEL, Gains.from_preset(gain_preset("default")), 0)
-    zero = model.sample(0.0, 1e-4, (0.0,) * 9, (0.0,) * 3, (0.0,) * 3, advance=False)[0]
-    assert fmu.get("F1", "F2", "F3") == pytest.approx(zero, rel=1e-12)  # inputs at their start, 0
+    # inputs at their start values: the paper run's initial reference, encoder positions and velocities
+    start = [v.start for v in VARIABLES[CONTROLLER] if v.causality == "input"]
+    zero = model.sample(0.0, 1e-4, start[:9], start[9:12], start[12:15], advance=False)[0]
+    assert fmu.get("F1", "F2", "F3") == pytest.approx(zero, rel=1e-12)
     fmu.set(**dict(zip(REF, ref)), q1=q[0], q2=q[1], q3=q[2], dq1=dq[0], dq2=dq[1], dq3=dq[2])
     in_init = fmu.get("F1", "F2", "F3")
     F0 = model.sample(0.0, 1e-4, ref, q, dq, advance=False)[0]

@@ -221,3 +221,69 @@ def test_documentation_renders_in_headless_chromium_with_every_image(host_built,
     import matplotlib.image
     pixels = matplotlib.image.imread(str(shot))
     assert pixels.shape[:2] == (1400, 1000) and pixels[..., :3].std() > 0.05  # text and the diagram
+
+
+# --- the clocked controller (TAPMP_ControllerClocked.fmu) carries the same --------------------------
+
+CLOCKED = "TAPMP_ControllerClocked"
+
+
+@pytest.mark.needs_shared("schemas/fmi-ls-ref/fmi3LayeredStandardReferenceManifest.xsd",
+                          "schemas/fmi3/fmi3TerminalsAndIcons.xsd")
+def test_the_clocked_controllers_manifest_and_terminals_are_valid_and_name_its_files(host_built):
+    from xml.etree import ElementTree as ET
+    fmu = host_built["fmi3"][CLOCKED]
+    data = member(fmu, f"{LS_REF}/fmi-ls-manifest.xml")
+    assert_valid(schema(shared("schemas/fmi-ls-ref/fmi3LayeredStandardReferenceManifest.xsd")), data)
+    with zipfile.ZipFile(fmu) as z:
+        names = set(z.namelist())
+    roles = {}
+    for r in ET.fromstring(data).iter("Related"):
+        assert str(Path(LS_REF) / r.get("source")).replace(f"{LS_REF}/../../", "") in names, r.get("source")
+        roles.setdefault(r.get("role"), []).append(r.get("source"))
+    assert roles["experiment/validation"] == [f"{SCENARIO}_in.csv", f"{SCENARIO}_ticks.csv", f"{SCENARIO}_ref.opt"]
+    assert roles["result"] == [f"{SCENARIO}_ref.csv"] and roles["parameter"] == [f"{SCENARIO}.ssv"]
+    terminals = member(fmu, "terminalsAndIcons/terminalsAndIcons.xml")
+    assert_valid(schema(shared("schemas/fmi3/fmi3TerminalsAndIcons.xsd")), terminals)
+    assert terminals == member(host_built["fmi3"]["TAPMP_Controller"], "terminalsAndIcons/terminalsAndIcons.xml")
+    assert member(fmu, "terminalsAndIcons/icon.png")[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_clocked_controllers_reference_results_are_the_event_mode_controllers(host_built):
+    """Ticked at every communication point, the clocked controller's expected outputs are the same doubles as
+    those of TAPMP_Controller.fmu stepped by FMPy's simulate_fmu on the same stimulus; its tick schedule is
+    every stimulus time but the last."""
+    clocked, plain = host_built["fmi3"][CLOCKED], host_built["fmi3"]["TAPMP_Controller"]
+    for name in (f"{SCENARIO}_ref.csv", f"{SCENARIO}_in.csv", f"{SCENARIO}.ssv", f"{SCENARIO}_ref.opt"):
+        assert member(clocked, f"{LS_REF}/{name}") == member(plain, f"{LS_REF}/{name}"), name
+    _, stimulus = fmu_extras.read_csv(member(clocked, f"{LS_REF}/{SCENARIO}_in.csv"))
+    header, ticks = fmu_extras.read_csv(member(clocked, f"{LS_REF}/{SCENARIO}_ticks.csv"))
+    assert header == ["time", "sample_clock"]
+    assert [t for t, _ in ticks] == [r[0] for r in stimulus[:-1]] and {a for _, a in ticks} == {1.0}
+
+
+def test_the_clocked_controllers_documented_fmpy_replay_gives_its_reference_results(host_built, tmp_path):
+    """The FMPy code on the FMU's documentation page, run as it stands there in the FMU's folder, ticks the
+    clock by the schedule and prints that its result equals the expected outputs."""
+    import html
+    import shutil
+    import sys
+    page = member(host_built["fmi3"][CLOCKED], "documentation/index.html").decode()
+    code = html.unescape(page.split("<pre>")[1].split("</pre>")[0])
+    assert code == fmu_extras.REPLAY_PY
+    shutil.copy(host_built["fmi3"][CLOCKED], tmp_path / f"{CLOCKED}.fmu")
+    (tmp_path / "replay.py").write_text(code)
+    done = subprocess.run([sys.executable, "replay.py"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "equal to the reference results: True\n"
+
+
+def test_the_clocked_controllers_documentation_says_how_to_tick_it(host_built):
+    fmu = host_built["fmi3"][CLOCKED]
+    page = member(fmu, "documentation/index.html").decode()
+    assert f"<h1>{CLOCKED}</h1>" in page and "<h2>The input clock</h2>" in page
+    for v in VARIABLES["TAPMP_Controller"]:
+        assert f"<code>{v.name}</code>" in page, v.name
+    for call in ("fmi3SetClock", "fmi3UpdateDiscreteStates", "eventModeUsed", "examples/clocked_fmpy_host.py"):
+        assert call in page, call
+    assert member(fmu, "documentation/licenses/license.txt") == (ROOT / "LICENSE").read_bytes()

@@ -116,11 +116,49 @@ def test_fmpys_results_in_the_cross_check_layout_pass_its_validator(tree, reques
         difference=compatibility.difference(largest, "relative", "the FMUs' reference experiments (_ref.csv)"))
 
 
-def test_tapmp_build_cross_check_writes_the_layout(tmp_path, capsys):
-    assert main(["build", "--out", str(tmp_path), "--platform", "x86_64-linux", "--cross-check"]) == 0
+def test_tapmp_build_cross_check_writes_the_layout_alone_into_its_own_folder(tmp_path, capsys):
+    out = tmp_path / "cross-check"
+    assert main(["build", "--out", str(out), "--cross-check"]) == 0
     printed = capsys.readouterr().out
     folders = [Path(line.removeprefix("wrote ")) for line in printed.splitlines()
-               if line.startswith("wrote ") and f"{tmp_path}/cross-check/" in line]
-    assert sorted(f.name for f in folders) == sorted(FMU_NAMES)  # linux64 only: the one platform built
+               if line.startswith("wrote ") and f"{out}/" in line]
+    assert sorted(f.name for f in folders) == sorted(FMU_NAMES)  # linux64 only: the host's, the default
     assert all(f.parent.parent.parent.name == "linux64" for f in folders)
-    assert validate_repo(str(tmp_path / "cross-check")) == (3, 0, [])
+    assert validate_repo(str(out)) == (3, 0, [])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cross-check"]  # no family, no SSP, nothing else
+    assert sorted(p.name for p in out.iterdir()) == ["fmus"]
+    assert "native fmi3" not in printed and "pythonfmu" not in printed.lower()  # only the FMI 2.0 FMUs built
+
+
+def test_a_signal_stops_tapmp_build_cross_check_and_its_compilers(tmp_path):
+    """SIGTERM while the compilers run: the command ends with 143 (128 + 15), its compiler processes
+    with it, and no layout is written."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    out = tmp_path / "cross-check"
+    env = {**os.environ, "ZIG_GLOBAL_CACHE_DIR": str(tmp_path / "zig"), "TAPMP_CACHE": str(tmp_path / "cache")}
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "build", "--cross-check", "--all-platforms",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    for line in proc.stdout:  # a cold cache: minutes of compiling ahead
+        if line.startswith("native: compiling"):
+            break
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "interrupted" in err and "Traceback" not in err
+    assert not out.exists()
+    assert _processes_with_environment(f"ZIG_GLOBAL_CACHE_DIR={tmp_path / 'zig'}") == []  # no compiler left
+
+
+def _processes_with_environment(entry: str) -> list[int]:
+    """The ids of this user's processes whose environment holds ``entry`` (NAME=value)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and entry.encode() in (proc / "environ").read_bytes().split(b"\0"):
+                found.append(int(proc.name))
+        except OSError:
+            continue  # another user's, or ended meanwhile
+    return found

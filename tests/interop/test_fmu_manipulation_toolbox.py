@@ -5,7 +5,9 @@ set applied (it reads no .ssv), and FMPy runs it.
 What its container does, measured here bit for bit: it initializes the embedded FMUs one after
 the other in the SSP's order (trajectory, controller, plant), each on the values its inputs'
 links hold at that moment, so the controller starts on the plant's outputs at 0 (the builder
-warns about the loop it cuts there); then it steps in its default PARALLEL mode, which is Jacobi:
+warns about the loop it cuts there): a link holds 0 until its source FMU is initialized, and it
+overwrites the controller's start values, which are the paper run's initial inputs
+(tests/fmu/test_start_values.py: a host that keeps them gives the paper's run in any order); then it steps in its default PARALLEL mode, which is Jacobi:
 every FMU steps from t on the link values of t. The three FMUs wired by hand in FMPy on those
 conventions give the container's results bit for bit; wired on the orchestrator's (outputs
 propagated in Initialization Mode, so the controller's first command sees the plant's initial

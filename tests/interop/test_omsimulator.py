@@ -274,6 +274,42 @@ def test_without_the_fixed_point_solver_omsimulator_fails_on_the_fmi3_ssp(omsimu
     log = proc.stdout + proc.stderr
     assert LOOP_OF_FMI3 in log
     assert "doesn't support directional derivatives" in log and "KINSol failed" in log, log
+    # what a script checking only the exit code misses (docs/other-tools.md)
+    assert proc.returncode == 0 and not (tmp_path / "paper.mat").exists(), log
+
+
+def test_the_fmi3_ssps_say_in_their_ssd_that_omsimulator_needs_the_fixed_point_solver(native_built):
+    """OMSimulator reads its loop solver from its command line only, so the flag is documented in the SSP
+    itself; the FMI 2.0 SSP, which needs none, says nothing."""
+    import zipfile
+    from xml.etree import ElementTree as ET
+
+    def description(ssp):
+        with zipfile.ZipFile(ssp) as z:
+            return ET.fromstring(z.read("SystemStructure.ssd")).get("description")
+
+    assert "--algLoopSolver=fixedpoint" in description(native_built["fmi3"]["ssp"])
+    assert "Event Mode" in description(native_built["fmi3"]["clocked_ssp"])
+    assert description(native_built["fmi2"]["ssp"]) is None
+
+
+def test_omsimulator_writes_two_rows_per_time_with_equal_outputs_and_the_inputs_of_both_steps(
+        omsimulator, native_built, tmp_path):
+    """docs/other-tools.md: the outputs are equal in both rows of a time; the plant's input F holds in the
+    first row the command of the step just done (the controller's F of the previous time), in the second
+    the one it passes on for the next step."""
+    run_omsimulator(omsimulator, ["--stopTime=0.01", "--resultFile=r.mat", native_built["fmi2"]["ssp"]], tmp_path)
+    result = read_mat(tmp_path / "r.mat")
+    t = result["time"]
+    first = [i for i in range(1, len(t)) if t[i] == t[i - 1]]  # the second row of each time from t1 on
+    assert len(first) >= 99
+    for name in ("controller.F1", "plant.q1", "plant.q1_true"):
+        values = result[f"TAPMP.TAPMP.{name}"]
+        assert all(values[i] == values[i - 1] for i in first), name
+    F, u = result["TAPMP.TAPMP.controller.F1"], result["TAPMP.TAPMP.plant.F1"]
+    assert all(u[i] == F[i] for i in first)                      # second row: the command passed on
+    assert all(u[i - 1] == F[i - 2] for i in first)              # first row: the previous time's command
+    assert any(u[i] != u[i - 1] for i in first)
 
 
 def test_the_ssp_step_rules_omsimulator_whatever_its_step_option(omsimulator, exported, tmp_path):
