@@ -312,28 +312,29 @@ def cmd_analyze(args) -> int:
 
 def _analyze_worst_case(args, scenario, out) -> int:
     """`tapmp analyze --worst-case`: the worst margins of each run over poses, envelope corners and a
-    study's parameter box (orchestrator.tool.robustness.worst_case), printed and written to out."""
-    import json
+    study's parameter box (orchestrator.studies.worst_case), printed and written to out."""
+    from .studies import worst_case
     from .studies.study_file import load_study
-    from .tool import robustness
+    from .tool.folders import atomic_file, write_json
     from .tool.progress import say
-    poses = robustness.check_poses(8 if args.poses is None else args.poses)
+    poses = worst_case.check_poses(8 if args.poses is None else args.poses)
     box = args.box or "robustness"
     try:
         study = load_study(study_file(box))
     except UsageError as err:
         raise UsageError(f"--box = {box!r}: {err}") from None
-    runs = robustness.worst_case_runs(scenario, study, args.runs)
-    result = robustness.worst_case(runs, study, poses, args.points, say=say)
+    runs = worst_case.worst_case_runs(scenario, study, args.runs)
+    result = worst_case.worst_case(runs, study, poses, args.points, say=say)
     left = f"; left out (no effect on the linearized loop): {', '.join(result['left_out'])}" if result["left_out"] else ""
     head = (f"{scenario.name}: worst case of each run over {result['points']} points: the start, {poses} poses along "
             f"the trajectory, the 8 corners of the envelope and the vertices of the parameter box of {box}{left}")
-    table = robustness.worst_case_table(result)
+    table = worst_case.worst_case_table(result)
     print(head)
     print(table)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "worst_case.json").write_text(json.dumps(result, indent=1) + "\n")
-    (out / "worst_case.md").write_text(f"{head}\n\n{table}\n")
+    write_json(out / "worst_case.json", result)
+    with atomic_file(out / "worst_case.md") as f:
+        f.write(f"{head}\n\n{table}\n")
     print(f"worst_case.json and worst_case.md in {out}")
     return 0
 
