@@ -25,7 +25,7 @@ import numpy as np
 import orjson
 from numpy.lib import format as npy
 
-from .folders import FORMATS, PART_FILE, ResultsWriteError, atomic_file
+from .folders import FORMATS, PART_FILE, ResultsWriteError, atomic_file, new_stream
 
 
 def _write_error(path: Path, err: OSError, detail: str = "") -> ResultsWriteError:
@@ -40,7 +40,7 @@ class _Blocks:
         self.path = Path(path)
         self.columns = list(columns)
         try:
-            self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
+            self.fd = new_stream(self.path)  # a new file renamed into place: never opened through a link
         except OSError as err:
             raise _write_error(self.path, err) from err
         self.size = 0            # bytes of whole blocks on disk
