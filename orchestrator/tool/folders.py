@@ -251,8 +251,12 @@ def file_record(path: Path) -> dict:
     """The proof that tapmp wrote the regular file ``path``: {"size": bytes, "sha256": hex digest}
     (read without following a link)."""
     fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    digest, size = hashlib.sha256(), 0
     with os.fdopen(fd, "rb") as f:
-        return {"size": os.fstat(fd).st_size, "sha256": hashlib.file_digest(f, "sha256").hexdigest()}
+        while chunk := f.read(1 << 20):  # hashlib.file_digest is Python 3.11+; 3.10 is supported
+            digest.update(chunk)
+            size += len(chunk)
+    return {"size": size, "sha256": digest.hexdigest()}
 
 
 def stream_record(path: Path) -> dict:
@@ -309,14 +313,17 @@ def marked_kind(folder) -> str | None:
     return found[0] if found else None
 
 
-def record_files(folder: Path, files: dict, names) -> dict:
+def record_files(folder: Path, files: dict, names, known: dict | None = None) -> dict:
     """Put on record in ``files`` (a marker's MANIFEST) each of ``names`` in ``folder`` as it is
-    now (file_record); a name that is no regular file there is dropped. Returns ``files``."""
+    now (file_record, or the record in ``known`` {name: record} computed as the file was written,
+    if its size agrees); a name that is no regular file there is dropped. Returns ``files``."""
     for name in names:
         path = Path(folder) / name
         try:
-            if stat.S_ISREG(os.lstat(path).st_mode):
-                files[name] = file_record(path)
+            st = os.lstat(path)
+            if stat.S_ISREG(st.st_mode):
+                rec = (known or {}).get(name)
+                files[name] = rec if rec and rec["size"] == st.st_size else file_record(path)
                 continue
         except OSError:
             pass

@@ -111,9 +111,15 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
     write_result(out / "run.json", info)
     written = {FORMATS[fmt], PART_FILE, "metrics.json"} if fmt == "mat" else {FORMATS[fmt], "metrics.json"}
 
-    def opened(path: Path) -> None:  # the result file exists: on record before its first row (a killed run)
-        info[MANIFEST][path.name] = stream_record(path)
+    writers = []
+
+    def opened(writer) -> None:  # the result file exists: on record before its first row (a killed run)
+        writers.append(writer)
+        info[MANIFEST][writer.path.name] = stream_record(writer.path)
         write_result(out / "run.json", info)
+
+    def record(names) -> None:  # the files' records, a CSV file's as its writer hashed it
+        record_files(out, info[MANIFEST], names, {w.path.name: w.record() for w in writers})
 
     start = time.perf_counter()
     stop = StopRequest()
@@ -136,12 +142,12 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
                 print(f"note: metrics not computed: {result['not_computed']}", file=sys.stderr)
             write_result(out / "metrics.json", result)
             wall = time.perf_counter() - start
-            record_files(out, info[MANIFEST], written)
+            record(written)
             info.update(status="completed", exit_code=0, wall_time_s=wall,
                         real_time_factor=wall / (scenario.stop_time - scenario.start_time))
             write_result(out / "run.json", info)
         except BaseException as err:
-            record_files(out, info[MANIFEST], set(info[MANIFEST]) | written)
+            record(set(info[MANIFEST]) | written)
             _record_failure(out / "run.json", info, err, sim, start)
             raise
     return result
@@ -159,7 +165,7 @@ def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
 def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: StopRequest, progress,
               keep_rows: list | None = None, keep_bytes: int = 0, opened=None):
     """The step loop: rows to the result file in whole blocks, metrics over every step;
-    ``opened(path)`` is called once the result file is made, before its first row;
+    ``opened(writer)`` is called once the result file (``writer.path``) is made, before its first row;
     returns the metrics.ErrorStatistics. Stops at a block boundary when ``stop`` is set.
     The rows of a block are stored by CoSimulation.advance (the compiled core or the
     Python loop) into one preallocated array."""
@@ -170,7 +176,7 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
     filled, first = 0, 0  # rows of buffer (steps first, first + 1, ...) not yet written
     try:
         if opened:
-            opened(base_writer.path)
+            opened(base_writer)
         stats = metrics.ErrorStatistics(sim.columns, metrics.saturation_limit(sim.parameters),
                                         metrics.force_step(sim.parameters, scenario.start_time, scenario.stop_time),
                                         metrics.move_spec(sim.parameters, scenario.settling_bands))
