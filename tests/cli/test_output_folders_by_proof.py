@@ -209,3 +209,25 @@ def test_a_killed_run_is_reused_its_result_file_on_record_by_its_inode(built, tm
     assert info["tapmp_files"] == {"results.csv": {"writing": True, "inode": results.stat().st_ino}}
     assert tapmp(built, "run", out) == 0  # never finished: reused without --overwrite
     assert len(results.read_text().splitlines()) == 1 + 21
+
+
+HOLD = ("import sys; from orchestrator.tool.folders import output_lock\n"
+        "with output_lock(sys.argv[1]):\n    print('held', flush=True); sys.stdin.read()\n")
+
+
+def test_plot_is_refused_while_another_process_writes_the_folder(built, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert tapmp(built, "run", out) == 0
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"
+        capsys.readouterr()
+        before = snapshot(out)
+        assert main(["plot", str(out)]) == 2
+        assert one_error_line(capsys) == (
+            f"error: output folder {out} is in use by tapmp (pid {holder.pid}): allowed is one writer per output "
+            "folder; wait for it to end or choose another --out\n")
+        assert snapshot(out) == before  # no figure, and run.json's record unchanged
+    finally:
+        holder.communicate("", timeout=30)
