@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..tool.folders import save_figure, write_text  # noqa: E402
 from .study import PENALTY_UM, STUDY_CSV, case_value, read_study_csv  # noqa: E402
 
 _MAE = (("tracking_mae_um_mean", "tracking MAE (mean of q1-q3) [µm]"),
@@ -69,14 +70,14 @@ def plot_study(out: Path, study, params: list) -> list:
     summary.md (monte_carlo_summary); returns the paths written."""
     paths = []
     for path, fig in study_figures(out, study).items():
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        try:
+            save_figure(fig, path, dpi=110)
+        finally:
+            plt.close(fig)
         paths.append(path)
     text = monte_carlo_summary(out, study)
     if text:
-        path = Path(out) / SUMMARY_MD
-        path.write_text(text)
-        paths.append(path)
+        paths.append(write_text(Path(out) / SUMMARY_MD, text))
     return paths
 
 
@@ -276,6 +277,8 @@ def plot_objective(path: Path, results: dict) -> Path:
         ax.set_ylabel("objective (tracking + sync MAE)/2 [µm]")
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
     return Path(path)

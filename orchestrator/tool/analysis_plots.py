@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .folders import save_figure  # noqa: E402
 from .plots import label  # noqa: E402
 
 MODES = ("common", "diff. Z", "diff. B")
@@ -40,8 +41,10 @@ def _save(fig, axes, title, path):
     fig.suptitle(title, fontsize=10)
     _legend(fig, axes)
     fig.tight_layout(rect=(0, 0.08, 1, 0.95))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=110)  # under a temporary name, then renamed; a link there is refused
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -9,7 +9,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from .estimate import check_output_size
-from .folders import ResultsWriteError, check_output, output_lock, prepare_output, write_comparison_status
+from .folders import (ResultsWriteError, check_output, output_lock, prepare_output, record_files,
+                      write_comparison_status, write_text, writes)
 from .progress import progress_bar, say
 from .scenario import MAX_INT
 from .results import one_line
@@ -22,24 +23,29 @@ def comparison_folder(out: Path, overwrite: bool, scenario, runs: dict, written_
     "interrupted" with the error. A completed comparison there is kept unless ``overwrite``;
     an unfinished one is replaced, its runs with it; a folder tapmp did not mark is refused
     unless empty (see folders.check_output). comparison.json records ``written_by``, the command
-    ("compare" or "reproduce") that wrote it."""
+    ("compare" or "reproduce") that wrote it, and the files the comparison wrote at the top of the
+    folder (folders.writes: comparison.md and the figures; check_output refused any other file of
+    those names there, so each one there at the end is the comparison's)."""
     laws = {name: sc.law for name, sc in runs.items()}
     # before the lock file is made: a refused folder stays as it was
     check_output(out, overwrite, "comparison", laws, unmarked_only=True)
     with output_lock(out):
         prepare_output(out, overwrite, "comparison", laws)
-        write_comparison_status(out, scenario.name, laws, "running", written_by=written_by)
+        files = {}
+        write_comparison_status(out, scenario.name, laws, "running", files, written_by=written_by)
         try:
             yield out
         except BaseException as err:
             status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
             try:
-                write_comparison_status(out, scenario.name, laws, status, error=one_line(err),
+                record_files(out, files, writes("comparison"))
+                write_comparison_status(out, scenario.name, laws, status, files, error=one_line(err),
                                         written_by=written_by)
             except (OSError, ResultsWriteError):
                 pass  # e.g. a full disk: the error itself is raised all the same
             raise
-        write_comparison_status(out, scenario.name, laws, "completed", written_by=written_by)
+        record_files(out, files, writes("comparison"))
+        write_comparison_status(out, scenario.name, laws, "completed", files, written_by=written_by)
 
 
 def check_runs(runs: dict) -> dict:
@@ -201,18 +207,12 @@ def run_comparison(scenario, ssp, out: Path, overwrite: bool, progress: bool, co
                                 noise_intro(), "",
                                 *noise_table(read_noise(out, results), float(scenario.plant.get("noise_rms", 0.0))),
                                 ""])
-            _write_text(out / "comparison.md", text)
+            write_text(out / "comparison.md", text)
         if not figures:
             return runs, results, checks, text
         say(f"{scenario.name}: figures")
         drawing.finish(jobs)
     return runs, results, checks, text
-
-
-def _write_text(path: Path, text: str) -> None:
-    tmp = Path(path).with_suffix(".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 class _FiguresDuringRuns:

@@ -26,7 +26,6 @@ for the container FMU TAPMP_ClosedLoop.fmu, whose parameters are named ``element
 """
 
 import io
-import os
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -35,6 +34,7 @@ from ..engine import fmu_extras
 from ..engine.fmu_extras import SSV, value_text
 from ..engine.ssd import ParameterAddressError, resolve_parameters
 from ..engine.ssp import SSC, SSD, default_experiment, qname, set_system_step
+from .folders import atomic_file
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 
@@ -166,17 +166,15 @@ def start_values_path(out: Path) -> Path:
 
 
 def _write_atomic(path: Path, data: bytes | dict) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    """Write ``data`` (bytes, or {member: content} of a zip archive) to ``path`` under a temporary name,
+    then renamed over it (folders.atomic_file: a symbolic link at ``path`` is refused, never followed)."""
+    with atomic_file(path, "wb") as f:
         if isinstance(data, dict):
-            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            with zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as z:
                 for name, content in data.items():
                     z.writestr(name, content)
         else:
-            tmp.write_bytes(data)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+            f.write(data)
 
 
 def export(scenario: Scenario, source_ssp: Path, out: Path, overwrite: bool = False) -> tuple[Path, Path]:

@@ -26,7 +26,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from ..errors import UsageError  # noqa: E402
 from .metrics import error_signals  # noqa: E402
-from .folders import COMPARISON_JSON, FORMATS, PART_FILE, folder_kind  # noqa: E402
+from .folders import (COMPARISON_JSON, FORMATS, PART_FILE, add_to_marker, check_targets, folder_kind,  # noqa: E402
+                      marker, PLOTS_JSON, output_lock, save_figure)
 from .reading import ResultFolderError, json_object, read_results  # noqa: E402
 
 LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
@@ -503,8 +504,10 @@ _RUNS = {}  # the runs a forked figure worker draws (inherited from the parent, 
 def _draw(stem: str, path: str) -> str:
     """Draw and write one figure of _RUNS (in this process or a forked worker)."""
     fig = _makers()[stem](_RUNS)
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=DPI)
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -657,27 +660,30 @@ def plot_runs(folders: list, labels: list[str] | None = None, signals: list[str]
                 src = SIGNALS[key][3] if key in SIGNALS else key
                 if isinstance(src, str) and src not in run["columns"]:
                     raise UsageError(f"--signals: {key!r} needs the column {src}, which run {name} did not record")
-    figs = {"signals": signals_figure(runs, keys)} if keys else figures(runs)
     if out is None:  # a comparison's chosen runs beside it, not over the comparison's own figures
         out = (folders[0] if len(folders) == 1 and show is None
                else default_out(folders, [p.name for p in paths] if show is not None else list(runs)))
     out = Path(out)
     prefix = "run_" if kind == "run" and not keys else ""
-    written = []
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        for stem, fig in figs.items():
-            for ext in ("png", "svg") if svg else ("png",):
-                path = out / f"{prefix}{stem}.{ext}"
-                fig.savefig(path, dpi=DPI)
-                written.append(path)
-    except BaseException:
-        for p in written:  # no partial output
-            p.unlink(missing_ok=True)
-        raise
-    finally:
-        for fig in figs.values():
-            plt.close(fig)
+    names = [f"{prefix}{stem}.{ext}" for stem in (["signals"] if keys else _makers())
+             for ext in (("png", "svg") if svg else ("png",))]
+    with output_lock(out):  # one writer: its marker's record of the figures is rewritten
+        found = marker(out)  # none: plots.json will put the figures on record
+        check_targets(out, names if found else [*names, PLOTS_JSON], found)  # else nothing is drawn
+        figs = {"signals": signals_figure(runs, keys)} if keys else figures(runs)
+        written = []
+        try:
+            for stem, fig in figs.items():
+                for ext in ("png", "svg") if svg else ("png",):
+                    written.append(save_figure(fig, out / f"{prefix}{stem}.{ext}", dpi=DPI))
+            add_to_marker(out, [p.name for p in written])
+        except BaseException:
+            for p in written:  # no partial output
+                p.unlink(missing_ok=True)
+            raise
+        finally:
+            for fig in figs.values():
+                plt.close(fig)
     return written
 
 

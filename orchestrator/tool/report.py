@@ -5,6 +5,7 @@ from pathlib import Path
 
 from .baselines import BASELINES, BY_NAME, robustness_matched, run_gains_text, scdc_modal
 from .metrics import METRIC_KEYS, QUANTITIES, reduction
+from .folders import write_text
 
 _TITLE = {"tracking": "tracking error of each motor", "sync": "synchronization error of each motor",
           "axis": "tracking error of each drive axis"}
@@ -315,7 +316,5 @@ def write_comparison(path: Path, scenario, results: dict, command: str, runs: di
     if moves:
         parts += [moves]
     text = "\n".join(parts)
-    tmp = Path(path).with_suffix(".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    write_text(path, text)  # under a temporary name, then renamed; a link there is refused
     return text

@@ -26,7 +26,8 @@ from . import metrics
 from ..engine.master import CoSimulation
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
-from .folders import FORMATS, ResultsWriteError, check_output, output_lock, prepare_output, write_json, write_result
+from .folders import (FORMATS, MANIFEST, PART_FILE, ResultsWriteError, check_output, output_lock, prepare_output,
+                      record_files, stream_record, write_json, write_result)
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 from .stops import StopRequest, stop_scope
@@ -106,8 +107,20 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
             "ordering": scenario.ordering, "record_every": scenario.record_every,
             "clock": scenario.clock, "connection_start": scenario.connection_start,
             "event_mode": scenario.event_mode, "plant_interface": scenario.plant_interface,
-            "versions": versions(), "status": "running"}
+            "versions": versions(), "status": "running", MANIFEST: {}}
     write_result(out / "run.json", info)
+    written = {FORMATS[fmt], PART_FILE, "metrics.json"} if fmt == "mat" else {FORMATS[fmt], "metrics.json"}
+
+    writers = []
+
+    def opened(writer) -> None:  # the result file exists: on record before its first row (a killed run)
+        writers.append(writer)
+        info[MANIFEST][writer.path.name] = stream_record(writer.path)
+        write_result(out / "run.json", info)
+
+    def record(names) -> None:  # the files' records, a CSV file's as its writer hashed it
+        record_files(out, info[MANIFEST], names, {w.path.name: w.record() for w in writers})
+
     start = time.perf_counter()
     stop = StopRequest()
     sim = None
@@ -122,19 +135,19 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
                               other_tables=SCENARIO_TABLES, loaded=loaded,
                               model_exchange=("plant",) if scenario.plant_interface == "me" else ()) as sim:
                 info["guids"] = sim.guids
-                info["columns"] = list(sim.columns)
-                if fmt == "mat":  # results.part.npy needs its column names on record (a killed run)
-                    write_result(out / "run.json", info)
-                stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes)
+                info["columns"] = list(sim.columns)  # on record with the result file (opened)
+                stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes, opened)
             result = stats.result()
             if "not_computed" in result:
                 print(f"note: metrics not computed: {result['not_computed']}", file=sys.stderr)
             write_result(out / "metrics.json", result)
             wall = time.perf_counter() - start
+            record(written)
             info.update(status="completed", exit_code=0, wall_time_s=wall,
                         real_time_factor=wall / (scenario.stop_time - scenario.start_time))
             write_result(out / "run.json", info)
         except BaseException as err:
+            record(set(info[MANIFEST]) | written)
             _record_failure(out / "run.json", info, err, sim, start)
             raise
     return result
@@ -150,8 +163,9 @@ def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
 
 
 def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: StopRequest, progress,
-              keep_rows: list | None = None, keep_bytes: int = 0):
+              keep_rows: list | None = None, keep_bytes: int = 0, opened=None):
     """The step loop: rows to the result file in whole blocks, metrics over every step;
+    ``opened(writer)`` is called once the result file (``writer.path``) is made, before its first row;
     returns the metrics.ErrorStatistics. Stops at a block boundary when ``stop`` is set.
     The rows of a block are stored by CoSimulation.advance (the compiled core or the
     Python loop) into one preallocated array."""
@@ -161,6 +175,8 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
     buffer = np.empty((BLOCK, len(sim.columns)))
     filled, first = 0, 0  # rows of buffer (steps first, first + 1, ...) not yet written
     try:
+        if opened:
+            opened(base_writer)
         stats = metrics.ErrorStatistics(sim.columns, metrics.saturation_limit(sim.parameters),
                                         metrics.force_step(sim.parameters, scenario.start_time, scenario.stop_time),
                                         metrics.move_spec(sim.parameters, scenario.settling_bands))

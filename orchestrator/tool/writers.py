@@ -14,6 +14,7 @@ reason Python sees; only a killed process (SIGKILL, power loss) leaves results.p
 which reading.read_results reads as well.
 """
 
+import hashlib
 import io
 import os
 import queue
@@ -25,7 +26,7 @@ import numpy as np
 import orjson
 from numpy.lib import format as npy
 
-from .folders import FORMATS, PART_FILE, ResultsWriteError, atomic_file
+from .folders import FORMATS, PART_FILE, ResultsWriteError, atomic_file, new_stream
 
 
 def _write_error(path: Path, err: OSError, detail: str = "") -> ResultsWriteError:
@@ -40,10 +41,11 @@ class _Blocks:
         self.path = Path(path)
         self.columns = list(columns)
         try:
-            self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
+            self.fd = new_stream(self.path)  # a new file renamed into place: never opened through a link
         except OSError as err:
             raise _write_error(self.path, err) from err
         self.size = 0            # bytes of whole blocks on disk
+        self._sha256 = hashlib.sha256()  # of those bytes, computed as they are written (folders.file_record)
         self.rows = 0            # rows on disk
         self.last_time = None    # time [s] of the last row on disk
 
@@ -58,17 +60,24 @@ class _Blocks:
             try:
                 os.ftruncate(self.fd, self.size)  # whole rows only
             except OSError:
-                pass
+                self._sha256 = None  # the file may hold more than the hashed blocks
             if quiet:
                 return False
             kept = (f"the rows up to t = {self.last_time:.6g} s" if self.last_time is not None
                     else "no rows")
             raise _write_error(self.path, err, f": it keeps {kept}, whole rows only") from err
         self.size += len(data)
+        if self._sha256 is not None:
+            self._sha256.update(data)  # in the writing thread of a CSV run: off the stepping thread
         self.rows += rows
         if last_time is not None:
             self.last_time = last_time
         return True
+
+    def record(self) -> dict | None:
+        """The file's folders.file_record as written ({"size", "sha256"}), None if not known; valid once
+        finish() has returned."""
+        return None if self._sha256 is None else {"size": self.size, "sha256": self._sha256.hexdigest()}
 
     def close(self) -> None:
         os.close(self.fd)
@@ -223,6 +232,9 @@ class MatBlocks(_Blocks):
                 raise _write_error(self.mat, err, f": the rows stay in {self.path}") from err
             raise
         self.path.unlink(missing_ok=True)
+
+    def record(self) -> None:
+        return None  # the part file's header is rewritten in place: hashed from the file when needed
 
 
 class Keeping:

@@ -32,6 +32,7 @@ def test_run_and_compare_default_to_distinct_folders_under_the_current_directory
         run = json.loads((base / law / "run.json").read_text())
         assert (run["kind"], run["status"], run["scenario"]["law"]) == ("run", "completed", law)
     cmp = json.loads((base / "compare" / "comparison.json").read_text())
+    assert sorted(cmp.pop("tapmp_files")) == ["comparison.md", *(n[len("run_"):] for n in RUN_FIGS)]  # what it wrote
     assert cmp == {"kind": "comparison", "scenario": "paper_simulation", "status": "completed", "written_by": "compare",
                    "runs": {"sc-dc": "sc-dc", "apd-dc": "apd-dc", "apd-dc-matched": "apd-dc",
                             "apd-dc-diff-stiffness": "apd-dc", "apd-dc-mode-matched": "pid-dc",

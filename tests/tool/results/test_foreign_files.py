@@ -1,8 +1,8 @@
 """tapmp never deletes or replaces a file it did not write. A folder is tapmp's only if tapmp marked
-it (run.json, comparison.json); `run` and `compare` refuse a folder they did not mark that holds
-anything, in one line, exit 2, with nothing changed there (not even a lock file). --overwrite
-writes beside foreign files but never replaces one, and in a folder tapmp marked it removes only
-the files of fixed names tapmp writes (folders.tapmp_names)."""
+it (run.json, comparison.json listing the files it wrote); `run` and `compare` refuse a folder they
+did not mark that holds anything, in one line, exit 2, with nothing changed there (not even a lock
+file). --overwrite writes beside foreign files but never replaces one, and in a folder tapmp marked
+it removes only the files its marker lists (the names of folders.tapmp_names that tapmp wrote)."""
 
 import json
 from pathlib import Path

@@ -3,6 +3,7 @@ bit for bit; both are read back by read_results, the metrics and the plots; a MA
 stopped leaves a consistent results.mat, a killed one a loadable results.part.npy."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -75,8 +76,10 @@ def test_a_write_that_fails_in_the_writing_thread_is_raised_in_the_run_once(tmp_
     rows kept) from finish(), once; blocks after it are dropped, not written."""
     from orchestrator.tool.folders import ResultsWriteError
     from orchestrator.tool.writers import CsvBlocks
-    (tmp_path / "results.csv").symlink_to("/dev/full")
     writer = CsvBlocks(tmp_path, ["time", "x"])
+    full = os.open("/dev/full", os.O_WRONLY)  # the file's descriptor now writes there (a link there is refused)
+    os.dup2(full, writer.fd)
+    os.close(full)
     try:
         writer.write(np.array([[0.0, 1.5], [1e-4, 2.5]]))
         with pytest.raises(ResultsWriteError) as err:
