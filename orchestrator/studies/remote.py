@@ -187,7 +187,7 @@ class StudyPlugin(WorkerPlugin):
         self.failed = await _problem_here(self, worker)
         if self.failed:
             worker.log_event(self.topic, {"worker": self.worker, "problem": self.failed})
-            asyncio.ensure_future(_retire(worker))
+            self._retiring = asyncio.ensure_future(_retire(worker))  # kept: the loop holds tasks weakly
 
     def problem(self) -> str | None:
         """worker_problem of this worker against the client's identity (and its SSP cache, in data mode)."""
