@@ -587,6 +587,9 @@ def cmd_study(args) -> int:
     max_cases = MAX_CASES if args.max_cases is None else args.max_cases
     if max_cases < 1:
         raise StudyError(f"--max-cases = {max_cases} is invalid: allowed is an integer >= 1")
+    if args.retry_failed and not (args.resume and not study.tune):
+        raise StudyError("--retry-failed goes with --resume, for a grid or Monte Carlo study: it runs the cases "
+                         "whose row in study.csv says failed again")
     if not args.worker_timeout > 0:
         raise StudyError(f"--worker-timeout = {args.worker_timeout:g} is invalid: allowed is a number > 0 [s]")
     if not study.tune:
@@ -618,7 +621,8 @@ def cmd_study(args) -> int:
             command = args.command_line
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
-                          not args.no_progress, command, args.write_docs, remote, max_cases, case_list)
+                          not args.no_progress, command, args.write_docs, remote, max_cases, case_list,
+                          args.retry_failed)
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped
@@ -972,6 +976,8 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="output folder (overrides the study's 'output')")
     fmu_args(st)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
+    st.add_argument("--retry-failed", action="store_true", help="with --resume: run the cases whose row says "
+                    "failed again, replacing their rows")
     st.add_argument("--overwrite", action="store_true", help="start again in an output folder with a study.csv")
     recording_args(st)
     st.add_argument("--write-docs", action="store_true", help="a tuning study: write its presets, comparison.md "

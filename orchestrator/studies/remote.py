@@ -17,11 +17,21 @@ In both, a scenario's gain preset file (gains_file) is read by the client and se
 (gain_values_of), so a worker never opens a path the client gave it (except the SSP in shared mode).
 
 Before the first case a remote study waits for a worker (wait_for_workers, one line if none comes)
-and compares every worker's tapmp version and model source hash with the client's
-(check_workers); a worker that joins later is checked by the plugin before each case.
+and checks every worker (worker_problem: its tapmp version, the content of its installed package
+and C model, that it can load or build the C model in a cache it may trust, and in data mode
+write the SSP into that cache). A worker that fails is retired from the study (Dask's
+retire_workers: it closes, with its nanny, so no case is ever sent to it) with one warning naming
+it and the reason; its cases run on the other workers. A worker that joins later is checked by
+the study's plugin when it joins, before it takes a case (StudyPlugin.setup: Dask sets up a
+joining worker's plugins before it reads the scheduler's tasks); if it fails, it asks the
+scheduler to retire it and any case that reached it meanwhile goes back to the scheduler (Dask's
+Reschedule). A worker plugin cannot refuse to start a worker (Dask logs its setup's error and
+runs the worker anyway), hence retiring.
 """
 
+import asyncio
 import dataclasses
+import functools
 import hashlib
 import os
 import shutil
@@ -39,28 +49,76 @@ PLUGIN_PREFIX = "tapmp-study-"
 ZLIB_LEVEL = 6  # zlib's default: a 0.5 s case's run.json + metrics.json shrink about 4x
 
 
+PACKAGES = ("tapmp", "orchestrator", "fmu_common", "fmu_plant", "fmu_controller")  # tapmp-cosim's code
+SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")  # the files of PACKAGES that make what a worker runs
+
+
+@functools.cache
+def package_hash() -> str:
+    """16 hex digits of a SHA-256 over the source files (SOURCE_SUFFIXES) of the imported
+    PACKAGES, each by its path in its package and its content: two installations that differ in
+    one byte of them differ here, whatever their version says."""
+    import importlib.util
+    digest = hashlib.sha256()
+    for package in PACKAGES:
+        root = Path(next(iter(importlib.util.find_spec(package).submodule_search_locations)))
+        files = sorted(p for p in root.rglob("*") if p.suffix in SOURCE_SUFFIXES
+                       and "__pycache__" not in p.parts and p.is_file())
+        for path in files:
+            digest.update(f"{package}/{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(hashlib.sha256(path.read_bytes()).digest())
+    return digest.hexdigest()[:16]
+
+
 def identity() -> dict:
-    """What a worker must share with the client: the installed tapmp-cosim version and the hash of
-    the model's C sources (tapmp.cmodel.source_hash), with the process's host and pid."""
+    """What a worker must share with the client: the installed tapmp-cosim version, the hash of
+    its package's source files (package_hash) and of the model's C sources
+    (tapmp.cmodel.source_hash), with the process's host and pid."""
     from tapmp.cmodel import source_hash
     try:
         version = metadata.version("tapmp-cosim")
     except metadata.PackageNotFoundError:
         version = "not installed"
-    return {"tapmp": version, "model": source_hash(), "host": os.uname().nodename, "pid": os.getpid()}
+    return {"tapmp": version, "package": package_hash(), "model": source_hash(), "host": os.uname().nodename,
+            "pid": os.getpid()}
+
+
+IDENTITY_KEYS = ("tapmp", "package", "model")  # what must be equal
 
 
 def describe(ident: dict) -> str:
-    """An identity as text: "tapmp-cosim VERSION, model sources HASH"."""
-    return f"tapmp-cosim {ident['tapmp']}, model sources {ident['model']}"
+    """An identity as text: "tapmp-cosim VERSION, package sources HASH, model sources HASH"."""
+    return f"tapmp-cosim {ident['tapmp']}, package sources {ident['package']}, model sources {ident['model']}"
 
 
 def mismatch(worker: str, theirs: dict, ours: dict) -> str | None:
     """The one-line refusal of a worker whose identity differs from the client's, else None."""
-    if (theirs["tapmp"], theirs["model"]) == (ours["tapmp"], ours["model"]):
+    if all(theirs.get(k) == ours.get(k) for k in IDENTITY_KEYS):
         return None
     return (f"Dask worker {worker} ({theirs['host']}) runs {describe(theirs)}, this client {describe(ours)}: "
             "install the same tapmp-cosim on every worker (pip install the wheel the client uses)")
+
+
+def worker_problem(worker: str, client_identity: dict, ssp=None) -> str | None:
+    """Why this process (the Dask worker ``worker``) cannot run the study's cases, in one line, or
+    None: its identity differs from the client's (mismatch); it cannot load the C model, which
+    is compiled on first use into the cache (tapmp.cmodel.library_path: no toolchain such as the
+    ziglang package, or a cache another user could write); or ``ssp()``, writing the study's
+    SSP into its cache (data mode), fails."""
+    from tapmp.cmodel import CModelError, load
+    from tapmp.toolchain import CacheTrustError
+    text = mismatch(worker, identity(), client_identity)
+    if text:
+        return text
+    try:
+        load()
+        if ssp is not None:
+            ssp()
+    except StudyError as err:
+        return str(err)
+    except (CModelError, CacheTrustError, OSError) as err:
+        return f"Dask worker {worker} ({os.uname().nodename}) cannot run the cases: {' '.join(str(err).split())}"
+    return None
 
 
 def wait_for_workers(client, timeout: float, address: str) -> None:
@@ -73,18 +131,37 @@ def wait_for_workers(client, timeout: float, address: str) -> None:
                          "--worker-timeout") from None
 
 
-def check_workers(client) -> int:
-    """Compare every connected worker's identity with the client's; StudyError naming the first
-    worker that differs (and both versions). Returns the number of workers checked."""
-    ours = identity()
-    found = client.run(identity, on_error="return")
-    for worker, theirs in sorted(found.items()):
-        if isinstance(theirs, BaseException):
-            raise StudyError(f"Dask worker {worker} cannot run tapmp: {type(theirs).__name__}: {theirs}")
-        text = mismatch(worker, theirs, ours)
+async def _problem_here(plugin: "StudyPlugin", dask_worker=None) -> str | None:
+    """StudyPlugin.problem on this worker, in a thread (it may compile the C model, and the
+    worker's event loop must keep answering the scheduler meanwhile)."""
+    plugin.worker = str(dask_worker.address)
+    return await asyncio.get_running_loop().run_in_executor(None, plugin.problem)
+
+
+def check_workers(client, plugin: "StudyPlugin") -> int:
+    """Check every connected worker (StudyPlugin.problem). Those that fail are retired from the
+    study (retire_workers: closed) with one warning each naming the worker and its reason;
+    StudyError with the first reason if every worker fails. Returns the number of good workers."""
+    found = client.run(_problem_here, plugin, on_error="return")
+    problems = {}
+    for worker, text in sorted(found.items()):
+        if isinstance(text, BaseException):
+            text = f"Dask worker {worker} cannot run tapmp: {type(text).__name__}: {' '.join(str(text).split())}"
         if text:
-            raise StudyError(text)
-    return len(found)
+            problems[worker] = text
+    if problems and len(problems) == len(found):
+        raise StudyError(next(iter(problems.values())))
+    for text in problems.values():
+        retired_warning(text)
+    if problems:
+        client.retire_workers(list(problems), close_workers=True)
+    return len(found) - len(problems)
+
+
+def retired_warning(text: str) -> None:
+    """The one warning line of a worker retired from the study, with the reason ``text``."""
+    import sys
+    print(f"warning: {text}; this worker is retired from the study, its cases run on the others", file=sys.stderr)
 
 
 class StudyPlugin(WorkerPlugin):
@@ -100,22 +177,27 @@ class StudyPlugin(WorkerPlugin):
         self.data = data
         self.sha256 = hashlib.sha256(data).hexdigest() if data is not None else ""
         self.worker = ""
+        self.topic = ""  # the plugin's name, under which a worker that fails the check says so (log_event)
+        self.failed = None  # on a worker: why it failed the check (setup), else None
         self._path = None
 
-    def setup(self, worker) -> None:
-        self.worker = str(worker.address)
+    async def setup(self, worker) -> None:
+        """Check this worker (problem); if it fails, say so under ``topic`` (the client prints it)
+        and ask the scheduler to retire it, without waiting (a joining worker is being set up)."""
+        self.failed = await _problem_here(self, worker)
+        if self.failed:
+            worker.log_event(self.topic, {"worker": self.worker, "problem": self.failed})
+            self._retiring = asyncio.ensure_future(_retire(worker))  # kept: the loop holds tasks weakly
+
+    def problem(self) -> str | None:
+        """worker_problem of this worker against the client's identity (and its SSP cache, in data mode)."""
+        return worker_problem(self.worker, self.client_identity, self.ssp_path if self.data is not None else None)
 
     def teardown(self, worker) -> None:
         """The study ended (or the worker closes): free the FMUs its cases kept loaded in this worker
         and remove their folder (engine.loaded.process_fmus)."""
         from ..engine.loaded import close_process_fmus
         close_process_fmus()
-
-    def check(self) -> None:
-        """StudyError (naming this worker and both versions) if this worker differs from the client."""
-        text = mismatch(self.worker, identity(), self.client_identity)
-        if text:
-            raise StudyError(text)
 
     def ssp_path(self) -> Path:
         """The SSP in this worker's cache, written there on first use (see cached_ssp)."""
@@ -124,19 +206,42 @@ class StudyPlugin(WorkerPlugin):
         return self._path
 
 
+async def _retire(worker) -> None:
+    """Ask the scheduler to retire ``worker`` (it closes, with its nanny)."""
+    try:
+        await worker.scheduler.retire_workers(workers=[worker.address], close_workers=True,
+                                              stimulus_id=f"tapmp-study-check-{os.urandom(4).hex()}")
+    except Exception:  # the scheduler is gone: the worker goes with it
+        pass
+
+
+def retired_since(client, topic: str, seen: int) -> int:
+    """Print the warning of each worker retired by its own check (StudyPlugin.setup) under ``topic``
+    since the first ``seen`` ones; returns how many there are now."""
+    events = client.get_events(topic)
+    for _, msg in events[seen:]:
+        retired_warning(msg["problem"])
+    return len(events)
+
+
 def cached_ssp(sha256: str, name: str, data: bytes, worker: str = "") -> Path:
     """``cache_dir()/ssp/SHA256/NAME`` holding ``data``: written once (to a temporary file in the
     same folder, then renamed, under a file lock so that the worker processes of a machine do not
-    write it twice); a file already there is used only if its SHA-256 matches. StudyError naming
-    the worker and the folder if the cache cannot be written."""
+    write it twice); a file already there is used only if its SHA-256 matches. The folder and the
+    file are under the compiled-code cache's rule (tapmp.toolchain.private_folder and
+    check_private_file: this user's, writable by no one else, no symbolic link), as the FMUs'
+    binaries are loaded from the SSP. StudyError naming the worker and the folder if the cache
+    cannot be written or is not trusted."""
     from filelock import FileLock
 
-    from tapmp.toolchain import cache_dir
+    from tapmp.toolchain import CacheTrustError, cache_dir, check_private_file, private_folder
     folder = cache_dir() / "ssp" / sha256
-    path = folder / name
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        folder = private_folder(folder)
+        path = folder / name
         with FileLock(str(folder / ".lock")):
+            if os.path.lexists(path):
+                check_private_file(path)
             if not (path.is_file() and hashlib.sha256(path.read_bytes()).hexdigest() == sha256):
                 fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
                 try:
@@ -145,6 +250,8 @@ def cached_ssp(sha256: str, name: str, data: bytes, worker: str = "") -> Path:
                     os.replace(tmp, path)
                 finally:
                     Path(tmp).unlink(missing_ok=True)
+    except CacheTrustError as err:
+        raise StudyError(f"Dask worker {worker or os.uname().nodename} does not trust its SSP cache: {err}") from None
     except OSError as err:
         raise StudyError(f"Dask worker {worker or os.uname().nodename} cannot write the study's SSP into its "
                          f"cache {folder}: {err.strerror or err} (set TAPMP_CACHE to a writable folder on "
@@ -195,20 +302,42 @@ def pack_folder(folder: Path) -> dict:
             if p.is_file() and p.name != LOCK_FILE}
 
 
-def unpack_folder(files: dict, folder: Path, ssp: str) -> int:
+def inflate(files: dict, limit: int) -> dict:
+    """{name: bytes} of pack_folder's {name: zlib bytes}; StudyError if they hold more than
+    ``limit`` bytes together, found without inflating more than ``limit`` + 1 of them (a small
+    message from a worker may expand a thousandfold)."""
+    out, total = {}, 0
+    for name, blob in files.items():
+        inflater = zlib.decompressobj()
+        try:
+            data = inflater.decompress(blob, limit - total + 1)
+        except zlib.error as err:
+            raise StudyError(f"the case's file {name} from the worker is not zlib data ({err})") from None
+        total += len(data)
+        if total > limit or inflater.unconsumed_tail:
+            raise StudyError(f"the case's files from the worker hold more than {limit} bytes uncompressed "
+                             f"(at {name}), more than the run can write: refused, nothing written")
+        if not inflater.eof:
+            raise StudyError(f"the case's file {name} from the worker is cut (its zlib data ends early)")
+        out[name] = data
+    return out
+
+
+def unpack_folder(files: dict, folder: Path, ssp: str, limit: int) -> int:
     """Write a case's files (from pack_folder) into its folder ``folder`` on the client, as a local
     study leaves them: the folder locked while written, its old run files removed, each file
     written atomically, run.json naming the client's SSP path ``ssp`` (the worker ran the same
-    bytes from its cache). Returns the bytes received (compressed)."""
+    bytes from its cache). StudyError, with nothing written, if they hold more than ``limit``
+    bytes uncompressed (inflate). Returns the bytes received (compressed)."""
     import json
 
     from ..tool.folders import atomic_file, output_lock, prepare_output
     if not files:
         return 0
+    inflated = inflate(files, limit)
     with output_lock(folder):
         prepare_output(folder, True)
-        for name, blob in files.items():
-            data = zlib.decompress(blob)
+        for name, data in inflated.items():
             if name == "run.json":
                 info = json.loads(data)
                 info["ssp"] = ssp
@@ -245,9 +374,10 @@ def shipping(client, ssp: Path, address: str, data: bool, timeout: float):
     registered (with the SSP's bytes if ``data``) and removed at the end. Yields the
     Shipping the CaseRunner uses."""
     wait_for_workers(client, timeout, address)
-    check_workers(client)
     plugin = study_plugin(ssp if data else None)
     name = f"{PLUGIN_PREFIX}{plugin.sha256[:12] or 'paths'}-{os.urandom(4).hex()}"  # one per study run
+    plugin.topic = name
+    check_workers(client, plugin)  # the bad ones retired before the plugin (and cases) reach any worker
     client.register_plugin(plugin, name=name)
     try:
         yield Shipping(plugin=name, data=data, address=address)

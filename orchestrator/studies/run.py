@@ -11,14 +11,15 @@ from pathlib import Path
 
 from ..tool.folders import output_lock, write_json
 from .study import (MAX_CASES, STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, Shipping, Study, StudyError,
-                    StudyTable, cases, fingerprint, prepare)
+                    StudyTable, cases, drop_failed_rows, fingerprint, prepare)
 from .study_plots import plot_study
 from .tuning import run_tuning
 
 
 def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
               overwrite: bool = False, progress: bool = True, command: str = "", write_docs: bool = False,
-              remote: dict | None = None, max_cases: int = MAX_CASES, case_list: list | None = None) -> dict:
+              remote: dict | None = None, max_cases: int = MAX_CASES, case_list: list | None = None,
+              retry_failed: bool = False) -> dict:
     """Run a study on a Dask client; returns a summary (counts by status, paths, wall time,
     bytes of case files received). The output folder is locked for the whole study
     (results.OutputInUseError if in use).
@@ -27,7 +28,8 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
     share the client's files, --shared-fs), "timeout": how long to wait for a worker [s]}; the
     workers are checked before the first case (orchestrator.studies.remote.shipping).
     max_cases: a grid / Monte Carlo study with more cases is refused (StudyError). case_list: the
-    study's cases (study.cases) if the caller has listed them already."""
+    study's cases (study.cases) if the caller has listed them already. retry_failed (with resume, a
+    grid / Monte Carlo study): the cases whose row says "failed" run again, their rows replaced."""
     ssp = Path(ssp)
     if not ssp.is_file():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
@@ -43,14 +45,17 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
     with output_lock(out), ship as ship:  # one writer per study folder (cases lock their own folders)
         if study.tune:
             return run_tuning(study, ssp, client, out, resume, overwrite, progress, command, write_docs, ship)
-        return _run_cases(study, case_list, ssp, client, out, resume, overwrite, progress, command, ship)
+        return _run_cases(study, case_list, ssp, client, out, resume, overwrite, progress, command, ship,
+                          retry_failed)
 
 
 def _run_cases(study: Study, case_list: list, ssp: Path, client, out: Path, resume: bool, overwrite: bool,
-               progress: bool, command: str, ship: Shipping) -> dict:
+               progress: bool, command: str, ship: Shipping, retry_failed: bool = False) -> dict:
     """run_study for a grid / Monte Carlo study, in the locked output folder ``out``."""
     fp = fingerprint(study, case_list)
     prepare(study, out, resume, overwrite, fp)
+    if resume and retry_failed:
+        drop_failed_rows(out / STUDY_CSV)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / STUDY_JSON, {"name": study.name, "source": study.source, "kind": study.kind,
                                   "fingerprint": fp, "command": command, "cases": case_list})

@@ -14,7 +14,8 @@ worker process, into its own folder ``OUTPUT/cases/CASE``. Workers get only plai
 (the base scenario as a dict, the changes, paths); each loads the FMUs itself. Rows
 (parameters, metrics, status, wall time) are appended to ``OUTPUT/study.csv`` as cases
 finish; a failing case is a row with its error. ``--resume`` runs only the cases that
-have no row yet.
+have no row yet, in a folder whose study.json holds this study's fingerprint (prepare), and
+with ``--retry-failed`` also those whose row says failed (drop_failed_rows).
 
 The objective of a case is the mean over the three motors of the tracking MAE and the
 synchronization MAE, averaged: (mean(tracking_mae_um) + mean(sync_mae_um)) / 2 [um].
@@ -39,8 +40,8 @@ import numpy as np
 
 from ..tool.config import require
 from ..tool.scenario import Scenario
-from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, this_plugin,
-                     unpack_folder)
+from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, retired_since,
+                     this_plugin, unpack_folder)
 from .study_file import Study, StudyError, apply_changes, base_value, expand_baseline, load_study
 
 STUDY_CSV = "study.csv"
@@ -66,13 +67,41 @@ def case_count(study: Study) -> int:
     return math.prod(len(v) for v in study.grid.values()) * (study.samples or 1)
 
 
+# What the client holds per case at the peak of listing a study [bytes]: the case dict (cases()) and
+# its text in study.json and in the fingerprint. Measured with tracemalloc on grids of the paper's
+# scenario: 2545 B per case with one grid key, 2987 B with three (1000 cases each), so 2324 B + 221 B
+# per key. A lower bound: the Dask futures and the scheduler's tasks come on top.
+CASE_BYTES = 2324
+KEY_BYTES = 221  # and per parameter or changed key of a case [bytes]
+
+
+def case_memory(study: Study) -> int:
+    """Estimated memory the client needs for the study's cases while it runs them [bytes]
+    (CASE_BYTES and KEY_BYTES per case, computed from the counts, nothing listed)."""
+    keys = len(study.grid) + len(study.factors) + sum(len(f.targets) for f in study.factors)
+    return case_count(study) * (CASE_BYTES + KEY_BYTES * max(keys, 1))
+
+
+def free_memory() -> int:
+    """Memory this machine can give a process without swapping [bytes] (psutil's "available")."""
+    import psutil
+    return psutil.virtual_memory().available
+
+
 def check_case_count(study: Study, limit: int = MAX_CASES) -> int:
-    """The study's case count; StudyError naming it and how to allow it if it is above ``limit``."""
+    """The study's case count; StudyError naming it and how to allow it if it is above ``limit``,
+    or naming the estimated memory (case_memory) and the free memory if it does not fit. A
+    higher --max-cases is suggested only when the cases fit."""
+    from ..tool.estimate import human_bytes
     n = case_count(study)
     sizes = [f"{len(v)} values of {k}" for k, v in study.grid.items()] + (
         [f"{study.samples} samples"] if study.samples else [])
+    need, free = case_memory(study), free_memory()
+    memory = (f"listing them needs about {human_bytes(need)} of memory and this machine has {human_bytes(free)} "
+              "free: make the grid smaller or split it into studies")
     _require(n <= limit, f"{study.name} has {n} cases ({' x '.join(sizes)}): allowed are at most {limit} cases; "
-             f"pass --max-cases {n} to run them all")
+             + (f"pass --max-cases {n} to run them all" if need <= free else memory))
+    _require(need <= free, f"{study.name} has {n} cases ({' x '.join(sizes)}): {memory}")
     return n
 
 
@@ -135,7 +164,8 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     mode: the SSP in this worker's cache); case_dir: the case's folder, or None to run in a
     worker-local temporary folder whose files come back in the row's "files" ({name: zlib
     bytes}, remote.pack_folder). With a ``plugin`` the worker is first checked against the
-    client (remote.StudyPlugin.check). Never raises for a failing case: the row's status is
+    client (remote.StudyPlugin.setup): a worker that failed it gives the case back to the
+    scheduler (Dask's Reschedule) while it is retired. Never raises for a failing case: the row's status is
     "diverged" (the run left the envelope or stopped being finite), "failed" with the error,
     or "rejected" (not run) when reject_unstable and the stability check finds the loop not
     stable. The row carries the full metrics under "metrics" (not a CSV column). After
@@ -153,13 +183,15 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     if stop_requested(stop_token):
         return dict(row, status="interrupted", error="not run: the study was stopped", wall_time_s=0.0)
     folder = None
+    if plugin and getattr(this_plugin(plugin), "failed", None):
+        from distributed import Reschedule
+        raise Reschedule()  # this worker failed the study's check and is being retired: another runs the case
     try:
         if plugin:
             shipped = this_plugin(plugin)
             if shipped is None:
                 raise StudyError(f"Dask worker {row['worker']} has not received the study's data (plugin {plugin}): "
                                  "it is not a worker of this study's scheduler")
-            shipped.check()
             if ssp is None:
                 ssp = shipped.ssp_path()
             if case_dir is None:
@@ -381,6 +413,9 @@ POLL_S = 0.05  # how often the client looks for finished cases when none is read
 # How long the client waits for a finished case's row: longer means the worker holding it died,
 # and Dask runs the case again (the client watches for workers meanwhile instead of blocking) [s]
 GATHER_S = 10.0
+# What sets the size of a case's result file (tool.estimate.output_estimate), among the keys a case changes
+TIMING_KEYS = ("start_time", "stop_time", "step", "record_every", "format")
+FILES_ALLOWANCE_BYTES = 64 * 2**20  # for run.json + metrics.json: 4.0 kB in a 0.5 s case (docs/studies.md)
 WATCH_S = 2.0  # how often it asks the scheduler whether any worker is left while it waits [s]
 
 
@@ -413,6 +448,7 @@ class CaseRunner:
     def __init__(self, client, base: Scenario, ssp: Path, out: Path, table: StudyTable,
                  keep_results: bool, progress: bool = True, desc: str = "cases", ship: Shipping | None = None):
         self.client = client
+        self.base_scenario = base
         self.base = scenario_data(base)
         self.ssp = str(Path(ssp).resolve())
         self.out = Path(out).resolve()
@@ -423,6 +459,7 @@ class CaseRunner:
         self.ship = ship or Shipping()
         self.token = f"study-{os.getpid()}-{os.urandom(8).hex()}"
         self.bytes_received = 0  # compressed case files received (data mode) [bytes]
+        self.retired = 0  # workers retired by the study's check (remote.retired_since) warned of so far
 
     def _submit(self, case: dict, reject_unstable: bool, gain_files: dict):
         path = case["changes"].get("gains_file")
@@ -453,9 +490,9 @@ class CaseRunner:
             waiting, watched = False, time.monotonic()
             while futures:
                 batch = done.next_batch(block=False)
+                if time.monotonic() - watched >= WATCH_S:  # also while rows come (a worker joining is checked)
+                    waiting, watched = self._watch(waiting, len(futures)), time.monotonic()
                 if not batch:
-                    if time.monotonic() - watched >= WATCH_S:
-                        waiting, watched = self._watch(waiting, len(futures)), time.monotonic()
                     time.sleep(POLL_S)
                     continue
                 for fut in batch:
@@ -472,6 +509,8 @@ class CaseRunner:
                     rows[c["case"]] = self.table.rows[c["case"]]
                     if bar is not None:
                         bar.update(1)
+            if self.ship.plugin:  # a worker retired since the last look
+                self.retired = retired_since(self.client, self.ship.plugin, self.retired)
         except BaseException as err:
             self._stop(futures, getattr(err, "signum", signal.SIGTERM))
             raise
@@ -487,11 +526,26 @@ class CaseRunner:
         """The case's files into its folder (data mode), then its row into study.csv."""
         files = row.pop("files", None)
         if files:
-            self.bytes_received += unpack_folder(files, self.out / "cases" / case["case"], self.ssp)
+            try:
+                self.bytes_received += unpack_folder(files, self.out / "cases" / case["case"], self.ssp,
+                                                     self._files_limit(case))
+            except StudyError as err:  # the files a worker sent are refused: the case failed
+                row = {"status": "failed", "error": str(err), "worker": row.get("worker", "")}
         self.table.add(case, row)
 
+    def _files_limit(self, case: dict) -> int:
+        """The most bytes a case's files may hold uncompressed: twice its result file's estimated
+        size (tool.estimate) and FILES_ALLOWANCE_BYTES for its run.json and metrics.json."""
+        from ..tool.estimate import output_estimate
+        timing = {k: case["changes"][k] for k in TIMING_KEYS if k in case["changes"]}
+        scenario = replace_fields(self.base_scenario, **timing) if timing else self.base_scenario
+        return 2 * output_estimate([scenario])[0] + FILES_ALLOWANCE_BYTES
+
     def _watch(self, waiting: bool, left: int) -> bool:
-        """Say once that no worker is connected (and the study waits for one); returns whether none is."""
+        """Say once that no worker is connected (and the study waits for one), and warn of each
+        worker retired by the study's check since the last look; returns whether none is connected."""
+        if self.ship.plugin:
+            self.retired = retired_since(self.client, self.ship.plugin, self.retired)
         none = not self.client.nthreads()
         if none and not waiting:
             where = f"the scheduler at {self.ship.address}" if self.ship.address else "the cluster"
@@ -534,10 +588,12 @@ def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> 
     csv_path = out / STUDY_CSV
     meta = out / STUDY_JSON
     if resume:
-        if meta.exists():
-            old = _recorded_fingerprint(meta)
-            _require(old == fp, f"--resume: {out} holds a different study (fingerprint {old}, this one {fp}); "
-                     "the study file or its base scenario changed: run it into another --out or pass --overwrite")
+        # only study.json's fingerprint shows that the rows there are this study's: without it, none are taken
+        _require(meta.exists(), f"--resume: {out} has no {STUDY_JSON}, so nothing shows that its rows are this "
+                 f"study's: run without --resume to start the study (--overwrite replaces a {STUDY_CSV} there)")
+        old = _recorded_fingerprint(meta)
+        _require(old == fp, f"--resume: {out} holds a different study (fingerprint {old}, this one {fp}); "
+                 "the study file or its base scenario changed: run it into another --out or pass --overwrite")
         return
     if csv_path.exists():
         _require(overwrite, f"output folder {out} already holds {STUDY_CSV}: pass --resume to run only the "
@@ -545,6 +601,31 @@ def prepare(study: Study, out: Path, resume: bool, overwrite: bool, fp: str) -> 
         csv_path.unlink()
         shutil.rmtree(out / "cases", ignore_errors=True)
     out.mkdir(parents=True, exist_ok=True)
+
+
+def drop_failed_rows(path: Path) -> int:
+    """Remove the rows of status "failed" from the study.csv ``path`` so that --resume runs their
+    cases again; the other lines stay byte for byte. The file is replaced atomically (a crash
+    leaves the old table or the new one, whose missing cases --resume runs). Returns the rows removed."""
+    from ..tool.folders import atomic_file
+    if not path.exists():
+        return 0
+    lines = path.read_bytes().splitlines(keepends=True)  # a line end only ever ends a whole row (StudyTable)
+    if not lines:
+        return 0
+    def failed(line: bytes) -> bool:
+        fields = next(csv.reader([line.decode(errors="replace")]), [])
+        return len(fields) == len(header) and fields[header.index("status")] == "failed"
+
+    header = next(csv.reader([lines[0].decode(errors="replace")]), [])
+    if "status" not in header:
+        return 0  # not a study table: StudyTable refuses it
+    keep = [line for line in lines if not failed(line)]
+    if len(keep) == len(lines):
+        return 0
+    with atomic_file(path, "wb") as f:
+        f.writelines(keep)
+    return len(lines) - len(keep)
 
 
 def _recorded_fingerprint(meta: Path) -> str:

@@ -227,3 +227,48 @@ def test_a_case_future_dask_gives_up_is_a_failed_row_at_once(client):
     fut = client.submit(time.sleep, 30, pure=False)
     fut.cancel()
     assert row_of(fut) == {"status": "failed", "error": "cancelled by Dask (its worker and its result were lost)"}
+
+
+def test_resume_without_study_json_refuses_and_leaves_the_other_studys_rows(built, tmp_path, capsys):
+    """Study A completes, its study.json is removed: study B with --resume cannot prove the rows
+    are its own, so it refuses in one line and study.csv stays byte for byte."""
+    a = write_study(tmp_path, '[set]\nstop_time = 0.02\n[grid]\n"gain_overrides.D" = [225.0, 450.0]\n', "a")
+    assert main(["study", a, "--ssp", built["ssp"], "--workers", "1", "--no-progress"]) == 0
+    (tmp_path / "out" / "study.json").unlink()
+    before = (tmp_path / "out" / "study.csv").read_bytes()
+    capsys.readouterr()
+    b = write_study(tmp_path, '[set]\nstop_time = 0.02\n[grid]\n"gain_overrides.D" = [900.0, 1800.0]\n', "b")
+    code = main(["study", b, "--ssp", built["ssp"], "--workers", "1", "--resume", "--no-progress"])
+    out = capsys.readouterr()
+    assert code == 2 and out.out == "" and out.err.splitlines()[-1] == (
+        f"error: --resume: {tmp_path / 'out'} has no study.json, so nothing shows that its rows are this study's: "
+        "run without --resume to start the study (--overwrite replaces a study.csv there)")
+    assert (tmp_path / "out" / "study.csv").read_bytes() == before
+    assert not (tmp_path / "out" / "study.json").exists()
+
+
+def test_retry_failed_reruns_only_the_failed_rows_and_replaces_them(built, faulty_ssps, tmp_path, capsys):
+    # the faulty plant fails its doStep from t = 0.5 ms on: the 0.3 ms case completes, the 2 ms one fails
+    path = write_study(tmp_path, '[grid]\nstop_time = [0.0003, 0.002]\n')
+    args = ["study", path, "--workers", "1", "--no-progress"]
+    assert main([*args, "--ssp", faulty_ssps["status"]]) == 1
+    table = tmp_path / "out" / "study.csv"
+    header, completed, failed = table.read_bytes().splitlines(keepends=True)
+    assert b",completed," in completed and b",failed," in failed
+    assert main([*args, "--ssp", faulty_ssps["status"], "--resume"]) == 1  # --resume alone: failed rows stay
+    assert table.read_bytes() == header + completed + failed
+    capsys.readouterr()
+    assert main([*args, "--ssp", built["ssp"], "--resume", "--retry-failed"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1].startswith("s: 2 cases (1 run now, ")
+    lines = table.read_bytes().splitlines(keepends=True)
+    assert lines[:2] == [header, completed] and len(lines) == 3
+    assert rows_of(tmp_path / "out")["c0001"]["status"] == "completed"
+
+
+def test_retry_failed_without_resume_is_refused(built, tmp_path, capsys):
+    path = write_study(tmp_path, '[set]\nstop_time = 0.02\n[grid]\nlaw = ["sc-dc"]\n')
+    code = main(["study", path, "--ssp", built["ssp"], "--workers", "1", "--retry-failed"])
+    assert code == 2 and capsys.readouterr().err.splitlines() == [
+        "error: --retry-failed goes with --resume, for a grid or Monte Carlo study: it runs the cases whose row in "
+        "study.csv says failed again"]
+    assert not (tmp_path / "out").exists()

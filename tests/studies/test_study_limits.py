@@ -1,6 +1,9 @@
 """A study's case count is checked before any case is listed: above the cap a one-line refusal
 naming the count and how to raise it (no grid is built, so three 3000-value keys cost nothing)."""
 
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -24,15 +27,36 @@ def big_study(folder: Path, n: int, samples: int = 0) -> Path:
     return path
 
 
-def test_three_3000_value_grid_keys_are_refused_naming_the_count_and_the_option(tmp_path, capsys):
+SIZES = "3000 values of gain_overrides.D x 3000 values of gain_overrides.b x 3000 values of gain_overrides.Lambda_v"
+MEMORY = re.compile(r"listing them needs about 80\.6 TB of memory and this machine has [0-9.]+ [kMGT]?B free: make "
+                    r"the grid smaller or split it into studies")
+
+
+def test_three_3000_value_grid_keys_are_refused_naming_the_count_and_never_a_cap_that_cannot_run(tmp_path, capsys):
+    """27e9 cases cannot be listed in memory (27e9 x 2987 B): the refusal names the memory, not a --max-cases."""
     path = big_study(tmp_path, 3000)
     assert case_count(load_study(path)) == 27_000_000_000
     code = main(["study", path, "--ssp", __file__, "--out", tmp_path / "o"])
-    err = capsys.readouterr().err.splitlines()
-    assert code == 2 and err == [
-        "error: big has 27000000000 cases (3000 values of gain_overrides.D x 3000 values of gain_overrides.b x 3000 "
-        f"values of gain_overrides.Lambda_v): allowed are at most {MAX_CASES} cases; pass --max-cases 27000000000 to "
-        "run them all"]
+    (err,) = capsys.readouterr().err.splitlines()
+    assert code == 2 and "--max-cases" not in err
+    assert err.startswith(f"error: big has 27000000000 cases ({SIZES}): allowed are at most {MAX_CASES} cases; ")
+    assert MEMORY.fullmatch(err.split("; ", 1)[1]), err
+
+
+def test_a_grid_that_does_not_fit_in_memory_is_refused_before_it_is_listed(tmp_path):
+    """With the case cap raised to the count, the memory check refuses: exit 2, one line naming the
+    estimate and the free memory, and the command's peak memory stays that of starting it."""
+    code = ("import resource, sys\nfrom orchestrator.cli import main\ncode = main(sys.argv[1:])\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\nsys.exit(code)")
+    res = subprocess.run([sys.executable, "-c", code, "study", str(big_study(tmp_path, 3000)), "--ssp", __file__,
+                          "--out", str(tmp_path / "o"), "--max-cases", "27000000000"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 2, res.stderr
+    (err,) = res.stderr.splitlines()
+    assert err.startswith(f"error: big has 27000000000 cases ({SIZES}): ")
+    assert MEMORY.fullmatch(err.split("): ", 1)[1]), err
+    assert int(res.stdout) < 500_000  # [kB]: the 80 TB list was never started (importing the CLI takes ~150 MB)
+    assert not (tmp_path / "o").exists()
 
 
 def test_the_cap_counts_monte_carlo_samples_and_max_cases_raises_it(tmp_path):

@@ -11,6 +11,7 @@ Needs root (mount namespaces), as CI runs."""
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -342,6 +343,54 @@ def test_a_worker_with_another_tapmp_version_is_refused_naming_it_and_both_versi
     assert err[-1].startswith("error: Dask worker tcp://127.0.0.1:") and " runs tapmp-cosim 9.9.9, " in err[-1]
     assert f"this client tapmp-cosim {version('tapmp-cosim')}, " in err[-1]
     assert not c.runs() and not (tmp_path / "o" / "study.csv").exists()
+
+
+def changed_copy(venv: Path, folder: Path) -> Path:
+    """``folder`` holding a copy of the wheel's installed orchestrator package with one byte of a
+    source file changed (a comment sign added): first on a worker's PYTHONPATH, it is what the
+    worker imports, with the same tapmp-cosim version (another commit numbered the same)."""
+    site = Path(sysconfig.get_paths()["purelib"].replace(sys.prefix, str(venv)))
+    shutil.copytree(site / "orchestrator", folder / "orchestrator", ignore=shutil.ignore_patterns("__pycache__"))
+    init = folder / "orchestrator" / "__init__.py"
+    init.write_bytes(init.read_bytes() + b"#")
+    return folder
+
+
+def test_a_worker_of_other_content_joining_mid_study_is_retired_and_every_case_completes_on_the_good_one(
+        cluster_factory, wheel_venv, ssp, tmp_path):
+    """The good worker is paused (SIGSTOP) from the first row until the bad one has been retired, so
+    the bad one joins while cases are left, whatever the machine's speed."""
+    c = cluster_factory()
+    c.worker(1)
+    values = ", ".join(f"{400.0 + 20 * i}" for i in range(20))
+    study = write_study(tmp_path, f'[set]\nstop_time = 0.2\n[grid]\n"gain_overrides.D" = [{values}]\n', "join")
+    client = start_client(study, "--scheduler", c.address, "--ssp", ssp, "--out", tmp_path / "o", tmp=tmp_path)
+    stderr = tmp_path / "stderr.txt"
+    wait_until(lambda: rows_in(tmp_path / "o"), client, "a row", stderr.read_text)
+    (good,) = c.worker_pids()
+    os.kill(good, signal.SIGSTOP)
+    try:
+        bad = c.worker(1, env={"PYTHONPATH": str(changed_copy(wheel_venv, c.folder / "changed"))})
+        wait_until(lambda: "warning: " in stderr.read_text(), client, "the bad worker's warning", stderr.read_text)
+        assert len(rows_in(tmp_path / "o")) < 20
+    finally:
+        os.kill(good, signal.SIGCONT)
+    out, _ = client.communicate(timeout=600)
+    assert client.returncode == 0, out + stderr.read_text()
+    assert "20 cases (20 run now, " in out and "20 completed, 0 diverged, 0 failed" in out
+    assert bad.wait(timeout=WAIT_S) is not None  # retired: the worker and its nanny closed
+    (warning,) = [line for line in stderr.read_text().splitlines() if line.startswith("warning: ")]
+    theirs, ours = re.fullmatch(r"warning: Dask worker tcp://127\.0\.0\.1:\d+ \(\S+\) runs (.*), this client (.*): "
+                                r"install the same tapmp-cosim on every worker \(pip install the wheel the client "
+                                r"uses\); this worker is retired from the study, its cases run on the others",
+                                warning).groups()
+    version, package, model = re.fullmatch(r"tapmp-cosim (\S+), package sources (\w+), model sources (\w+)",
+                                           theirs).groups()
+    assert ours.startswith(f"tapmp-cosim {version}, package sources ") and ours.endswith(f", model sources {model}")
+    assert f"package sources {package}," not in ours  # the same version and model: the package's content differs
+    with open(tmp_path / "o" / "study.csv", newline="") as f:
+        assert {r["worker"].split(":")[1] for r in csv.DictReader(f)} == {str(good)}
+    assert sorted(key.split("-")[1] for key in c.runs()) == [f"c{i:04d}" for i in range(20)]  # each once
 
 
 def test_without_workers_the_study_ends_with_one_line_after_the_timeout(cluster_factory, ssp, tmp_path, capsys):
