@@ -559,9 +559,8 @@ def cmd_reproduce(args) -> int:
         docs = Path("docs") / "paper-reproduction.md"
         if not docs.parent.is_dir():
             raise UsageError(f"--write-docs: no folder {docs.parent.absolute()}: run it from the repository root")
-        tmp = docs.with_suffix(".tmp")
-        tmp.write_text(text)
-        tmp.replace(docs)
+        from .tool.folders import write_text
+        write_text(docs, text)
         print(f"wrote {docs}")
     return 0
 
@@ -749,7 +748,8 @@ def cmd_paper_gains(args) -> int:
     print(paper_gains_table(rows))
     if args.json:
         import json
-        Path(args.json).write_text(json.dumps(rows, indent=1))
+        from .tool.folders import write_text
+        write_text(Path(args.json), json.dumps(rows, indent=1))
     return 0
 
 

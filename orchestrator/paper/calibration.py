@@ -54,7 +54,7 @@ from ..engine.families import SCENARIOS_DIR
 from . import paper_tables
 from ..tool import scenario as scenario_mod
 from ..tool import stability
-from ..tool.folders import write_json
+from ..tool.folders import write_json, write_text
 from .paper_tables import TABLES, by_metric, tables_of, values
 from ..tool.metrics import METRIC_KEYS, reductions
 from ..tool.results import run_scenario
@@ -366,7 +366,7 @@ def calibrate_and_predict(target: str, ssp: Path, work: Path, horizon: float | N
     write_json(work / "calibration.json", {"fit": fit, "prediction": pred})
     lines = []
     if write_to is not None:
-        write_to.write_text(scenario_text(target, fit, pred))
+        write_text(write_to, scenario_text(target, fit, pred))
         lines.append(f"wrote {write_to}")
     lines.append(f"fitted ({fit['evaluations']} runs of {fit['horizon_s']:g} s, {fit['wall_s']:.0f} s): "
                  + ", ".join(f"{k} = {v:.6g}" for k, v in fit["values"].items()))

@@ -15,6 +15,7 @@ from tapmp.modal import modal_table
 
 from ..tool.baselines import scdc_modal
 from ..tool.compare import noise_intro, noise_table, read_noise, run_comparison
+from ..tool.folders import write_text
 from .paper_gains import paper_gains_table, run_paper_gains
 from .predictors import prediction_lines, run_extra
 from ..tool.robustness import MODES, mode_peaks
@@ -397,7 +398,5 @@ def reproduce(scenarios_dir: Path, results_dir: Path, out: Path, command: str, *
     text = "\n".join(parts)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(text)
-    tmp.replace(out)
+    write_text(out, text)  # under a temporary name, then renamed; a link there is refused
     return text

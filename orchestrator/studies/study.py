@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..tool.config import require
+from ..tool.folders import refuse_link
 from ..tool.scenario import Scenario
 from .remote import (Shipping, case_folder, gain_values_of, pack_folder, remove_case_folder, retired_since,
                      this_plugin, unpack_folder)
@@ -363,6 +364,7 @@ class StudyTable:
         self.path = Path(path)
         self.columns = ["case", *param_columns, "status", *METRIC_COLUMNS, *TAIL_COLUMNS]
         self.rows = {}
+        refuse_link(self.path)  # rows are appended: never through a link to a file elsewhere
         self.dropped = self._drop_cut_row()
         if self.path.exists():
             with open(self.path, newline="") as f:

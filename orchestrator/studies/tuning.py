@@ -35,6 +35,7 @@ from scipy.optimize import differential_evolution
 from tapmp.params import GAIN_NAMES
 
 from ..tool.config import require
+from ..tool.folders import write_text
 from ..tool.scenario import load_gain_file
 from .study import PENALTY_UM, STATUSES, STUDY_CSV, STUDY_JSON, CaseRunner, StudyTable, case_value, fingerprint, prepare
 from .study_file import StudyError, apply_changes
@@ -157,7 +158,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
             for n in names:
                 tuned[n] = (float(best_row[n]),) * 3
             preset = write_to / f"{law}.toml"
-            preset.write_text(_preset_text(law, tuned, case_value(start_row) if start_row.get("status") == "completed"
+            write_text(preset, _preset_text(law, tuned, case_value(start_row) if start_row.get("status") == "completed"
                                            else None, case_value(best_row), scenario, command))
             load_gain_file(preset)  # what we wrote must be a valid preset file
             start_value = case_value(start_row) if start_row.get("status") == "completed" else None
@@ -257,5 +258,5 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
                   "Laid out like `tapmp compare` (paper Tables 1-3): both rows use their own tuned gains.", "",
                   comparison_tables(tuned, reference_rows(base.name))]
     text = "\n".join(lines) + "\n"
-    path.write_text(text)
+    write_text(path, text)
     return text

@@ -62,6 +62,7 @@ from scipy import linalg
 
 from tapmp.modal import MODES
 
+from .folders import atomic_file, write_text
 from .scenario import ScenarioError
 from .stability import OneStepMap, invariant_basis, verdict_for
 
@@ -443,7 +444,7 @@ def write_responses(result: dict, path: Path) -> Path:
             for key, H in x["response"].items():
                 cols += [f"{run}|{b}|{key}|mag", f"{run}|{b}|{key}|phase_deg"]
                 data += [np.abs(H), np.angle(H, deg=True)]
-    with open(path, "w", newline="") as f:
+    with atomic_file(path) as f:  # under a temporary name, then renamed; a link there is refused
         w = csv.writer(f)
         w.writerow(cols)
         w.writerows(np.column_stack(data).tolist())
@@ -484,7 +485,7 @@ def analyze(scenario, out: Path | None = None, f_min: float = F_MIN, f_max: floa
                                   "spacing": "logarithmic"}
         data["runs"] = {run: {**r, "loops": {b: {k: v for k, v in x.items() if k != "response"}
                                              for b, x in r["loops"].items()}} for run, r in result["runs"].items()}
-        (out / "analysis.json").write_text(json.dumps(_plain(data), indent=1) + "\n")
+        write_text(out / "analysis.json", json.dumps(_plain(data), indent=1) + "\n")
     return result
 
 

@@ -272,3 +272,16 @@ def test_retry_failed_without_resume_is_refused(built, tmp_path, capsys):
         "error: --retry-failed goes with --resume, for a grid or Monte Carlo study: it runs the cases whose row in "
         "study.csv says failed again"]
     assert not (tmp_path / "out").exists()
+
+
+def test_study_csv_is_never_appended_through_a_link_and_its_target_stays(tmp_path):
+    from orchestrator.studies.study import StudyTable
+    from orchestrator.tool.folders import LinkInTheWayError
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("a user's file\n")
+    (tmp_path / "out").mkdir()
+    link = tmp_path / "out" / "study.csv"
+    link.symlink_to(target)
+    with pytest.raises(LinkInTheWayError, match="study.csv is a symbolic link"):
+        StudyTable(link, ["D"])
+    assert target.read_text() == "a user's file\n"
