@@ -14,6 +14,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from tapmp.interface import CONNECTIONS, ELEMENT, START_OUTPUTS, VARIABLES
+from tests.support.fmu_host import ssp_fmi2_units
 from tests.support.runs import orchestrator_rows, paper_scenario
 
 pytestmark = pytest.mark.slow  # builds the native FMUs for this machine
@@ -90,19 +91,7 @@ def jacobi_without_propagation(ssp, folder, order) -> tuple[list[str], np.ndarra
     """The SSP's FMI 2.0 FMUs in FMPy, each initialized alone at its start values in ``order`` (nothing set
     in Initialization Mode), then Jacobi steps (every FMU from t on the outputs of t) of STEP up to STOP;
     (columns "element.output", rows at t_0 ... t_n)."""
-    from fmpy.ssp.ssd import read_ssd
-    ssd = read_ssd(str(ssp))
-    with zipfile.ZipFile(ssp) as z:
-        z.extractall(folder)
-    units = {}
-    for c in ssd.system.elements:
-        path = str(folder / c.source)
-        md = read_model_description(path)
-        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(path, unzipdir=str(folder / c.name)),
-                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=c.name)
-        refs = {v.name: v.valueReference for v in md.modelVariables}
-        units[c.name] = (slave, refs, [v.name for v in md.modelVariables if v.causality == "output"])
-    links = [(c.startElement, c.startConnector, c.endElement, c.endConnector) for c in ssd.system.connections]
+    units, links = ssp_fmi2_units(ssp, folder)
     value = {}
 
     def read(name):

@@ -21,16 +21,14 @@ import math
 import shutil
 import subprocess
 import sys
-import zipfile
 from pathlib import Path
 
 from tests.interop import compatibility
 import numpy as np
 import pytest
+from tests.support.fmu_host import ssp_fmi2_units
 from tests.support.runs import orchestrator_rows, paper_scenario
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
-from fmpy.ssp.ssd import read_ssd
+from fmpy import read_model_description
 
 STEP = 1e-4
 STOP = 0.2
@@ -86,19 +84,8 @@ def wired_by_hand(ssp: Path, folder: Path, initialization: str) -> np.ndarray:
     SSP's order, each on the link values so far, 0 before any) or "propagated" (the
     orchestrator's: every output read in Initialization Mode, then the inputs set in dependency
     order)."""
-    with zipfile.ZipFile(ssp) as z:
-        z.extractall(folder)
-    ssd = read_ssd(str(ssp))
-    units = {}
-    for c in ssd.system.elements:
-        path = str(folder / c.source)
-        md = read_model_description(path)
-        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(path, unzipdir=str(folder / c.name)),
-                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=c.name)
-        refs = {v.name: v.valueReference for v in md.modelVariables}
-        units[c.name] = (slave, refs, [v.name for v in md.modelVariables if v.causality == "output"])
+    units, links = ssp_fmi2_units(ssp, folder)
     assert tuple(units) == ORDER
-    links = [(c.startElement, c.startConnector, c.endElement, c.endConnector) for c in ssd.system.connections]
     value = {}  # (element, output) -> the link's value
 
     def set_inputs(name):

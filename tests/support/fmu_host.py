@@ -101,3 +101,24 @@ class Host:
             pass
         self.fmu.freeInstance()
 
+
+
+def ssp_fmi2_units(ssp, folder) -> tuple[dict, list]:
+    """The FMI 2.0 FMUs of the SSP file ``ssp`` unpacked into ``folder`` and instantiated in FMPy, one
+    per element: ({element: (FMU2Slave, {variable: value reference}, [output names])}, [(start element,
+    start connector, end element, end connector)] of the SSD's connections), elements in the SSD's order."""
+    import zipfile
+    from fmpy.ssp.ssd import read_ssd
+    with zipfile.ZipFile(ssp) as z:
+        z.extractall(folder)
+    ssd = read_ssd(str(ssp))
+    units = {}
+    for c in ssd.system.elements:
+        path = str(folder / c.source)
+        md = read_model_description(path)
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(path, unzipdir=str(folder / c.name)),
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=c.name)
+        refs = {v.name: v.valueReference for v in md.modelVariables}
+        units[c.name] = (slave, refs, [v.name for v in md.modelVariables if v.causality == "output"])
+    links = [(c.startElement, c.startConnector, c.endElement, c.endConnector) for c in ssd.system.connections]
+    return units, links
