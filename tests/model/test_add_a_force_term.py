@@ -72,8 +72,9 @@ with tempfile.TemporaryDirectory() as tmp:
             "fmi2": build_native_fmu("TAPMP_Plant", "fmi2", Path(tmp) / "fmi2", windows=False),
             "fmi3": build_native_fmu("TAPMP_Plant", "fmi3", Path(tmp) / "fmi3", windows=False)}
     for family, fmu in fmus.items():
-        # from rest, as the Python plant above (the FMUs' defaults start on the paper's trajectory)
-        rest = {name: 0.0 for name in ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")}
+        # from rest and with no force, as the Python plant above (the FMUs' defaults start on the paper's
+        # trajectory, their force inputs at the paper run's first command)
+        rest = {name: 0.0 for name in ("X0", "Z0", "B0", "dX0", "dZ0", "dB0", "F1", "F2", "F3")}
         res = simulate_fmu(str(fmu), stop_time=steps * h, step_size=h, output_interval=h, output=["X"],
                            start_values=rest)
         out[family] = [float(x) for x in res["X"]]
