@@ -28,7 +28,7 @@ from tests.support.shared import ROOT  # noqa: E402
 from tests.interop.test_export import (run_container, run_ecos_executable, run_ecos_exported,  # noqa: E402
                                        run_fmpy_ssp_exported, run_libcosim_exported)
 
-from orchestrator.engine.families import family_ssp  # noqa: E402
+from orchestrator.engine.families import family_ssp, fmus_dir  # noqa: E402
 
 NAMES = MOTOR_POSITIONS + COMMANDS
 
@@ -78,7 +78,7 @@ def main() -> int:
                  run_fmpy_ssp_exported(ssp, NAMES), 1, NAMES, {"clock": "accumulated", "connection_start": "zero"},
                  longer),
                 ("fmpy simulate, container", "clock exact",
-                 run_container(ROOT / "build" / "TAPMP_ClosedLoop.fmu", ssp, values, NAMES, Path(tmp) / "c.csv"),
+                 run_container(fmus_dir() / "TAPMP_ClosedLoop.fmu", ssp, values, NAMES, Path(tmp) / "c.csv"),
                  0, NAMES, {}, scenario)]
         print(f"paper_simulation, {scenario.n_steps} steps of {scenario.step:g} s, {args.fmus} FMUs; "
               "max |difference|: true positions [m] / encoder positions [m] / commands [N]")
