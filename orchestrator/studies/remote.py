@@ -55,13 +55,16 @@ SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")  # the files of PACKAGES that mak
 
 @functools.cache
 def package_hash() -> str:
-    """16 hex digits of a SHA-256 over the source files (SOURCE_SUFFIXES) of the imported
+    """16 hex digits of a SHA-256 over the source files (SOURCE_SUFFIXES) of the installed
     PACKAGES, each by its path in its package and its content: two installations that differ in
     one byte of them differ here, whatever their version says."""
-    import importlib.util
+    # PACKAGES sit beside this package (site-packages or the checkout), found from this file, not by
+    # import: a pythonfmu FMU run in the process puts its resources, a partial copy of fmu_common, on
+    # sys.path
+    top = Path(__file__).resolve().parents[2]
     digest = hashlib.sha256()
     for package in PACKAGES:
-        root = Path(next(iter(importlib.util.find_spec(package).submodule_search_locations)))
+        root = top / package
         files = sorted(p for p in root.rglob("*") if p.suffix in SOURCE_SUFFIXES
                        and "__pycache__" not in p.parts and p.is_file())
         for path in files:
