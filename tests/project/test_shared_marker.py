@@ -34,9 +34,9 @@ def run_pytest(tmp_path: Path, present=(), **env) -> tuple[int, str]:
     tests.mkdir(parents=True)
     # the conftest without its compatibility plugin, which checks rows of the repository's docs
     text = (ROOT / "tests" / "conftest.py").read_text()
-    plugin = 'pytest_plugins = ("tests.interop.compatibility",)\n'
+    plugin = 'pytest_plugins = ("tests.interop.compatibility", "tests.support.temp_folder")\n'
     assert text.count(plugin) == 1
-    (tests / "conftest.py").write_text(text.replace(plugin, ""))
+    (tests / "conftest.py").write_text(text.replace(plugin, 'pytest_plugins = ("tests.support.temp_folder",)\n'))
     (tests / "__init__.py").write_text("")
     shutil.copytree(ROOT / "tests" / "support", tests / "support", ignore=shutil.ignore_patterns("__pycache__"))
     (tests / "test_scratch.py").write_text(TEST)
