@@ -46,8 +46,8 @@ def test_the_quick_start_builds_in_a_fresh_clone_with_empty_caches_saying_what_i
                 "native: compiling 7 FMUs (fmi2, fmi3) for 1 platform(s): x86_64-linux",
                 "native fmi2: x86_64-linux binaries done", "native fmi3: x86_64-linux binaries done",
                 "native fmi2: writing the FMUs", "native fmi3: writing the FMUs",
-                "the native FMUs hold binaries for x86_64-linux only (and their C sources); `tapmp build` without "
-                "--platform adds aarch64-linux, x86_64-windows, x86-windows, x86_64-darwin, aarch64-darwin",
+                "the native FMUs hold binaries for x86_64-linux only (and their C sources); `tapmp build "
+                "--all-platforms` adds aarch64-linux, x86_64-windows, x86-windows, x86_64-darwin, aarch64-darwin",
                 "fmpy validate: every FMU", "FMUs and SSPs in "]
     at = [next(i for i, line in enumerate(lines) if line.startswith(e)) for e in expected]
     assert at == sorted(at), lines  # in this order
