@@ -38,12 +38,12 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from orchestrator.engine import build  # noqa: E402
+from orchestrator.builder import build  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.results import run_scenario  # noqa: E402
 from orchestrator.tool.scenario import load  # noqa: E402
-from orchestrator.engine.ssp import write_ssp  # noqa: E402
+from orchestrator.builder.ssp import write_ssp  # noqa: E402
 from tapmp.closed_loop import simulate  # noqa: E402
 from tapmp.interface import FMU_NAMES  # noqa: E402
 
@@ -79,7 +79,7 @@ class {name}(Fmi2Slave):
 
 def build_native_systems(tmp: Path, log) -> dict[str, Path]:
     """SSP files of the native families and their pass-through floors."""
-    from orchestrator.engine.build_native import build_native, build_native_fmu
+    from orchestrator.builder.build_native import build_native, build_native_fmu
 
     systems = {}
     for family, paths in build_native(tmp / "native", log=lambda *_: None, windows=False).items():
@@ -101,8 +101,8 @@ def time_c_master(fmi2_ssp: Path, scenario, tmp: Path, every_output: bool = Fals
     import subprocess
     import zipfile
 
-    from orchestrator.engine.build_native import fmi_headers_dir
-    from tapmp.toolchain import compile_c
+    from orchestrator.builder.build_native import fmi_headers_dir
+    from ctoolchain import compile_c
     exe = tmp / "c_master"
     if not exe.exists():
         compile_c([ROOT / "benchmarks" / "c_master.c"], exe, shared=False, flags=["-O2"],

@@ -33,7 +33,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as every tapmp command (cl
 import numpy as np  # noqa: E402
 
 from orchestrator.cli import main  # noqa: E402
-from orchestrator.engine.families import resolve_ssp  # noqa: E402
+from orchestrator.builder.families import resolve_ssp  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.envelope import envelope  # noqa: E402

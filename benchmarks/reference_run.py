@@ -13,7 +13,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.engine.build import build_all  # noqa: E402
+from orchestrator.builder.build import build_all  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load  # noqa: E402

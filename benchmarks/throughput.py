@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as every tapmp command (cli.single_threaded_blas)
 
-from orchestrator.engine.families import DEFAULT_FAMILY, resolve_ssp  # noqa: E402
+from orchestrator.builder.families import DEFAULT_FAMILY, resolve_ssp  # noqa: E402
 from orchestrator.studies.run import run_study  # noqa: E402
 from orchestrator.studies.study import load_study, run_case, scenario_data  # noqa: E402
 

@@ -11,9 +11,9 @@ import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
-from tapmp.toolchain import PLATFORMS
+from ctoolchain import PLATFORMS
 
-from .engine.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, data_dir,
+from .builder.families import (DEFAULT_FAMILY, ENV as FMUS_DIR_ENV, FAMILIES, SCENARIOS_DIR, data_dir,
                                default_build_dir, resolve_ssp)
 from .errors import UsageError
 
@@ -27,9 +27,9 @@ def user_errors() -> tuple:
     disk, a scheduler address). Every other exception is a programming error and shows its traceback."""
     from tapmp.errors import ModelInputError
     from tapmp.cmodel import CModelError
-    from tapmp.toolchain import CacheTrustError
-    from .engine.build import BuildError
-    from .engine.build_native import NativeBuildError
+    from ctoolchain import CacheTrustError
+    from .builder.build import BuildError
+    from .builder.build_native import NativeBuildError
     from .engine.master import CoSimulationError
     from .engine.schedule import ScheduleError
     from .engine.ssd import ParameterAddressError
@@ -180,14 +180,14 @@ def warn_if_implausible(scenario) -> None:
 
 
 def cmd_build(args) -> int:
-    from .engine.build import build_all
-    from .engine.build_native import build_native
+    from .builder.build import build_all
+    from .builder.build_native import build_native
     out = Path(args.out or default_build_dir())
     for p in args.platform or ():  # before building anything
         if p not in PLATFORMS:
             raise UsageError(f"--platform = {p!r} is invalid: allowed are {', '.join(PLATFORMS)}")
     if args.clean_cache:
-        from tapmp.toolchain import cache_dir, clean_cache
+        from ctoolchain import cache_dir, clean_cache
         removed = clean_cache(cache_sources())
         print(f"removed {len(removed)} stale file(s) from the compiled-code cache {cache_dir()}", flush=True)
 
@@ -214,8 +214,8 @@ def build_cross_check(out: Path, platforms, log) -> int:
     """`tapmp build --cross-check`: the native FMI 2.0 FMUs (built in a temporary folder, for ``platforms``)
     in the FMI Cross-Check layout under ``out``, and nothing else."""
     import tempfile
-    from .engine.build_native import build_native
-    from .engine.fmu_extras import cross_check_tree
+    from .builder.build_native import build_native
+    from .builder.fmu_extras import cross_check_tree
     with tempfile.TemporaryDirectory(prefix="tapmp_cross_check_") as tmp:
         native = build_native(Path(tmp), families=("fmi2",), platforms=platforms, log=log)
         fmus = {m: p for m, p in native["fmi2"].items() if m != "ssp"}
@@ -232,7 +232,7 @@ ALL_PLATFORMS_TIME = ("4 to 13 min the first time on a machine (Zig builds each 
 def build_platforms(args) -> tuple[str, ...]:
     """The platforms `tapmp build` compiles the native FMUs for: --platform's, every one with
     --all-platforms, else this machine's alone (as `bash build_fmus.sh --host`, the quick start)."""
-    from tapmp.toolchain import HOST
+    from ctoolchain import HOST
     if args.platform:
         return tuple(args.platform)
     return tuple(PLATFORMS) if args.all_platforms else (HOST,)

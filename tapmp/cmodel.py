@@ -9,11 +9,11 @@ from ``tapmp_model.h`` itself (:func:`cdef_text`), so nothing is mirrored by han
 The library is, in this order:
 * bundled next to the sources (``tapmp/c/tapmp_model-<hash>.so``, written into the
   pythonfmu FMUs' resources at build time): an FMU never compiles at run time;
-* compiled on first use by the project's toolchain (tapmp.toolchain: zig cc, or $CC) into
+* compiled on first use by the project's toolchain (ctoolchain: zig cc, or $CC) into
   the cache folder ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
   under a file lock so that concurrent processes (a study's workers) build it once. The cache
   folder and the library must belong to this user and be writable by no one else
-  (tapmp.toolchain.build_cached), else CacheTrustError and nothing is loaded.
+  (ctoolchain.build_cached), else CacheTrustError and nothing is loaded.
 Both names carry a hash of the C sources, so an edited model is never run from a stale library.
 
 The range checks of the settings are generated C too (``tapmp_settings.h``, from the settings
@@ -84,8 +84,8 @@ def bundled_name() -> str:
 
 def compile_library(output: Path) -> Path:
     """Compile tapmp_model.c, tapmp_loop.c and tapmp_filter.c into the shared library ``output`` with the native FMUs' flags
-    (tapmp.toolchain.CFLAGS) but exported symbols; CModelError if the compiler fails."""
-    from .toolchain import CFLAGS, ToolchainError, compile_c
+    (ctoolchain.CFLAGS) but exported symbols; CModelError if the compiler fails."""
+    from ctoolchain import CFLAGS, ToolchainError, compile_c
     # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
     flags = [f for f in CFLAGS if not f.startswith("-fvisibility")]
     with tempfile.TemporaryDirectory(prefix="tapmp_settings_") as generated:
@@ -99,7 +99,7 @@ def compile_library(output: Path) -> Path:
 
 def cached_library_path() -> Path:
     """Where the cache keeps the library of these sources for the current compiler and flags."""
-    from .toolchain import CFLAGS, cache_dir, compiler
+    from ctoolchain import CFLAGS, cache_dir, compiler
     key = hashlib.sha256(f"{source_hash()}\0{' '.join(compiler())}\0{' '.join(CFLAGS)}".encode()).hexdigest()
     return cache_dir() / f"tapmp_model_{key[:16]}.so"
 
@@ -108,7 +108,7 @@ def _cached_library() -> Path:
     """The library in the cache folder, compiled there (under a file lock) unless present."""
     path = cached_library_path()
     try:
-        from .toolchain import build_cached
+        from ctoolchain import build_cached
         return build_cached(path, compile_library)
     except OSError as err:
         raise CModelError(f"cannot write the compiled C model into {path.parent}: "

@@ -18,7 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import pytest  # noqa: E402
 
-from orchestrator.engine.build import build_all  # noqa: E402
+from orchestrator.builder.build import build_all  # noqa: E402
 from tests.support.fmus import LoadedFMU  # noqa: E402
 from tests.support.shared import shared  # noqa: E402
 
@@ -126,7 +126,7 @@ def faulty_ssps(built, tmp_path_factory):
 def native_built(tmp_path_factory):
     """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real for every
     platform (zig cc) into a temporary folder laid out as build/native/."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=True)
 
 

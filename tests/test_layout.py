@@ -11,11 +11,11 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = ROOT / "tests"
 PKG = ROOT / "orchestrator"
-PACKAGES = ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator")
+PACKAGES = ("ctoolchain", "tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator")
 # A layer may import from itself and from the layers before it, never from a later one: the engine
 # (FMUs, SSP, the master), the tool (scenarios, runs, results, reports, for any controller), the
 # paper study (its tables, reproduction, calibration), the studies on Dask.
-LAYERS = ("engine", "tool", "paper", "studies")
+LAYERS = ("engine", "builder", "tool", "paper", "studies")
 
 # {package: what it must not import}: the model knows no FMU and no master; the FMI runtime knows
 # only the model; the FMU adapters know the model and the runtime; the orchestrator's engine knows
@@ -23,11 +23,13 @@ LAYERS = ("engine", "tool", "paper", "studies")
 # paper study knows no study or command line; studies no command line. Standard library and
 # third-party imports are free.
 FORBIDDEN = {
+    "ctoolchain": ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
     "tapmp": ("fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
     "fmu_common": ("fmu_plant", "fmu_controller", "orchestrator"),
     "fmu_plant": ("fmu_controller", "orchestrator"),
     "fmu_controller": ("fmu_plant", "orchestrator"),
-    "orchestrator.engine": ("orchestrator.tool", "orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.engine": ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator.builder", "orchestrator.tool", "orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
+    "orchestrator.builder": ("orchestrator.tool", "orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
     "orchestrator.tool": ("orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
     "orchestrator.paper": ("orchestrator.studies", "orchestrator.cli"),
     "orchestrator.studies": ("orchestrator.cli",),

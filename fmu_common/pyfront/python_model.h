@@ -2,7 +2,7 @@
  * object (the adapter's TapmpSlave subclass, fmu_common/slave.py). The instance keeps the
  * model's hidden state as the JSON text of the adapter's hidden_state(), one character
  * code per double (zero-padded), so that FMU states copy, check and serialize it exactly
- * as they do a native model's numbers. The build (orchestrator/engine/build.py) adds
+ * as they do a native model's numbers. The build (orchestrator/builder/build.py) adds
  * MODEL_N_OUT and MODEL_OUT_FIRST from the variable table. */
 #ifndef TAPMP_PYTHON_MODEL_H
 #define TAPMP_PYTHON_MODEL_H

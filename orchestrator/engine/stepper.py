@@ -15,7 +15,7 @@ the package: ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/t
 named after a hash of the source and the compiler command, under a file lock so that
 concurrent processes build it once. If it cannot be built, the master says so in one line
 on stderr and steps in Python. A cache folder or library another user could have written is
-refused before anything is loaded (tapmp.toolchain.CacheTrustError, not a fallback: the run
+refused before anything is loaded (ctoolchain.CacheTrustError, not a fallback: the run
 stops with one line naming the path). ``TAPMP_STEPPER=python`` selects the Python loop.
 """
 
@@ -46,15 +46,15 @@ class StepperBuildError(RuntimeError):
 
 def compiler_command(source: Path, output: Path) -> list[str]:
     """The compiler and flags that build the core (the project's toolchain: $CC if set, else
-    zig cc from the ziglang package; tapmp.toolchain); part of the cache key."""
-    from tapmp.toolchain import compiler
+    zig cc from the ziglang package; ctoolchain); part of the cache key."""
+    from ctoolchain import compiler
     return [*compiler(), *CFLAGS, "-shared", "-fPIC", "-o", str(output), str(source), "-lm"]
 
 
 def compile_core(source: Path, output: Path) -> Path:
     """Compile the stepping core ``source`` into ``output`` with the project's toolchain;
     StepperBuildError with the compiler's first error line if it fails."""
-    from tapmp.toolchain import ToolchainError, compile_c
+    from ctoolchain import ToolchainError, compile_c
     try:
         return compile_c([source], output, flags=CFLAGS, libs=("m",), what="the compiled stepping core")
     except ToolchainError as err:
@@ -63,7 +63,7 @@ def compile_core(source: Path, output: Path) -> Path:
 
 def library_path() -> Path:
     """Where the compiled core of this source and compiler command lives in the cache."""
-    from tapmp.toolchain import cache_dir  # on first use: importing the master loads no tapmp module
+    from ctoolchain import cache_dir  # on first use: importing the master loads no tapmp module
     key = hashlib.sha256(SOURCE.read_bytes() + "\0".join(compiler_command(SOURCE, Path("x"))).encode())
     return cache_dir() / f"tapmp_stepper_{key.hexdigest()[:16]}.so"
 
@@ -71,7 +71,7 @@ def library_path() -> Path:
 def build() -> Path:
     """Build the compiled core into the cache unless it is there; returns its path.
     A file lock makes concurrent builds (a study's workers) wait for the first one."""
-    from tapmp.toolchain import build_cached
+    from ctoolchain import build_cached
     path = library_path()
     try:
         return build_cached(path, lambda tmp: compile_core(SOURCE, tmp))

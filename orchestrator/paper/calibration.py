@@ -50,7 +50,7 @@ from scipy.optimize import least_squares
 
 from tapmp.params import GAIN_PRESETS
 
-from ..engine.families import SCENARIOS_DIR
+from ..builder.families import SCENARIOS_DIR
 from . import paper_tables
 from ..tool import scenario as scenario_mod
 from ..tool import stability

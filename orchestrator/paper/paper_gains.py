@@ -45,7 +45,7 @@ from tapmp.control import Gains
 from tapmp.errors import ModelInputError
 from tapmp.params import ModelParams
 
-from ..engine.families import SCENARIOS_DIR
+from ..builder.families import SCENARIOS_DIR
 from ..errors import UsageError
 from ..tool import stability
 from ..tool.metrics import ErrorStatistics

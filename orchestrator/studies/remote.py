@@ -49,7 +49,7 @@ PLUGIN_PREFIX = "tapmp-study-"
 ZLIB_LEVEL = 6  # zlib's default: a 0.5 s case's run.json + metrics.json shrink about 4x
 
 
-PACKAGES = ("tapmp", "orchestrator", "fmu_common", "fmu_plant", "fmu_controller")  # tapmp-cosim's code
+PACKAGES = ("ctoolchain", "tapmp", "orchestrator", "fmu_common", "fmu_plant", "fmu_controller")  # tapmp-cosim's code
 SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")  # the files of PACKAGES that make what a worker runs
 
 
@@ -109,7 +109,7 @@ def worker_problem(worker: str, client_identity: dict, ssp=None) -> str | None:
     ziglang package, or a cache another user could write); or ``ssp()``, writing the study's
     SSP into its cache (data mode), fails."""
     from tapmp.cmodel import CModelError, load
-    from tapmp.toolchain import CacheTrustError
+    from ctoolchain import CacheTrustError
     text = mismatch(worker, identity(), client_identity)
     if text:
         return text
@@ -231,13 +231,13 @@ def cached_ssp(sha256: str, name: str, data: bytes, worker: str = "") -> Path:
     """``cache_dir()/ssp/SHA256/NAME`` holding ``data``: written once (to a temporary file in the
     same folder, then renamed, under a file lock so that the worker processes of a machine do not
     write it twice); a file already there is used only if its SHA-256 matches. The folder and the
-    file are under the compiled-code cache's rule (tapmp.toolchain.private_folder and
+    file are under the compiled-code cache's rule (ctoolchain.private_folder and
     check_private_file: this user's, writable by no one else, no symbolic link), as the FMUs'
     binaries are loaded from the SSP. StudyError naming the worker and the folder if the cache
     cannot be written or is not trusted."""
     from filelock import FileLock
 
-    from tapmp.toolchain import CacheTrustError, cache_dir, check_private_file, private_folder
+    from ctoolchain import CacheTrustError, cache_dir, check_private_file, private_folder
     folder = cache_dir() / "ssp" / sha256
     try:
         folder = private_folder(folder)

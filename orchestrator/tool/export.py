@@ -30,10 +30,10 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..engine import fmu_extras
-from ..engine.fmu_extras import SSV, value_text
+from ..builder import fmu_extras
+from ..builder.fmu_extras import SSV, value_text
 from ..engine.ssd import ParameterAddressError, resolve_parameters
-from ..engine.ssp import SSC, SSD, default_experiment, qname, set_system_step
+from ..builder.ssp import SSC, SSD, default_experiment, qname, set_system_step
 from .folders import atomic_file
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
@@ -78,7 +78,7 @@ def _fmu_parameters(root: ET.Element) -> tuple[dict, dict]:
 
 
 def parameter_set(name: str, values: dict, declared: dict, units: dict, element: str) -> bytes:
-    """One SSV document (engine.fmu_extras.parameter_set); ExportError names a variable the
+    """One SSV document (builder.fmu_extras.parameter_set); ExportError names a variable the
     element's FMU does not declare."""
     try:
         return fmu_extras.parameter_set(name, values, declared, units, element)

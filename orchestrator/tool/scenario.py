@@ -10,7 +10,7 @@ open_inputs (a list of "element.variable" FMU inputs that no connection of the S
 drives, deliberately: they keep their start values; the master refuses any other
 undriven input, and an entry that is no input of the system or that a connection drives),
 fmus (the FMU family whose built SSP a run uses: "native" (default), "fmi3" or "python";
-see orchestrator.engine.families; `--fmus` and `--ssp` on the command line override it),
+see orchestrator.builder.families; `--fmus` and `--ssp` on the command line override it),
 format (the result file: "csv" (default) or "mat", see orchestrator.tool.results;
 `--format` overrides it), plant_interface (the plant FMU's interface: "cs", Co-Simulation with its own
 RK4 (default), or "me", Model Exchange integrated by the master with CVODE, see
@@ -46,7 +46,7 @@ from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
 from ..engine.clocks import CLOCKS, nanoseconds_problem
-from ..engine.families import FAMILIES
+from ..builder.families import FAMILIES
 from ..engine.schedule import CONNECTION_STARTS, ORDERINGS
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
@@ -267,7 +267,7 @@ class Scenario:
     order: Annotated[list | None, BeforeValidator(_order)] = None
     # [ELEMENT] tables: FMU parameters by SSP element name
     elements: Annotated[dict, BeforeValidator(_elements)] = field(default_factory=dict)
-    fmus: Annotated[str, one_of(FAMILIES)] = "native"  # FMU family: python, native or fmi3 (engine.families)
+    fmus: Annotated[str, one_of(FAMILIES)] = "native"  # FMU family: python, native or fmi3 (builder.families)
     plant_interface: Annotated[str, one_of(PLANT_INTERFACES)] = "cs"  # the plant as Co-Simulation or Model Exchange
     format: Annotated[str, one_of(RESULT_FORMATS)] = "csv"   # result file: csv or mat (RESULT_FORMATS)
     # point-to-point runs: settling bands [m for X, Z and the motors, rad for B] of the move metrics

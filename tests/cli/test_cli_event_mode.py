@@ -20,7 +20,7 @@ PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 @pytest.fixture(scope="module")
 def fmi3(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
                         windows=False)["fmi3"]
 

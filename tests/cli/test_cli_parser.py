@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from orchestrator import cli
-from orchestrator.engine.families import data_dir
+from orchestrator.builder.families import data_dir
 from orchestrator.tool.scenario import RESULT_FORMATS
 
 pytestmark = pytest.mark.slow  # child processes

@@ -17,7 +17,7 @@ import pytest
 
 from orchestrator.engine import stepper
 from tapmp import cmodel
-from tapmp.toolchain import compile_c
+from ctoolchain import compile_c
 
 pytestmark = pytest.mark.slow  # child processes, a C compile
 

@@ -207,8 +207,8 @@ else:
 
 
 def test_an_instance_whose_reset_fails_is_replaced_by_a_new_one(native_built, tmp_path):
-    from orchestrator.engine.build import build_interface_fmu
-    from orchestrator.engine.ssp import write_ssp
+    from orchestrator.builder.build import build_interface_fmu
+    from orchestrator.builder.ssp import write_ssp
     from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
     trajectory = build_interface_fmu(tmp_path / "src" / "Refusing_Trajectory.py", REFUSING, tmp_path)
     with zipfile.ZipFile(native_built["fmi2"]["ssp"]) as z:

@@ -1,4 +1,4 @@
-"""The native FMUs' binaries for every platform, built by zig cc (tapmp/toolchain.py).
+"""The native FMUs' binaries for every platform, built by zig cc (ctoolchain/__init__.py).
 
 * aarch64 Linux runs: the C hosts (tests/fmu/c_host), built for aarch64 by the same toolchain, step
   the aarch64 binaries 2,000 times under qemu-aarch64 (Debian's qemu-user, libc6-arm64-cross as
@@ -136,7 +136,7 @@ def test_linux_binaries_export_only_the_fmi_functions_and_need_glibc_2_17_at_mos
 @pytest.mark.parametrize("family", FAMILIES)
 def test_windows_dlls_export_only_the_fmi_functions_and_import_only_windows_dlls(
         native_built, linux_exports, family, platform, machine):
-    from orchestrator.engine.build_native import PLATFORM_DIRS
+    from orchestrator.builder.build_native import PLATFORM_DIRS
     for model in FMU_NAMES:
         pe = lief.PE.parse(list(member(native_built[family][model],
                                        f"binaries/{PLATFORM_DIRS[family][platform]}/{model}.dll")))

@@ -3,7 +3,7 @@ process have adapters of the same module name."""
 
 import pytest
 
-from orchestrator.engine.build import build_fmu
+from orchestrator.builder.build import build_fmu
 from tapmp.interface import PLANT
 
 FROZEN_PLANT = '''

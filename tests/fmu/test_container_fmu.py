@@ -17,7 +17,7 @@ import pytest
 from tests.support.runs import COMMANDS, MOTOR_POSITIONS, orchestrator_rows, paper_scenario
 from fmpy import read_model_description
 
-from orchestrator.engine.container import CONTAINER
+from orchestrator.builder.container import CONTAINER
 from tapmp.interface import ELEMENT, FMU_NAMES, VARIABLES
 
 FMPY = Path(sys.executable).with_name("fmpy")  # the fmpy command of this environment

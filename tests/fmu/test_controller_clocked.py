@@ -33,7 +33,7 @@ def q_of(t):
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     """The native FMI 3.0 FMUs built for this machine, the clocked controller among them."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
                         windows=False)["fmi3"]
 
@@ -370,7 +370,7 @@ def test_fmil_parses_the_clocked_controller_with_only_its_known_gaps_on_the_term
 
 
 def test_the_clocked_fmu_carries_its_sources_its_binary_and_the_license(fmus):
-    from orchestrator.engine.fmu_extras import LICENSE_FILE
+    from orchestrator.builder.fmu_extras import LICENSE_FILE
     names = set(zipfile.ZipFile(fmus[CLOCKED]).namelist())
     assert {"modelDescription.xml", "binaries/x86_64-linux/TAPMP_ControllerClocked.so", "sources/all.c",
             "sources/buildDescription.xml", LICENSE_FILE} <= names

@@ -28,7 +28,7 @@ def host(tmp_path_factory):
 
 
 def run_host(host, fmi3, tmp, steps=STEPS):
-    from orchestrator.engine.build_native import CLOCKED
+    from orchestrator.builder.build_native import CLOCKED
     order = (TRAJECTORY, CLOCKED, PLANT)  # the master's initialization order: trajectory, controller, plant
     index = {TRAJECTORY: 0, CONTROLLER: 1, PLANT: 2}
     elements = [f"{unzip_fmu(fmi3[m], tmp / m)}:{m}" for m in order]
@@ -64,7 +64,7 @@ def test_the_loop_with_every_fmu_and_the_host_under_address_and_ub_sanitizers_ru
     nothing, and give the shipped binaries' rows."""
     import os
     from tests.support.ctools import SANITIZE, SANITIZER_ENV, compile_c as cc, extract_sources
-    from orchestrator.engine.build_native import CLOCKED
+    from orchestrator.builder.build_native import CLOCKED
     exe = tmp_path / "loop_asan"
     proc = cc([*SANITIZE, "-std=c99", "-o", exe, HOST_SOURCE, "-ldl"])
     assert proc.returncode == 0, proc.stderr

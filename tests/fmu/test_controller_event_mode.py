@@ -35,7 +35,7 @@ def q_of(t):
 @pytest.fixture(scope="module")
 def fmu(tmp_path_factory):
     """The native FMI 3.0 controller, built for this machine."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
                         windows=False)["fmi3"]["TAPMP_Controller"]
 

@@ -17,8 +17,8 @@ from fmpy import read_model_description
 
 from tests.support.fmu_host import Host
 from tests.support.fmil_gaps import fmil_messages, terminal_messages
-from orchestrator.engine.build_native import ME_STATES, state_derivative_dependencies
-from orchestrator.engine.container import CONTAINER, container_dependencies
+from orchestrator.builder.build_native import ME_STATES, state_derivative_dependencies
+from orchestrator.builder.container import CONTAINER, container_dependencies
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, dependencies
 from tapmp.kinematics import inverse
 from tapmp.params import DEFAULT_MODAL_GAINS

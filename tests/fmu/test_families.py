@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
-from orchestrator.engine import families
+from orchestrator.builder import families
 from orchestrator.cli import main
 
 TRUE_POSITIONS = MOTOR_POSITIONS[:3]

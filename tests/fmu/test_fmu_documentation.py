@@ -13,8 +13,8 @@ import pytest
 from tests.support.runs import PAPER
 from tests.support.shared import ROOT, shared
 
-from orchestrator.engine import fmu_extras
-from orchestrator.engine.fmu_extras import LS_REF, SCENARIO
+from orchestrator.builder import fmu_extras
+from orchestrator.builder.fmu_extras import LS_REF, SCENARIO
 from tapmp.interface import ELEMENT, FMU_NAMES, VARIABLES
 
 pytestmark = pytest.mark.slow  # builds the native FMUs; runs fmusim and Chromium
@@ -25,7 +25,7 @@ CASES = [(f, m) for f in FAMILIES for m in FMU_NAMES]
 @pytest.fixture(scope="module")
 def host_built(tmp_path_factory):
     """The native FMUs with this machine's binary only (what the extras need is the same)."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native_host"), log=lambda *_: None, windows=False)
 
 

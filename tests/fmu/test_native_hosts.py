@@ -1,7 +1,7 @@
 """The native FMUs (C, no Python at run time) in real hosts other than the orchestrator.
 
 * Linux: small C hosts (tests/fmu/c_host/fmi2_host.c, fmi3_host.c), compiled here by the
-  project's toolchain (zig cc, tapmp/toolchain.py) and
+  project's toolchain (zig cc, ctoolchain/__init__.py) and
   started with an empty environment (`env -i`), load the shipped .so files and must give
   FMPy's results exactly; the .so files need nothing but the C runtime.
 * Windows: the same hosts, cross-compiled by the same toolchain (-static), run the shipped DLLs
@@ -32,7 +32,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from tapmp.toolchain import compile_c
+from ctoolchain import compile_c
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TRAJECTORY, VARIABLES
 
 C_HOST = Path(__file__).parent / "c_host"

@@ -10,7 +10,8 @@ import pytest
 from fmpy import simulate_fmu
 
 from orchestrator.cli import main
-from tapmp import cmodel, toolchain
+import ctoolchain as toolchain
+from tapmp import cmodel
 from tapmp.errors import ModelInputError
 from tapmp.interface import TRAJECTORY, VARIABLES, allowed_text
 from tapmp.trajectory import TrajectoryParams
@@ -33,7 +34,7 @@ def refusal(v) -> str:
 @pytest.fixture(scope="module")
 def families(built, tmp_path_factory):
     """{family: {model: FMU path}}: pythonfmu and the native FMI 2.0 and 3.0 FMUs for this host."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     native_fmus = build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None,
                                platforms=(toolchain.HOST,))
     return {"python": built, **native_fmus}

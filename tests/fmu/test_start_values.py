@@ -25,7 +25,7 @@ STEP, STOP = 1e-4, 0.2
 @pytest.fixture(scope="module")
 def native(tmp_path_factory):
     """The native FMI 2.0 and 3.0 FMUs and SSPs, built for this machine."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=False)
 
 

@@ -28,7 +28,7 @@ from tests.support.shared import ROOT  # noqa: E402
 from tests.interop.test_export import (run_container, run_ecos_executable, run_ecos_exported,  # noqa: E402
                                        run_fmpy_ssp_exported, run_libcosim_exported)
 
-from orchestrator.engine.families import family_ssp, fmus_dir  # noqa: E402
+from orchestrator.builder.families import family_ssp, fmus_dir  # noqa: E402
 
 NAMES = MOTOR_POSITIONS + COMMANDS
 

@@ -1,5 +1,5 @@
 """The FMI Cross-Check layout of the native FMI 2.0 Co-Simulation FMUs (`tapmp build
---cross-check`, orchestrator.engine.fmu_extras.cross_check_tree): FMPy's own validator of
+--cross-check`, orchestrator.builder.fmu_extras.cross_check_tree): FMPy's own validator of
 Cross-Check vendor repositories (fmpy.cross_check.validate_vendor_repo) finds no problem in it,
 and FMPy's Cross-Check importer (fmpy.cross_check.cross_check) run on it passes every model, its
 results validated by the same validator."""
@@ -17,7 +17,7 @@ from fmpy.cross_check.validate_vendor_repo import validate_repo
 from fmpy.util import read_csv
 
 from orchestrator.cli import main
-from orchestrator.engine.fmu_extras import cross_check_tree
+from orchestrator.builder.fmu_extras import cross_check_tree
 from tapmp import __version__
 from tapmp.interface import FMU_NAMES
 

@@ -24,9 +24,9 @@ import pytest
 from tests.support.runs import COMMANDS, MOTOR_POSITIONS, PAPER, orchestrator_rows, paper_scenario
 
 from orchestrator.cli import main
-from orchestrator.engine import families
-from orchestrator.engine.container import CONTAINER
-from orchestrator.engine.ssp import OSP
+from orchestrator.builder import families
+from orchestrator.builder.container import CONTAINER
+from orchestrator.builder.ssp import OSP
 from orchestrator.tool.export import SSD_MEMBER
 from tapmp.interface import INITIAL_STATE as DEFAULT_STATE
 

@@ -20,7 +20,7 @@ from tests.support.shared import shared
 from tests.support.fmil_gaps import fmil_messages, terminal_messages, warnings_and_errors
 from fmpy import simulate_fmu
 
-from orchestrator.engine.container import CONTAINER
+from orchestrator.builder.container import CONTAINER
 from tapmp.interface import FMU_NAMES
 
 FMIL_CHECK = "tools/fmil/fmil_check"

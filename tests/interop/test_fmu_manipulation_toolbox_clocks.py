@@ -29,7 +29,7 @@ FORCES = tuple(f"tapmp_controllerclocked.F{i}" for i in (1, 2, 3))  # the contai
 @pytest.fixture(scope="module")
 def container(tmp_path_factory):
     """`fmucontainer -container TAPMP_Clocked.ssp:0.0001 -fmi 3`: (the container FMU, the builder's log)."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     fmi3 = build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
                         windows=False)["fmi3"]
     folder = tmp_path_factory.mktemp("fmt_clocked")

@@ -9,7 +9,7 @@ import pytest
 from fmpy import simulate_fmu
 from tests.fmu.test_native_hosts import run_fmu_check
 
-from orchestrator.engine.container import CONTAINER
+from orchestrator.builder.container import CONTAINER
 
 pytestmark = pytest.mark.needs_shared("tools/fmuCheck/fmuCheck.linux64")
 

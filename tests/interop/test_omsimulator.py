@@ -329,7 +329,7 @@ def test_an_ssp_without_omsimulators_annotation_is_refused_by_it(omsimulator, ex
             if item.filename == "SystemStructure.ssd":
                 from xml.etree import ElementTree as ET
 
-                from orchestrator.engine.ssp import OMS_ANNOTATION, SSD
+                from orchestrator.builder.ssp import OMS_ANNOTATION, SSD
                 root = ET.fromstring(data)
                 for annotations in root.iter(f"{{{SSD}}}Annotations"):
                     for a in list(annotations):

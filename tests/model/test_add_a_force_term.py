@@ -52,8 +52,8 @@ from fmpy import simulate_fmu
 import tapmp
 from tapmp.params import PAPER_MODEL
 from tapmp.plant import PlantConfig, PlantModel
-from orchestrator.engine.build import build_fmu
-from orchestrator.engine.build_native import build_native_fmu
+from orchestrator.builder.build import build_fmu
+from orchestrator.builder.build_native import build_native_fmu
 
 steps, h = int(sys.argv[1]), float(sys.argv[2])
 out = {"tapmp": tapmp.__file__}

@@ -34,7 +34,7 @@ from tests.support.control_reference import sync_errors
 from tapmp.errors import KinematicDomainError
 from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel
-from tapmp.toolchain import CFLAGS, compile_c
+from ctoolchain import CFLAGS, compile_c
 from tapmp.trajectory import TrajectoryParams, _c_trajectory, circle_reference, move_plan, move_reference
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -99,7 +99,7 @@ def test_the_circle_is_untouched_by_the_move_parameters():
 
 @pytest.fixture(scope="module")
 def native_trajectory(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native_fmu
+    from orchestrator.builder.build_native import build_native_fmu
     out = {}
     for family in ("fmi2", "fmi3"):
         folder = tmp_path_factory.mktemp(f"traj_{family}")

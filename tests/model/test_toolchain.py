@@ -1,4 +1,4 @@
-"""The one C toolchain (tapmp/toolchain.py): every FMU family and platform builds
+"""The one C toolchain (ctoolchain/__init__.py): every FMU family and platform builds
 with no system compiler, $CC is honoured for the host platform, and a failing compiler or an
 unknown platform is one line with exit code 2 and no half-written FMU."""
 
@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.engine.build_native import PLATFORM_DIRS
-from tapmp.toolchain import PLATFORMS
+from orchestrator.builder.build_native import PLATFORM_DIRS
+from ctoolchain import PLATFORMS
 from tapmp.interface import FMU_NAMES
 
 pytestmark = pytest.mark.slow  # builds every family for every platform with zig cc
@@ -81,7 +81,7 @@ def test_cc_is_used_for_the_host_platform_and_zig_for_the_others(tmp_path):
                        f'exec "{sys.executable}" -m ziglang cc -target x86_64-linux-gnu.2.17 "$@"\n')
     wrapper.chmod(0o755)
     env = dict(os.environ, CC=str(wrapper))
-    proc = subprocess.run([sys.executable, "-m", "orchestrator.engine.build_native", "--out", str(tmp_path / "n"),
+    proc = subprocess.run([sys.executable, "-m", "orchestrator.builder.build_native", "--out", str(tmp_path / "n"),
                            "--platform", "x86_64-linux", "--platform", "aarch64-linux"],
                           env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
@@ -109,7 +109,7 @@ def test_a_failing_compiler_is_one_line_naming_the_target_and_its_first_error_an
     previous = out / "fmi2" / "TAPMP_Trajectory.fmu"
     previous.write_bytes(b"an FMU of an earlier build")
     env = dict(os.environ, CC=str(failing_cc(tmp_path)))
-    proc = subprocess.run([sys.executable, "-m", "orchestrator.engine.build_native", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "orchestrator.builder.build_native", "--out", str(out)],
                           env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1, proc.stderr
@@ -133,7 +133,7 @@ def test_tapmp_build_with_a_failing_cc_exits_2_with_one_line(tmp_path):
 
 def test_a_missing_cc_names_it(tmp_path):
     env = dict(os.environ, CC=str(tmp_path / "no-such-cc"))
-    proc = subprocess.run([sys.executable, "-m", "orchestrator.engine.build_native", "--out", str(tmp_path / "n"),
+    proc = subprocess.run([sys.executable, "-m", "orchestrator.builder.build_native", "--out", str(tmp_path / "n"),
                            "--platform", "x86_64-linux"], env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 2
     assert proc.stderr == (f"error: fmi2/TAPMP_Trajectory.fmu (x86_64-linux): C compiler "
@@ -141,7 +141,7 @@ def test_a_missing_cc_names_it(tmp_path):
 
 
 @pytest.mark.parametrize("command", [[str(VENV_BIN / "tapmp"), "build"],
-                                     [sys.executable, "-m", "orchestrator.engine.build_native"]])
+                                     [sys.executable, "-m", "orchestrator.builder.build_native"]])
 def test_an_unknown_platform_is_one_line_with_exit_2_and_builds_nothing(tmp_path, command):
     out = tmp_path / "b"
     proc = subprocess.run([*command, "--out", str(out), "--platform", "x86_64-linux", "--platform", "riscv64-linux"],
@@ -153,7 +153,7 @@ def test_an_unknown_platform_is_one_line_with_exit_2_and_builds_nothing(tmp_path
 
 
 def test_a_source_that_does_not_compile_names_the_platform_and_the_error_for_a_cross_target(tmp_path):
-    from orchestrator.engine.build_native import NativeBuildError, build_native_fmu
+    from orchestrator.builder.build_native import NativeBuildError, build_native_fmu
     bad = tmp_path / "bad_model.c"
     bad.write_text("this is not C;\n")
     with pytest.raises(NativeBuildError) as err:

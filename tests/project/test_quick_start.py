@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.engine import build_native
-from orchestrator.engine.build import build_all
-from tapmp import toolchain
+from orchestrator.builder import build_native
+from orchestrator.builder.build import build_all
+import ctoolchain as toolchain
 
 pytestmark = pytest.mark.slow  # a clone, a build, child processes
 

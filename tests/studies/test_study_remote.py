@@ -98,7 +98,7 @@ def wheel_venv(tmp_path_factory):
 @pytest.fixture(scope="module")
 def ssp(tmp_path_factory):
     """The native FMI 2.0 FMUs for this machine and their SSP, in the client's (hidden) folder."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), families=("fmi2",), log=lambda *_: None,
                         windows=False)["fmi2"]["ssp"]
 

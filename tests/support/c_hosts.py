@@ -6,7 +6,7 @@ from pathlib import Path
 
 import fmpy
 
-from tapmp.toolchain import compile_c
+from ctoolchain import compile_c
 
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"  # FMPy's FMI 2.0 and 3.0 headers
 

@@ -1,12 +1,12 @@
 """Compiling C in the tests: one place that picks the compiler, as
-orchestrator/engine/build_native.py does ($CC, else gcc), so the tests can be switched to
+orchestrator/builder/build_native.py does ($CC, else gcc), so the tests can be switched to
 another toolchain in one place."""
 
 import os
 import subprocess
 from pathlib import Path
 
-from orchestrator.engine.build_native import fmi_headers_dir
+from orchestrator.builder.build_native import fmi_headers_dir
 
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
 # Sanitizer options of every sanitized run: leaks are findings, so is any UBSan report.

@@ -1,7 +1,7 @@
 """Fault injection, in one place: the real pythonfmu plant with some of its methods overridden,
 built into a real FMU, and an SSP of it with the real controller and trajectory.
 
-The plant's adapter (``orchestrator.engine.build.SCRIPTS[PLANT]``) is copied with its class
+The plant's adapter (``orchestrator.builder.build.SCRIPTS[PLANT]``) is copied with its class
 renamed ``_RealPlant``, and a class ``TAPMP_Plant(_RealPlant)`` holding the given methods is
 appended, so the faulty FMU has the real plant's interface, numbers and model description and
 misbehaves only where a test says.
@@ -41,7 +41,7 @@ def faulty_plant_script(folder: Path, methods: str, doc: str = "The real plant, 
     """Write ``folder/TAPMP_Plant.py``: the real plant's adapter as ``_RealPlant`` and a
     ``TAPMP_Plant(_RealPlant)`` with ``methods`` (source indented by four spaces) and the
     docstring ``doc``; returns its path."""
-    from orchestrator.engine.build import SCRIPTS
+    from orchestrator.builder.build import SCRIPTS
     from tapmp.interface import PLANT
 
     real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
@@ -55,7 +55,7 @@ def faulty_plant_script(folder: Path, methods: str, doc: str = "The real plant, 
 def faulty_plant_fmu(folder: Path, methods: str, doc: str = "The real plant, faulty.", binaries=None) -> Path:
     """The plant FMU of :func:`faulty_plant_script`, built into ``folder/fmus`` (the adapter in
     ``folder/src``); ``binaries`` from ``compile_binaries`` are reused if given."""
-    from orchestrator.engine.build import build_fmu
+    from orchestrator.builder.build import build_fmu
     from tapmp.interface import PLANT
 
     script = faulty_plant_script(Path(folder) / "src", methods, doc)
@@ -65,7 +65,7 @@ def faulty_plant_fmu(folder: Path, methods: str, doc: str = "The real plant, fau
 def faulty_ssp(path: Path, plant: Path, built: dict) -> Path:
     """An SSP at ``path`` of the plant FMU ``plant`` with the real controller and trajectory of
     ``built`` (the session's pythonfmu FMUs)."""
-    from orchestrator.engine.ssp import write_ssp
+    from orchestrator.builder.ssp import write_ssp
     from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY
 
     return write_ssp(Path(path), {PLANT: plant, CONTROLLER: built[CONTROLLER], TRAJECTORY: built[TRAJECTORY]})
@@ -73,7 +73,7 @@ def faulty_ssp(path: Path, plant: Path, built: dict) -> Path:
 
 def faulty_ssps(built: dict, root: Path) -> dict:
     """{fault: SSP path} for every fault of :data:`FAULTY`, built under ``root``."""
-    from orchestrator.engine.build import compile_binaries
+    from orchestrator.builder.build import compile_binaries
 
     (root / "bin").mkdir(parents=True)
     binaries = compile_binaries(root / "bin")

@@ -94,7 +94,7 @@ def test_margins_of_a_sampled_double_integrator_under_pd_match_the_hand_derivati
 
 @pytest.fixture(scope="module")
 def native_fmi2(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native_an"), families=("fmi2",), log=lambda *_: None,
                         windows=False)["fmi2"]
 

@@ -35,7 +35,7 @@ RUN = 0.4  # [s] of co-simulation per verdict: the slowest stable mode (6 Hz) ha
 
 @pytest.fixture(scope="module")
 def ssp(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native_dm"), families=("fmi2",), log=lambda *_: None,
                         windows=False)["fmi2"]["ssp"]
 

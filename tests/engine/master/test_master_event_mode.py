@@ -67,6 +67,6 @@ def test_event_mode_with_the_compiled_core_gives_the_python_loops_rows(fmi3):
 
 @pytest.fixture(scope="module")
 def native_fmi2_ssp(tmp_path_factory):
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native2"), families=("fmi2",), log=lambda *_: None,
                         windows=False)["fmi2"]["ssp"]

@@ -37,7 +37,7 @@ EXACT = ("controller.F1", "controller.F2", "controller.F3", "plant.q1", "plant.q
 @pytest.fixture(scope="module")
 def native(tmp_path_factory):
     """The native FMI 2.0 and 3.0 FMUs and their SSPs, built for this machine."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=False)
 
 

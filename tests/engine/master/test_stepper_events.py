@@ -22,7 +22,7 @@ T_S = 1e-4
 @pytest.fixture(scope="module")
 def fmi3(tmp_path_factory):
     """The native FMI 3.0 FMUs, their SSP and the SSP with the clocked controller, built for this machine."""
-    from orchestrator.engine.build_native import build_native
+    from orchestrator.builder.build_native import build_native
     return build_native(tmp_path_factory.mktemp("native"), families=("fmi3",), log=lambda *_: None,
                         windows=False)["fmi3"]
 

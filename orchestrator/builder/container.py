@@ -114,7 +114,7 @@ def model_description(fmus: dict, guid: str, variables: list[dict]) -> bytes:
                        "(container of TAPMP_Trajectory, TAPMP_Controller, TAPMP_Plant; Jacobi "
                        "ordering at a fixed step of 0.1 ms)",
         "author": "TAPMP co-simulation project", "license": "MIT",
-        "generationTool": f"tapmp orchestrator.engine.container (fmpy container runtime {_runtime_version()})",
+        "generationTool": f"tapmp orchestrator.builder.container (fmpy container runtime {_runtime_version()})",
         "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
     needs_tool = any(md.coSimulation.needsExecutionTool for md in mds)
     ET.SubElement(root, "CoSimulation", {

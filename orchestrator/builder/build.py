@@ -1,6 +1,6 @@
 """Build the TAPMP FMUs with pythonfmu, complete their modelDescription.xml, give them
 their own binary, and write the SSP system TAPMP.ssp and the closed-loop container FMU
-TAPMP_ClosedLoop.fmu (orchestrator/engine/container.py).
+TAPMP_ClosedLoop.fmu (orchestrator/builder/container.py).
 
 pythonfmu 0.7 writes no units and no initial unknowns; :func:`complete_model_description`
 adds them from the variable tables in ``tapmp.interface`` (one source of truth).
@@ -10,7 +10,7 @@ corrupts the host interpreter), needs libpython already in the host process, and
 a Python call per getReal/setReal. So the FMUs ship their own binary instead: the native
 FMUs' runtime (``fmu_common/c``) with model operations that call Python
 (``fmu_common/pyfront``), compiled here by the project's C compiler (zig cc from the ziglang
-package, or $CC; tapmp/toolchain.py): see :func:`compile_binaries`.
+package, or $CC; ctoolchain/__init__.py): see :func:`compile_binaries`.
 """
 
 import shutil
@@ -27,7 +27,8 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES, dependencies
 
-from tapmp import cmodel, toolchain
+import ctoolchain as toolchain
+from tapmp import cmodel
 from .families import default_build_dir
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
