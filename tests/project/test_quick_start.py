@@ -57,13 +57,18 @@ def test_the_quick_start_builds_in_a_fresh_clone_with_empty_caches_saying_what_i
         assert (repo / "build" / "native" / family / "TAPMP.ssp").is_file()
 
 
+def slow_compiler(folder, seconds: int) -> str:
+    """Path of a host compiler (zig cc for x86_64 Linux) that waits ``seconds`` s before compiling."""
+    slow = folder / "slow-cc"
+    zig = " ".join(toolchain.zig_command())
+    slow.write_text(f"#!/bin/sh\nsleep {seconds}\nexec {zig} -target x86_64-linux-gnu.2.17 \"$@\"\n")
+    slow.chmod(0o755)
+    return str(slow)
+
+
 def test_the_pythonfmu_compile_says_it_is_still_compiling_while_it_runs(tmp_path, monkeypatch):
     # every compile of the pythonfmu binaries waits 2 s: a line at least every second meanwhile
-    slow = tmp_path / "slow-cc"
-    zig = " ".join(toolchain.zig_command())
-    slow.write_text(f"#!/bin/sh\nsleep 2\nexec {zig} -target x86_64-linux-gnu.2.17 \"$@\"\n")
-    slow.chmod(0o755)
-    monkeypatch.setenv("CC", str(slow))
+    monkeypatch.setenv("CC", slow_compiler(tmp_path, 2))
     lines = []
     paths = build_all(tmp_path / "fmus", lines.append, every=1.0)
     assert paths["ssp"].is_file()
@@ -75,11 +80,7 @@ def test_the_pythonfmu_compile_says_it_is_still_compiling_while_it_runs(tmp_path
 
 def test_a_compile_longer_than_the_interval_is_reported_while_it_runs(tmp_path, monkeypatch):
     # the host's compiler waits 3 s before compiling: the build says what it is still doing
-    slow = tmp_path / "slow-cc"
-    zig = " ".join(toolchain.zig_command())
-    slow.write_text(f"#!/bin/sh\nsleep 3\nexec {zig} -target x86_64-linux-gnu.2.17 \"$@\"\n")
-    slow.chmod(0o755)
-    monkeypatch.setenv("CC", str(slow))
+    monkeypatch.setenv("CC", slow_compiler(tmp_path, 3))
     units = {("TAPMP_Plant", "fmi2"): build_native.staged_sources(build_native.source_files("TAPMP_Plant", "fmi2"),
                                                                   "TAPMP_Plant", "fmi2")}
     lines = []
