@@ -40,7 +40,8 @@ from pydantic.dataclasses import dataclass
 from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
 from tapmp import cmodel
-from tapmp.interface import CONTROLLER, ELEMENT, PLANT, TRAJECTORY, VARIABLES
+# ORDERINGS: the model's (tapmp.closed_loop's), which the master's own (engine.schedule) equals (a test)
+from tapmp.interface import CONTROLLER, ELEMENT, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
 from tapmp.laws import C_IDS
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
@@ -48,7 +49,7 @@ from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, referenc
 
 from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..builder.families import FAMILIES
-from ..engine.schedule import CONNECTION_STARTS, ORDERINGS
+from ..engine.schedule import CONNECTION_STARTS
 from .folders import RESULT_FORMATS
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
