@@ -2,7 +2,7 @@
 tapmp.control.ControllerModel."""
 
 from fmu_common.slave import WARNING, TapmpSlave, as_float, is_number, require_state
-from tapmp import cmodel
+from tapmp import cmodel, laws
 from tapmp.control import ControllerModel, Gains, ModalGains
 from tapmp.errors import ModelInputError
 from tapmp.interface import CONTROLLER_VARS
@@ -18,9 +18,7 @@ class TAPMP_Controller(TapmpSlave):
     (tapmp.control.ControllerModel.communication_point)."""
 
     VARIABLES = CONTROLLER_VARS
-    description = ("SC-DC synchronization controller with dynamics compensation (law 0), the "
-                   "APD-DC baseline (law 1) and the modal PID-DC baseline (law 2) for the TAPMP; "
-                   "outputs force commands F = u / K_T")
+    description = laws.controller_description()
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

@@ -7,15 +7,15 @@ of Theorem 1), so F = u / K_T. Gains are per motor (diagonal matrices of the pap
 """
 
 import math
-from typing import NamedTuple
+from collections import namedtuple
 
 from . import cmodel
 from .errors import KinematicDomainError, ModelInputError, require_finite
+from .laws import C_IDS
 from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, SERVO_STEP, ModelParams, scdc_modal_image
 
-SCDC = 0   # law: synchronization controller with dynamics compensation (Eq. 25)
-APDDC = 1  # law: augmented PD with dynamics compensation (Eq. 38)
-PIDDC = 2  # law: PID on e with modal gains and dynamics compensation
+# the ``law`` setting of each law (tapmp.laws): SC-DC (Eq. 25), APD-DC (Eq. 38), PID-DC (modal PID on e)
+SCDC, APDDC, PIDDC = (C_IDS[name] for name in ("sc-dc", "apd-dc", "pid-dc"))
 VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
 # A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s
@@ -25,14 +25,12 @@ _INPUT_NAMES = ("X_d", "Z_d", "B_d", "dX_d", "dZ_d", "dB_d", "ddX_d", "ddZ_d", "
                 "q1", "q2", "q3", "dq1", "dq2", "dq3")
 
 
-class Gains(NamedTuple):
-    """Per-motor gains; each field is (motor 1, motor 2, motor 3)."""
+class Gains(namedtuple("Gains", GAIN_NAMES)):
+    """Per-motor gains; each field is (motor 1, motor 2, motor 3). The fields are the per-motor
+    rows of the gains table (tapmp.settings.GAINS: Lambda_p, Lambda_v, b, D, K_T, with their units
+    and meaning)."""
 
-    Lambda_p: tuple[float, float, float]  # on c (SC-DC) or k_p on e (APD-DC)
-    Lambda_v: tuple[float, float, float]  # on n (SC-DC) or k_v on de (APD-DC)
-    b: tuple[float, float, float]         # coupling coefficient B = diag(b) [1/s]
-    D: tuple[float, float, float]         # D = diag(D) in n = de_c + D e_c [1/s]
-    K_T: tuple[float, float, float]       # feedforward gain, K_T F = u
+    __slots__ = ()
 
     def validated(self) -> "Gains":
         """Return self if every gain is within its range of the settings table (ModelInputError
@@ -50,21 +48,15 @@ class Gains(NamedTuple):
         return cls(*(tuple(float(x) for x in preset[n]) for n in GAIN_NAMES))
 
 
-_MG = DEFAULT_MODAL_GAINS
-
-
-class ModalGains(NamedTuple):
+class ModalGains(namedtuple("ModalGains", MODAL_GAIN_NAMES,
+                            defaults=[DEFAULT_MODAL_GAINS[n] for n in MODAL_GAIN_NAMES])):
     """PID-DC gains per mode: common mode (1, 1, 1)/sqrt(3) (suffix _c) and the two
     differential modes (suffix _d), K = k_c Pi_c + k_d Pi_d. Units as Lambda (u scaled by
     K_T, F = u / K_T): kp [N/m], kv [N s/m], ki [N/(m s)]. Defaults: the modal image of
-    the default SC-DC gains (tapmp.params.DEFAULT_MODAL_GAINS)."""
+    the default SC-DC gains (tapmp.params.DEFAULT_MODAL_GAINS). The fields are the modal rows of
+    the gains table (tapmp.settings.GAINS)."""
 
-    kp_c: float = _MG["kp_c"]
-    kv_c: float = _MG["kv_c"]
-    ki_c: float = _MG["ki_c"]
-    kp_d: float = _MG["kp_d"]
-    kv_d: float = _MG["kv_d"]
-    ki_d: float = _MG["ki_d"]
+    __slots__ = ()
 
     def validated(self) -> "ModalGains":
         """Return self if every gain is within its range of the settings table (ModelInputError

@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 from .params import (DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
                      SERVO_STEP, START_TIME, STOP_TIME)
+from . import laws, settings
 from .plant import PlantConfig
 from .trajectory import TrajectoryParams, circle_reference
 
@@ -142,24 +143,10 @@ PLANT_VARS: tuple[Var, ...] = tuple(
            "in every FMU family)", _CFG.noise_seed, type="Integer", variability="fixed")]
 )
 
-# Gains act on the command u (command units, K_T F = u); "{i}" is the motor number.
-GAIN_DOC = {
-    "Lambda_p": ("1/m", "SC-DC Lambda_p on c (Eq. 25), APD-DC k_p on e (Eq. 38) of motor {i}, in command "
-                 "units per m: the force gain is Lambda_p{i}/K_T{i} N/m"),
-    "Lambda_v": ("s/m", "SC-DC Lambda_v on n (Eq. 25), APD-DC k_v on de (Eq. 38) of motor {i}, in command "
-                 "units per m/s: the force gain (damping) is Lambda_v{i}/K_T{i} N.s/m"),
-    "b": ("1/s", "coupling coefficient b of B = diag(b) (Eq. 22), motor {i}"),
-    "D": ("1/s", "D of n = de_c + D e_c (Eq. 24), motor {i}"),
-    "K_T": ("1/N", "command per newton of motor {i}: K_T{i} F{i} = u{i} (Eq. 25/38), so F{i} = u{i}/K_T{i} "
-            "and every gain of motor {i} divided by K_T{i} is its force gain"),
-}
+# Gains act on the command u (command units, K_T F = u); "{i}" is the motor number (tapmp.settings).
+GAIN_DOC = settings.gain_doc()
 _DEFAULT_GAINS = GAIN_PRESETS["default"]
-_MODE = {"c": "common mode (1,1,1)/sqrt(3)", "d": "differential modes (I - 1 1^T/3)"}
-_MODAL_DOC = {f"k{k}_{m}": (unit, f"PID-DC (law 2) {what} gain on the {_MODE[m]}, in command units per "
-                                  f"{per}: the force gain is k{k}_{m}/K_T {force}")
-              for k, unit, what, per, force in (
-                  ("p", "1/m", "proportional", "m", "N/m"), ("v", "s/m", "derivative", "m/s", "N.s/m"),
-                  ("i", "1/(m.s)", "integral", "m.s", "N/(m.s)")) for m in "cd"}
+_MODAL_DOC = settings.modal_doc()
 
 CONTROLLER_VARS: tuple[Var, ...] = tuple(
     _pose("_d", "input", "desired")
@@ -174,8 +161,7 @@ CONTROLLER_VARS: tuple[Var, ...] = tuple(
     + [Var(f"es{i}", "output", "m", f"synchronization error of motor {i} (Eq. 18)") for i in (1, 2, 3)]
     + [Var(f"{n}{i}", "parameter", GAIN_DOC[n][0], GAIN_DOC[n][1].format(i=i),
            _DEFAULT_GAINS[n][i - 1], variability="tunable") for n in GAIN_NAMES for i in (1, 2, 3)]
-    + [Var("law", "parameter", "", "control law: 0 = SC-DC (Eq. 25), 1 = APD-DC (Eq. 38), "
-           "2 = PID-DC (modal PID on e)", 0, type="Integer", variability="tunable"),
+    + [Var("law", "parameter", "", laws.setting_description(), 0, type="Integer", variability="tunable"),
        Var("velocity_source", "parameter", "",
            "joint velocity: 0 = backward difference of q over the time between samples, 1 = dq inputs", 0,
            type="Integer", variability="tunable"),
@@ -244,10 +230,8 @@ RANGES: dict[str, tuple[float, float]] = {
     # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
     # stays below a millisecond of CPU per step or so
     "substeps": (1, 10000),
-    **{f"{n}{i}": r for n, r in (("Lambda_p", (0.0, 1e12)), ("Lambda_v", (0.0, 1e12)), ("b", (0.0, 1e9)),
-                                 ("D", (0.0, 1e9)), ("K_T", (1e-12, 1e12))) for i in (1, 2, 3)},
-    "law": (0, 2), "velocity_source": (0, 1), "T_s": (1e-9, 1e3),
-    **{f"k{k}_{m}": (0.0, 1e15) for k in "pvi" for m in "cd"},
+    **settings.ranges(),
+    "law": laws.C_RANGE, "velocity_source": (0, 1), "T_s": (1e-9, 1e3),
     "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),
     "phase_xz": (-1e6, 1e6), "B_amplitude": (0.0, 1.5), "f_B": (0.0, 1e4), "phase_B": (-1e6, 1e6),
     "B_offset": (-1.5, 1.5),
@@ -263,7 +247,7 @@ SETTINGS_STRUCT = {PLANT: "tapmp_plant_settings", CONTROLLER: "tapmp_controller_
                    TRAJECTORY: "tapmp_trajectory_settings"}
 _ARRAYS = ("c_v", "F_c", "cogging_phase", "disturbance_force", *GAIN_NAMES)  # per-motor C arrays [3]
 _INITIAL = ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")
-_CHOICES = {"law": "0 (SC-DC), 1 (APD-DC) or 2 (PID-DC)",
+_CHOICES = {"law": laws.choices_text(),
             "velocity_source": "0 (backward difference of q) or 1 (dq inputs)",
             "profile": "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)"}
 
@@ -420,8 +404,8 @@ def _controller_dependencies(name: str) -> Dependencies:
         # gains and only its own block mass in its feedforward. The integral is zero initially,
         # so the integral gains ki_c, ki_d do not enter.
         initial = {v.name for v in table if v.causality == "input"}
-        initial |= {"m_p", f"m_{i}", "I_y", "L_1", "g", "law", "kp_c", "kv_c", "kp_d", "kv_d"}
-        initial |= {f"{n}{i}" for n in ("Lambda_p", "Lambda_v", "b", "D", "K_T")}
+        initial |= {"m_p", f"m_{i}", "I_y", "L_1", "g", "law"}
+        initial |= {n for n in MODAL_GAIN_NAMES if not settings.SETTING[n].integral} | {f"{n}{i}" for n in GAIN_NAMES}
         if name[0] == "F":
             initial.add("force_limit")
     elif name[1] == "s":  # es_i = e_i - e_(i+1) (Eq. 18), as computed: X_d cancels only to round-off

@@ -33,38 +33,17 @@ force on the motors, F = K_T^-1 u: K_P in N/m, K_V in N s/m, K_I in N/(m s).
 Run ``tapmp modal`` to print the table of the gain presets (Markdown).
 """
 
-import math
 from typing import NamedTuple
 
 from .control import Gains
+from .laws import LAPLACIAN, MODE_BASIS, Mat3, PIDMatrices, Vec3, apd_matrices, law_named, scdc_matrices  # noqa: F401
+from .laws import LAWS as _LAWS, diag as _diag, mul as _mul
 from .params import gain_preset
 
-Vec3 = tuple[float, float, float]
-Mat3 = tuple[Vec3, Vec3, Vec3]
-
-LAPLACIAN: Mat3 = ((2.0, -1.0, -1.0), (-1.0, 2.0, -1.0), (-1.0, -1.0, 2.0))  # L = 3 I - 1 1^T
-_R3, _R2, _R6 = 1.0 / math.sqrt(3.0), 1.0 / math.sqrt(2.0), 1.0 / math.sqrt(6.0)
-# (name, unit vector): an orthonormal basis of R^3, the eigenvectors of L.
-MODES: tuple[tuple[str, Vec3], ...] = (
-    ("common (1,1,1)/sqrt3", (_R3, _R3, _R3)),
-    ("diff. Z (1,0,-1)/sqrt2", (_R2, 0.0, -_R2)),
-    ("diff. B (1,-2,1)/sqrt6", (_R6, -2.0 * _R6, _R6)),
-)
-LAWS = ("sc-dc", "apd-dc")
+# (name, unit vector): an orthonormal basis of R^3, the eigenvectors of L (tapmp.laws.MODE_BASIS).
+MODES: tuple[tuple[str, Vec3], ...] = tuple((f"{label} {words}", v) for label, words, v in MODE_BASIS)
+LAWS = tuple(law.name for law in _LAWS if law.matrices)  # the laws written as PID matrices of Gains
 ROUNDOFF = 1e-12  # relative size below which a projected entry is round-off
-
-
-class PIDMatrices(NamedTuple):
-    """u = K_T u_d + K_V de + K_P e + K_I int(e), 3x3 matrices (row = motor).
-
-    Units as in the module doc: K_T dimensionless (1 in the force view), K_V [u s/m],
-    K_P [u/m], K_I [u/(m s)] with u = K_T F; in the force view u is replaced by F [N].
-    """
-
-    K_T: Mat3
-    K_V: Mat3
-    K_P: Mat3
-    K_I: Mat3
 
 
 class ModeGains(NamedTuple):
@@ -84,44 +63,15 @@ class ModeGains(NamedTuple):
     coupling_I: float
 
 
-def _diag(v) -> Mat3:
-    return tuple(tuple(float(v[i]) if i == j else 0.0 for j in range(3)) for i in range(3))
-
-
-def _mul(A: Mat3, B: Mat3) -> Mat3:
-    return tuple(tuple(sum(A[i][k] * B[k][j] for k in range(3)) for j in range(3)) for i in range(3))
-
-
-def _add(A: Mat3, B: Mat3) -> Mat3:
-    return tuple(tuple(A[i][j] + B[i][j] for j in range(3)) for i in range(3))
-
-
 def _apply(A: Mat3, x) -> Vec3:
     return tuple(A[i][0] * x[0] + A[i][1] * x[1] + A[i][2] * x[2] for i in range(3))
 
 
-def scdc_matrices(g: Gains) -> PIDMatrices:
-    """SC-DC (Eq. 22-25) as PID matrices on e (module doc); gains per motor as in Gains."""
-    g = g.validated()
-    Lv, D, B, Lp = _diag(g.Lambda_v), _diag(g.D), _diag(g.b), _diag(g.Lambda_p)
-    K_P = _add(_mul(Lv, D), _mul(_add(_mul(Lv, B), Lp), LAPLACIAN))
-    K_I = _mul(_mul(_mul(Lv, D), B), LAPLACIAN)
-    return PIDMatrices(_diag(g.K_T), Lv, K_P, K_I)
-
-
-def apd_matrices(g: Gains) -> PIDMatrices:
-    """APD-DC (Eq. 38, k_p = Lambda_p, k_v = Lambda_v, K_T1 = K_T as Eq. 41): diagonal, K_I = 0."""
-    g = g.validated()
-    return PIDMatrices(_diag(g.K_T), _diag(g.Lambda_v), _diag(g.Lambda_p), _diag((0.0, 0.0, 0.0)))
-
-
 def law_matrices(g: Gains, law: str) -> PIDMatrices:
-    """PID matrices of ``law`` ("sc-dc" or "apd-dc") for the gains g."""
-    if law == "sc-dc":
-        return scdc_matrices(g)
-    if law == "apd-dc":
-        return apd_matrices(g)
-    raise ValueError(f"law = {law!r} is invalid: allowed are {', '.join(LAWS)}")
+    """PID matrices of ``law`` (one of LAWS: "sc-dc" or "apd-dc") for the gains g."""
+    if law not in LAWS:
+        raise ValueError(f"law = {law!r} is invalid: allowed are {', '.join(LAWS)}")
+    return law_named(law).matrices(g)
 
 
 def pid_command(e, de, int_e, u_d, m: PIDMatrices) -> Vec3:

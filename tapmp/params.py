@@ -8,6 +8,8 @@ import math
 from typing import NamedTuple
 
 from . import cmodel
+from .laws import BY_NAME as _LAW
+from .settings import GAIN_NAMES, MODAL_GAIN_NAMES
 
 
 class ModelParams(NamedTuple):
@@ -67,12 +69,10 @@ GAIN_PRESETS: dict[str, dict[str, tuple[float, float, float]]] = {
     },
 }
 
-GAIN_NAMES = ("Lambda_p", "Lambda_v", "b", "D", "K_T")
-
-# PID-DC (law 2) modal gains: K = k_c Pi_c + k_d Pi_d with Pi_c = 1 1^T / 3 (common mode) and
-# Pi_d = I - Pi_c (the two differential modes of L = 3 I - 1 1^T = 3 Pi_d); same units and
+# GAIN_NAMES (the per-motor gains, every preset's keys) and MODAL_GAIN_NAMES come from the gains table
+# (tapmp.settings). PID-DC (law 2) modal gains: K = k_c Pi_c + k_d Pi_d with Pi_c = 1 1^T / 3 (common
+# mode) and Pi_d = I - Pi_c (the two differential modes of L = 3 I - 1 1^T = 3 Pi_d); same units and
 # K_T scaling as Lambda: kp [N/m], kv [N s/m], ki [N/(m s)] on u, F = u / K_T.
-MODAL_GAIN_NAMES = ("kp_c", "kv_c", "ki_c", "kp_d", "kv_d", "ki_d")
 
 
 def scdc_modal_image(preset: dict) -> dict[str, float]:
@@ -86,7 +86,7 @@ def scdc_modal_image(preset: dict) -> dict[str, float]:
     differs between motors (then the modes of L are not the modes of the law).
     """
     v = {}
-    for name in ("Lambda_p", "Lambda_v", "b", "D"):
+    for name in _LAW["sc-dc"].tunable:
         values = tuple(float(x) for x in preset[name])
         if not values[0] == values[1] == values[2]:
             raise ValueError(f"{name} = {values!r} is not uniform: allowed are equal gains on all motors "
@@ -98,8 +98,8 @@ def scdc_modal_image(preset: dict) -> dict[str, float]:
 def scdc_mode_gains(lp: float, lv: float, b: float, D: float) -> dict[str, float]:
     """Per-mode PID gains of SC-DC for one motor's Lambda_p [u/m], Lambda_v [u s/m], b and
     D [1/s] (formulas in scdc_modal_image; units as MODAL_GAIN_NAMES)."""
-    return {"kp_c": lv * D, "kv_c": lv, "ki_c": 0.0,
-            "kp_d": lv * D + 3.0 * (lv * b + lp), "kv_d": lv, "ki_d": 3.0 * lv * D * b}
+    common, differential = (lv * D, lv, 0.0), (lv * D + 3.0 * (lv * b + lp), lv, 3.0 * lv * D * b)
+    return dict(zip(MODAL_GAIN_NAMES, common + differential))  # kp, kv, ki of each mode
 
 
 # The PID-DC defaults are the modal image of the default SC-DC gains, so that law = 2 on

@@ -36,6 +36,7 @@ from concurrent.futures import ThreadPoolExecutor
 from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, Var,
                              dependencies, dependency_attributes, settings_read_macro)
 from tapmp.cmodel import SETTINGS_HEADER, settings_header
+from tapmp import laws
 
 import ctoolchain as toolchain
 from .families import default_build_dir
@@ -68,9 +69,7 @@ SUFFIX = toolchain.SUFFIX
 DESCRIPTIONS = {
     PLANT: "Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
            "in, encoder positions and platform pose out (native C, no Python at run time)",
-    CONTROLLER: "SC-DC synchronization controller with dynamics compensation (law 0), the APD-DC baseline "
-                "(law 1) and the modal PID-DC baseline (law 2) for the TAPMP; outputs force commands "
-                "F = u / K_T (native C, no Python at run time)",
+    CONTROLLER: laws.controller_description() + " (native C, no Python at run time)",
     TRAJECTORY: "TAPMP reference trajectory (paper Section 5.2 / 6.2): XZ circle and B sinusoid "
                 "(native C, no Python at run time)",
 }

@@ -30,6 +30,7 @@ from xml.etree import ElementTree as ET
 from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, ELEMENT, INITIAL_STATE, PLANT, TRAJECTORY, UNITS, VARIABLES,
                              allowed_text)
 from tapmp.params import SERVO_STEP
+from tapmp import laws
 
 from .model_description import to_bytes
 from .ssp import qname
@@ -369,7 +370,7 @@ def _equations(model: str) -> list[tuple[str, str]]:
             ("SC-DC command (Eq. 25)", f"u = K_T u_d + Lambda_v n + Lambda_p c, Lambda_p = {c('Lambda_p1')} 1/m, "
                                        f"Lambda_v = {c('Lambda_v1')} s/m, K_T = {c('K_T1')} 1/N; F = u / K_T"),
             ("Dynamics compensation (Eq. 26)", "u_d = J^-T(x) (M(x) ddx_d + C(x, dx) dx_d + G(x)), x = FK(q) (Eq. 1)"),
-            ("APD-DC (Eq. 38, law = 1)", "u = K_T u_d + Lambda_v de + Lambda_p e"),
+            *laws.equation_rows(),
             ("Sampling", f"at t0 + k T_s, T_s = {c('T_s')} s; velocity by backward difference of q"),
         ],
         TRAJECTORY: [

@@ -13,6 +13,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, TypeAdapter,
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from tapmp.errors import allowed_are, suggestion
+from tapmp.laws import LAWS
 from tapmp.params import GAIN_NAMES
 
 from ..tool.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
@@ -259,7 +260,7 @@ class _MonteCarlo(BaseModel):
         return data
 
 
-_TUNABLE = {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
+_TUNABLE = {law.name: law.tunable for law in LAWS if law.tunable}  # the laws tuned on Gains (tapmp.laws)
 _KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time", "ms_bound")
 MS_BOUND = 2.0  # default tune.ms_bound: the usual guideline Ms < 2 (6 dB; Skogestad and Postlethwaite, Sec. 2.4.3)
 
@@ -288,8 +289,9 @@ def _bounds(bounds, info) -> dict:
         out[law] = {}
         for gain, lim in b.items():
             if gain not in _TUNABLE[law]:
+                unused = [n for n in GAIN_NAMES if n != "K_T" and n not in _TUNABLE[law]]
                 raise ValueError(f"tune.bounds.{law}.{gain} is invalid: allowed are {', '.join(_TUNABLE[law])} "
-                                 f"({law} " + ("does not use b or D; " if law == "apd-dc" else "")
+                                 f"({law} " + (f"does not use {' or '.join(unused)}; " if unused else "")
                                  + "K_T is not tuned: only Lambda / K_T matters)" + suggestion(gain, _TUNABLE[law]))
             require(isinstance(lim, list) and len(lim) == 2 and all(is_number(v) and math.isfinite(v) for v in lim)
                     and 0.0 < lim[0] < lim[1], f"tune.bounds.{law}.{gain} = {lim!r} is invalid: allowed is "

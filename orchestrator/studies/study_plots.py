@@ -20,9 +20,6 @@ from .study import PENALTY_UM, STUDY_CSV, case_value, read_study_csv  # noqa: E4
 _MAE = (("tracking_mae_um_mean", "tracking MAE (mean of q1-q3) [µm]"),
         ("sync_mae_um_mean", "synchronization MAE (mean of q1-q3) [µm]"))
 
-# Names of the gains (gain_overrides.<name>: the same value on all three motors)
-_GAIN_NAMES = {"Lambda_p": "Λp, position gain", "Lambda_v": "Λv, velocity gain", "b": "b, coupling coefficient",
-               "D": "D, error-filter gain", "K_T": "K_T, command per newton"}
 _TOP_KEYS = {"stop_time": ("stop time", "s"), "start_time": ("start time", "s"), "step": ("communication step", "s"),
              "record_every": ("recorded every", "steps")}
 
@@ -39,7 +36,8 @@ def key_label(key: str) -> str:
     """Axis label of a swept scenario key: its quantity and unit, e.g. "gain_overrides.D" ->
     "D, error-filter gain (all motors) [1/s]", "plant.k_pull" -> "k_pull, mutual pulling
     stiffness ... [N/m]"; the unit from tapmp/interface.py ("-" for a number without unit)."""
-    from tapmp.interface import GAIN_DOC, ELEMENT, VARIABLES
+    from tapmp.interface import ELEMENT, VARIABLES
+    from tapmp.settings import GAIN_NAMES, SETTING
     head, _, name = key.partition(".")
     if not name:
         if key in _TOP_KEYS:
@@ -47,11 +45,11 @@ def key_label(key: str) -> str:
             return f"{what} [{unit}]"
         return f"{key} [-]"
     if head == "gain_overrides":
-        base = name.rstrip("123") if name not in GAIN_DOC else name
-        if base in GAIN_DOC:
+        base = name.rstrip("123") if name not in GAIN_NAMES else name
+        if base in GAIN_NAMES:
             motor = name[len(base):]
             where = f"motor {motor}" if motor else "all motors"
-            return f"{_GAIN_NAMES.get(base, base)} ({where}) [{GAIN_DOC[base][0] or '-'}]"
+            return f"{SETTING[base].label} ({where}) [{SETTING[base].unit or '-'}]"
         head = "controller"
     for fmu, element in ELEMENT.items():
         if element == head:

@@ -60,6 +60,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy import linalg
 
+from tapmp.laws import MODE_LABELS
 from tapmp.modal import MODES
 
 from .folders import atomic_file, write_text
@@ -67,7 +68,7 @@ from .scenario import ScenarioError
 from .stability import OneStepMap, invariant_basis, verdict_for
 
 F_SCALE = 1e-3  # [N] finite-difference step of the plant-input force (as stability's F_held)
-BREAK_POINTS = ("motor 1", "motor 2", "motor 3", "common", "diff. Z", "diff. B")
+BREAK_POINTS = ("motor 1", "motor 2", "motor 3", *MODE_LABELS)
 POINTS = 400  # default number of frequencies
 F_MIN = 0.1   # default lowest frequency [Hz]
 

@@ -10,10 +10,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .folders import save_figure  # noqa: E402
-from .plots import label  # noqa: E402
+from tapmp.laws import MODE_LABELS as MODES  # noqa: E402
 
-MODES = ("common", "diff. Z", "diff. B")
+from .folders import save_figure  # noqa: E402
+from .plots import PROPOSED, label  # noqa: E402
+
 MOTORS = ("motor 1", "motor 2", "motor 3")
 _STYLE = ("-", "--", "-.", ":")
 
@@ -64,7 +65,7 @@ def _bode(result, breaks, title, path):
         for name, lab, color, ls in _lines(result):
             x = result["runs"][name]["loops"][b]
             L = x["response"]["L"]
-            lw = 2.0 if name == "sc-dc" else 1.0
+            lw = 2.0 if name == PROPOSED else 1.0
             mag.semilogx(f, _db(L), ls, color=color, lw=lw, label=lab)
             ph.semilogx(f, _phase(f, L, x["f_gc_hz"]), ls, color=color, lw=lw)
             if x["f_pc_hz"] is not None:  # gain margin: from |L| up to 0 dB at the phase crossover
@@ -96,7 +97,7 @@ def _sensitivity(result, path):
             a = axes[row, col]
             for name, lab, color, ls in _lines(result):
                 x = result["runs"][name]["loops"][b]
-                a.semilogx(f, _db(x["response"][key]), ls, color=color, lw=2.0 if name == "sc-dc" else 1.0,
+                a.semilogx(f, _db(x["response"][key]), ls, color=color, lw=2.0 if name == PROPOSED else 1.0,
                            label=lab)
             a.axhline(0.0, color="k", lw=0.6)
             a.axhline(-3.01, color="k", lw=0.4, ls=":")
@@ -119,7 +120,7 @@ def _disturbance(result, path):
             a = axes[row, col]
             for name, lab, color, ls in _lines(result):
                 E = result["runs"][name]["loops"][b]["response"]["e_per_d"]
-                a.loglog(f, np.abs(E) * 1e6, ls, color=color, lw=2.0 if name == "sc-dc" else 1.0, label=lab)
+                a.loglog(f, np.abs(E) * 1e6, ls, color=color, lw=2.0 if name == PROPOSED else 1.0, label=lab)
             a.set_title(f"{b}: force at the plant input to tracking error", fontsize=10)
             a.set_ylabel("|e / d| [µm/N]")
             a.grid(True, which="both", lw=0.3)

@@ -34,6 +34,7 @@ motor's gains.
 from typing import NamedTuple
 
 from tapmp.control import Gains, ModalGains
+from tapmp.laws import law_named
 from tapmp.modal import modal_gains, scdc_matrices
 from tapmp.params import scdc_mode_gains
 
@@ -150,16 +151,14 @@ def robustness_matched(scenario):
 
 
 def run_gains_text(sc) -> str:
-    """The gains a compare run uses, in words (Lambda_p etc. per motor; PID-DC: its modal gains)."""
-    g = sc.gain_values()
+    """The gains a compare run uses, in words: the gains its law reads (tapmp.laws.Law.gains) by the
+    names the law gives them (Lambda_p etc. per motor, one value if equal on all; PID-DC: its modal
+    gains)."""
+    values = {**sc.gain_values()._asdict(), **model_tuple(ModalGains, sc.controller)._asdict()}
 
-    def vec(v):
+    def text(v):
+        if not isinstance(v, tuple):
+            return f"{v:.4g}"
         return "/".join(f"{x:.4g}" for x in v) if len(set(v)) > 1 else f"{v[0]:.4g}"
 
-    if sc.law == "pid-dc":
-        mg = model_tuple(ModalGains, sc.controller)
-        return (f"kp_c = {mg.kp_c:.4g}, kp_d = {mg.kp_d:.4g}, kv_c = {mg.kv_c:.4g}, kv_d = {mg.kv_d:.4g}, "
-                f"ki_c = {mg.ki_c:.4g}, ki_d = {mg.ki_d:.4g}")
-    if sc.law == "apd-dc":
-        return f"k_p = {vec(g.Lambda_p)}, k_v = {vec(g.Lambda_v)}"
-    return f"Lambda_p = {vec(g.Lambda_p)}, Lambda_v = {vec(g.Lambda_v)}, b = {vec(g.b)}, D = {vec(g.D)}"
+    return ", ".join(f"{shown} = {text(values[setting])}" for shown, setting in law_named(sc.law).gains)

@@ -43,6 +43,7 @@ from pathlib import Path
 from filelock import FileLock, Timeout
 
 FORMATS = {"csv": "results.csv", "mat": "results.mat"}  # scenario key format / --format -> file
+RESULT_FORMATS = tuple(FORMATS)  # the allowed values of a scenario's format and of --format
 PART_FILE = "results.part.npy"  # a MAT run's rows while it runs (writers.MatBlocks)
 RUN_FILES = (*FORMATS.values(), PART_FILE, "run.json", "metrics.json")
 COMPARISON_JSON = "comparison.json"  # marks a comparison folder (kind "comparison")

@@ -5,33 +5,32 @@ the paper could have, usually a unit slip: ``encoder_resolution = 0.5`` (metres,
 micrometres) quantizes the motor positions to half a metre. Such a run is allowed (a study
 may want it) but gets one warning line per parameter, naming the value and the usual range.
 
-USUAL holds the ranges, in one place: generous bands around the paper's Section 5.1 values
-(masses 1.835 / 4.776 / 1.946 / 4.775 kg, I_y = 7.768e-3 kg m^2, L_1 = 0.09 m) and the plant's
-defaults (100 nm grating ruler, 5 N s/m viscous and 2 N Coulomb friction, 600 N force limit,
-200 N/m pulling), wide enough that only an error of units or orders of magnitude leaves them.
+The usual ranges are a column of the settings table (tapmp.settings.USUAL, in the units of the
+FMU variables); USUAL here says which sections' settings are checked against them.
 """
+
+from tapmp import settings
+from tapmp.interface import ELEMENT, VARIABLES
 
 from .scenario import Scenario
 
-_MODEL = {  # the rigid-body parameters; the plant and the controller's nominal model both have them
-    "m_p": (0.1, 50.0, "kg"), "m_1": (0.1, 50.0, "kg"), "m_2": (0.1, 50.0, "kg"), "m_3": (0.1, 50.0, "kg"),
-    "I_y": (1e-5, 1.0, "kg m^2"), "L_1": (0.01, 1.0, "m"), "g": (9.7, 9.9, "m/s^2"),
-}
+_MODEL = ("m_p", "m_1", "m_2", "m_3", "I_y", "L_1", "g")  # the plant and the controller's nominal model have them
+# The settings checked, by section, in the order of the warnings.
+_CHECKED = (("plant", _MODEL), ("controller", _MODEL),
+            ("plant", ("encoder_resolution", "c_v1", "c_v2", "c_v3", "F_c1", "F_c2", "F_c3", "v_s", "force_limit",
+                       "k_pull")),
+            ("controller", ("force_limit",)), ("trajectory", ("radius", "B_amplitude")))
+
+
+def _unit(section: str, name: str) -> str:
+    """The unit of the setting ``name`` of the element ``section`` as a message writes it."""
+    model = next(m for m, element in ELEMENT.items() if element == section)
+    return settings.unit_text(next(v.unit for v in VARIABLES[model] if v.name == name))
+
+
 # (section, name) -> (lowest usual, highest usual, unit). 0 for a value that 0 switches off
 # (encoder_resolution, force_limit, friction, k_pull) is always plausible.
-USUAL = {
-    **{("plant", n): r for n, r in _MODEL.items()},
-    **{("controller", n): r for n, r in _MODEL.items()},
-    ("plant", "encoder_resolution"): (1e-9, 1e-4, "m"),
-    **{("plant", f"c_v{i}"): (0.01, 1000.0, "N s/m") for i in (1, 2, 3)},
-    **{("plant", f"F_c{i}"): (0.01, 200.0, "N") for i in (1, 2, 3)},
-    ("plant", "v_s"): (1e-6, 0.1, "m/s"),
-    ("plant", "force_limit"): (10.0, 1e4, "N"),
-    ("plant", "k_pull"): (-1e5, 1e5, "N/m"),  # negative: a net attraction (negative stiffness)
-    ("controller", "force_limit"): (10.0, 1e4, "N"),
-    ("trajectory", "radius"): (1e-5, 0.04, "m"),
-    ("trajectory", "B_amplitude"): (0.0, 0.35, "rad"),
-}
+USUAL = {(section, name): (*settings.USUAL[name], _unit(section, name)) for section, names in _CHECKED for name in names}
 _OFF_AT_ZERO = {"encoder_resolution", "force_limit", "k_pull", "c_v1", "c_v2", "c_v3", "F_c1", "F_c2", "F_c3",
                 "radius"}
 

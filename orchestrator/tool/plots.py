@@ -24,14 +24,15 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from tapmp.laws import LAWS  # noqa: E402
+
 from ..errors import UsageError  # noqa: E402
 from .metrics import error_signals  # noqa: E402
 from .folders import (COMPARISON_JSON, FORMATS, PART_FILE, add_to_marker, check_targets, folder_kind,  # noqa: E402
                       marker, PLOTS_JSON, output_lock, save_figure)
 from .reading import ResultFolderError, json_object, read_results  # noqa: E402
 
-LAW_LABELS = {"sc-dc": "SC-DC (proposed)", "apd-dc": "APD-DC", "apd-dc-matched": "APD-DC matched",
-              "pid-dc": "PID-DC",
+LAW_LABELS = {**{law.name: law.label for law in LAWS}, "apd-dc-matched": "APD-DC matched",
               # the other runs of `tapmp compare` (orchestrator.tool.baselines): one label each
               "apd-dc-diff-stiffness": "APD-DC diff. stiffness", "apd-dc-mode-matched": "APD-DC mode-matched",
               "apd-dc-ms-matched": "APD-DC Ms-matched", "pid-dc-mode-matched": "PID-DC mode-matched",

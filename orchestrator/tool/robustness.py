@@ -16,12 +16,12 @@ import numpy as np
 from scipy.optimize import brentq
 
 from tapmp.control import ModalGains
+from tapmp.laws import MODE_LABELS as MODES
 
 from ..errors import UsageError
 from . import analysis
 from .scenario import model_tuple
 
-MODES = ("common", "diff. Z", "diff. B")
 RTOL = 1e-4  # relative tolerance of the matched Ms
 
 

@@ -40,14 +40,17 @@ from pydantic.dataclasses import dataclass
 from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
 from tapmp import cmodel
-from tapmp.interface import CONTROLLER, ELEMENT, PLANT, TRAJECTORY, VARIABLES
+# ORDERINGS: the model's (tapmp.closed_loop's), which the master's own (engine.schedule) equals (a test)
+from tapmp.interface import CONTROLLER, ELEMENT, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
+from tapmp.laws import C_IDS
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
 from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..builder.families import FAMILIES
-from ..engine.schedule import CONNECTION_STARTS, ORDERINGS
+from ..engine.schedule import CONNECTION_STARTS
+from .folders import RESULT_FORMATS
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
 if sys.version_info >= (3, 11):
@@ -55,7 +58,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-LAWS = {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}  # PID-DC: modal gains in [controller] kp_c .. ki_d
+LAWS = C_IDS  # law -> the controller's law setting (tapmp.laws); PID-DC: modal gains in [controller] kp_c .. ki_d
 # [mismatch]: relative model error of the controller's nominal parameters. For each listed
 # field of tapmp.params.ModelParams the controller gets (plant value) x factor; the plant
 # keeps its own. A factor within MISMATCH_RANGE; not together with [controller] NAME.
@@ -66,7 +69,6 @@ TOP = {"name": str, "description": str, "law": str, "gains": str, "gains_file": 
        "start_on_trajectory": bool, "record_every": int, "clock": str, "connection_start": str,
        "open_inputs": list, "fmus": str, "format": str, "settling_bands": list, "event_mode": bool,
        "plant_interface": str}
-RESULT_FORMATS = ("csv", "mat")  # results.csv or results.mat (orchestrator.tool.results)
 # The plant's FMI interface in a run: "cs" (Co-Simulation, its own RK4) or "me" (Model Exchange,
 # integrated by the master with CVODE: orchestrator.engine.model_exchange)
 PLANT_INTERFACES = ("cs", "me")

@@ -54,7 +54,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import linalg
 
-from tapmp.control import PIDDC, SCDC, VELOCITY_DIFFERENCE, ControllerModel, ModalGains
+from tapmp.control import VELOCITY_DIFFERENCE, ControllerModel, ModalGains
+from tapmp.laws import BY_ID
 from tapmp.params import ModelParams
 from tapmp.plant import PlantConfig, PlantModel
 from tapmp.trajectory import TrajectoryParams, reference
@@ -163,19 +164,13 @@ class OneStepMap:
         self.h = scenario.step
         self.t = scenario.start_time
         self.jacobi = scenario.ordering == "jacobi"
-        g = self.ctrl.g
-        mg = self.ctrl.modal
-        if self.ctrl.law == SCDC:
-            self.integrals = [i for i in range(3) if g.b[i] != 0.0]
-        elif self.ctrl.law == PIDDC and (mg.ki_c != 0.0 or mg.ki_d != 0.0):
-            self.integrals = [0, 1, 2]
-        else:
-            self.integrals = []
+        self.law = BY_ID[self.ctrl.law]
+        # the integral states fed back, and their directions with a structural eigenvalue 1 (module doc)
+        self.integrals, self.constant_directions = self.law.integral(self.ctrl.g, self.ctrl.modal)
         self.difference = self.ctrl.velocity_source == VELOCITY_DIFFERENCE
         names = ["X", "Z", "B", "dX", "dZ", "dB"]
         kinds = ["pose"] * 3 + ["rate"] * 3
-        which = "e" if self.ctrl.law == PIDDC else "c"
-        names += [f"integral_{which}{i + 1}" for i in self.integrals]
+        names += [f"integral_{self.law.integrates}{i + 1}" for i in self.integrals]
         kinds += ["integral"] * len(self.integrals)
         if self.difference:
             names += ["q1_prev", "q2_prev", "q3_prev"]
@@ -254,15 +249,9 @@ class OneStepMap:
 
 def _removed_directions(m: OneStepMap) -> list:
     """The integral directions (over the three integral states) that carry a structural
-    eigenvalue 1 (module doc): SC-DC the sum; PID-DC each mode whose integral gain is 0."""
-    if len(m.integrals) < 3:
-        return []
-    common = [(1.0, 1.0, 1.0)]
-    if m.ctrl.law == SCDC:
-        return common
-    mg = m.ctrl.modal
-    return ((common if mg.ki_c == 0.0 else [])
-            + ([(1.0, -1.0, 0.0), (1.0, 1.0, -2.0)] if mg.ki_d == 0.0 else []))
+    eigenvalue 1 (module doc): SC-DC the sum; PID-DC each mode whose integral gain is 0 (the law's
+    record, tapmp.laws.Law.integral)."""
+    return m.constant_directions
 
 
 def invariant_basis(m: OneStepMap) -> np.ndarray:
