@@ -79,7 +79,7 @@ int tapmp_enter_step_mode(tapmp_instance *inst)
 int tapmp_do_step_events(tapmp_instance *inst, double t, double h, int *event_needed, int *early_return,
                          double *last_time)
 {
-    ALLOW(inst, OP_DO_STEP);  /* the caller has set *last_time to the time for a refusal */
+    ALLOW(inst, OP_DO_STEP);  /* a refusal leaves the caller's outputs: no event, the time */
     double te;
     *event_needed = *early_return = 0;
     if (!inst->event_mode_used || inst->failed || !isfinite(t) ||
