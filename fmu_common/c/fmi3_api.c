@@ -4,8 +4,9 @@
  * controller) has Event Mode (hasEventMode, mightReturnEarlyFromDoStep); the others refuse
  * eventModeUsed. A model with a periodic input clock (MODEL_CLOCK: the clocked controller) has the clock
  * functions and requires eventModeUsed. A model with a continuous state (MODEL_N_STATES: the plant) is
- * offered for Model Exchange too, under the same model identifier (instance.c's tapmp_me_* operations,
- * shared with FMI 2.0); its time derivatives der(X) ... are the Float64 variables N_VARS + 1 ...
+ * offered for Model Exchange too, under the same model identifier (model_exchange.c's tapmp_me_* operations,
+ * shared with FMI 2.0; fmi3_model_exchange.c); its time derivatives der(X) ... are the Float64 variables
+ * N_VARS + 1 ... The clock functions are in fmi3_clocks.c.
  * Scheduled Execution, other clocks, derivatives and, for the other models, Model Exchange are not
  * provided:
  * those calls return fmi3Error with a message (their capability flags are false in the
@@ -14,7 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "instance.h"
+#include "runtime.h"
 #include "fmi3Functions.h"
 
 typedef struct {
@@ -29,20 +30,14 @@ static void logger(void *instance, int status, const char *category, const char 
     if (env && env->log) env->log(env->env, (fmi3Status)status, category, message);
 }
 
-#define INSTANCE(c) tapmp_instance *inst = (tapmp_instance *)(c); if (!tapmp_alive(inst)) return fmi3Error
-
-static fmi3Status unsupported(fmi3Instance c, const char *call, const char *why)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_fail(inst, "fmi3%s is not supported: %s", call, why);
-}
+#define unsupported(c, call, why) ((fmi3Status)tapmp_unsupported((c), (call), (why)))
 
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t n, const fmi3String categories[])
 {
     (void)n, (void)categories;
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     inst->logging_on = loggingOn;
     return fmi3OK;
 }
@@ -141,27 +136,27 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefi
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
-    INSTANCE(c);
-    if (inst->mode != MODE_INSTANTIATED)
-        return (fmi3Status)tapmp_mode_error(inst, "EnterInitializationMode", "Instantiated");
-    int status = tapmp_setup_experiment(inst, startTime);
+    INSTANCE(c, fmi3Error);
+    /* the start time is set (tapmp_setup_experiment) only for a call that is allowed */
+    int status = tapmp_allowed(inst, OP_ENTER_INITIALIZATION);
+    if (status == ST_OK) status = tapmp_setup_experiment(inst, startTime);
     return (fmi3Status)(status != ST_OK ? status : tapmp_enter_initialization(inst));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance c)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
 #ifdef MODEL_N_STATES
     if (inst->model_exchange) return (fmi3Status)tapmp_me_exit_initialization(inst);  /* into Event Mode */
 #endif
     return (fmi3Status)tapmp_exit_initialization(inst);
 }
-fmi3Status fmi3Terminate(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_terminate(inst); }
-fmi3Status fmi3Reset(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_reset(inst); }
+fmi3Status fmi3Terminate(fmi3Instance c) { INSTANCE(c, fmi3Error); return (fmi3Status)tapmp_terminate(inst); }
+fmi3Status fmi3Reset(fmi3Instance c) { INSTANCE(c, fmi3Error); return (fmi3Status)tapmp_reset(inst); }
 
 fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
 #ifdef MODEL_N_STATES
     for (size_t i = 0; vr && v && i < n && nv == n; i++)  /* der(X) ... follow `time` (N_VARS) */
         if (vr[i] > N_VARS && vr[i] <= N_VARS + MODEL_N_STATES)
@@ -172,19 +167,19 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 
 fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_set_real(inst, vr, n, v, nv);
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Int32 v[], size_t nv)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_get_integer(inst, vr, n, (int *)v, nv);
 }
 
 fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Int32 v[], size_t nv)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_set_integer(inst, vr, n, (const int *)v, nv);
 }
 
@@ -231,151 +226,6 @@ fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t n
     return n ? unsupported(c, "SetBinary", "this FMU has no Binary variables (n must be 0)") : fmi3OK;
 }
 
-#ifdef MODEL_CLOCK
-/* The periodic input clock (instance.c, tapmp_set_clock ...): fmi3Clock is a bool, the runtime takes ints. */
-#define CLOCK_MAX 64  /* values per call: the FMU has one clock, a host passes it once or a few times */
-static int clock_count(tapmp_instance *inst, const char *call, size_t n)
-{
-    if (n <= CLOCK_MAX) return ST_OK;
-    return tapmp_fail(inst, "fmi3%s: nValueReferences = %zu is invalid: allowed is at most %d (this FMU has one "
-                      "clock, " MODEL_CLOCK_NAME ")", call, n, CLOCK_MAX);
-}
-
-fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Clock v[])
-{
-    INSTANCE(c);
-    int values[CLOCK_MAX];
-    int status = clock_count(inst, "GetClock", n);
-    if (status == ST_OK) status = tapmp_get_clock(inst, vr, n, v ? values : NULL);
-    for (size_t i = 0; status == ST_OK && i < n; i++) v[i] = values[i] ? fmi3ClockActive : fmi3ClockInactive;
-    return (fmi3Status)status;
-}
-
-fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Clock v[])
-{
-    INSTANCE(c);
-    int values[CLOCK_MAX];
-    int status = clock_count(inst, "SetClock", n);
-    if (status != ST_OK) return (fmi3Status)status;
-    for (size_t i = 0; v && i < n; i++) values[i] = v[i] != fmi3ClockInactive;
-    return (fmi3Status)tapmp_set_clock(inst, vr, n, v ? values : NULL);
-}
-
-fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 interval[],
-                                  fmi3IntervalQualifier qualifier[])
-{
-    INSTANCE(c);
-    int q[CLOCK_MAX];
-    int status = clock_count(inst, "GetIntervalDecimal", n);
-    if (status == ST_OK) status = tapmp_get_interval(inst, vr, n, interval, q);
-    for (size_t i = 0; status == ST_OK && qualifier && i < n; i++)
-        qualifier[i] = q[i] == 2 ? fmi3IntervalChanged : fmi3IntervalUnchanged;
-    return (fmi3Status)status;
-}
-
-/* The interval as counter / resolution [s]: T_s = 1 / resolution when that is exact (0.0001 s = 1/10000),
- * else the error: a fraction would round the period the controller uses. */
-static int interval_fraction(tapmp_instance *inst, double T, fmi3UInt64 *counter, fmi3UInt64 *resolution)
-{
-    double r = nearbyint(1.0 / T);
-    if (r >= 1.0 && r < 1e15 && 1.0 / r == T) {
-        *counter = 1;
-        *resolution = (fmi3UInt64)r;
-        return ST_OK;
-    }
-    char v[40];
-    return tapmp_invalid(inst, "T_s (as a fraction)", tapmp_repr(T, v), "a period 1/n s, n an integer, for "
-                         "fmi3GetIntervalFraction (fmi3GetIntervalDecimal gives any T_s)", 0);
-}
-
-fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counter[],
-                                   fmi3UInt64 resolution[], fmi3IntervalQualifier qualifier[])
-{
-    INSTANCE(c);
-    double interval[CLOCK_MAX];
-    int q[CLOCK_MAX];
-    int status = clock_count(inst, "GetIntervalFraction", n);
-    if (status == ST_OK && n && (!counter || !resolution))
-        status = tapmp_fail(inst, "fmi3GetIntervalFraction: counters and resolutions must not be NULL");
-    if (status == ST_OK) status = tapmp_get_interval(inst, vr, n, interval, q);
-    for (size_t i = 0; status == ST_OK && i < n; i++) {
-        status = interval_fraction(inst, interval[i], &counter[i], &resolution[i]);
-        if (qualifier) qualifier[i] = q[i] == 2 ? fmi3IntervalChanged : fmi3IntervalUnchanged;
-    }
-    return (fmi3Status)status;
-}
-
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n,
-                                  const fmi3Float64 interval[])
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_set_interval(inst, vr, n, interval);
-}
-
-fmi3Status fmi3SetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n,
-                                   const fmi3UInt64 counter[], const fmi3UInt64 resolution[])
-{
-    INSTANCE(c);
-    double interval[CLOCK_MAX];
-    int status = clock_count(inst, "SetIntervalFraction", n);
-    if (status == ST_OK && n && (!counter || !resolution))
-        status = tapmp_fail(inst, "fmi3SetIntervalFraction: counters and resolutions must not be NULL");
-    for (size_t i = 0; status == ST_OK && i < n; i++)
-        interval[i] = resolution[i] ? (double)counter[i] / (double)resolution[i] : INFINITY;
-    return (fmi3Status)(status == ST_OK ? tapmp_set_interval(inst, vr, n, interval) : status);
-}
-
-fmi3Status fmi3GetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 shift[])
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_get_shift(inst, vr, n, shift);
-}
-
-fmi3Status fmi3GetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counter[],
-                                fmi3UInt64 resolution[])
-{
-    INSTANCE(c);
-    double shift[CLOCK_MAX];
-    int status = clock_count(inst, "GetShiftFraction", n);
-    if (status == ST_OK && n && (!counter || !resolution))
-        status = tapmp_fail(inst, "fmi3GetShiftFraction: counters and resolutions must not be NULL");
-    if (status == ST_OK) status = tapmp_get_shift(inst, vr, n, shift);
-    for (size_t i = 0; status == ST_OK && i < n; i++) counter[i] = 0, resolution[i] = 1;
-    return (fmi3Status)status;
-}
-
-fmi3Status fmi3SetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 shift[])
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_set_shift(inst, vr, n, shift);
-}
-
-fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counter[],
-                                const fmi3UInt64 resolution[])
-{
-    INSTANCE(c);
-    double shift[CLOCK_MAX];
-    int status = clock_count(inst, "SetShiftFraction", n);
-    if (status == ST_OK && n && (!counter || !resolution))
-        status = tapmp_fail(inst, "fmi3SetShiftFraction: counters and resolutions must not be NULL");
-    for (size_t i = 0; status == ST_OK && i < n; i++)
-        shift[i] = resolution[i] ? (double)counter[i] / (double)resolution[i] : INFINITY;
-    return (fmi3Status)(status == ST_OK ? tapmp_set_shift(inst, vr, n, shift) : status);
-}
-#else
-fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Clock v[])
-{
-    (void)vr, (void)v;
-    return n ? unsupported(c, "GetClock", "this FMU has no clocks") : fmi3OK;
-}
-
-fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Clock v[])
-{
-    (void)vr, (void)v;
-    return n ? unsupported(c, "SetClock", "this FMU has no clocks") : fmi3OK;
-}
-#endif
-
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference vr, size_t *n)
 {
     (void)vr, (void)n;
@@ -393,37 +243,37 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference depend
 
 fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *state)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_get_state(inst, (tapmp_state **)state);
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState state)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_set_state(inst, (const tapmp_state *)state);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *state)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_free_state(inst, (tapmp_state **)state);
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState state, size_t *size)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_serialized_size(inst, (const tapmp_state *)state, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState state, fmi3Byte bytes[], size_t size)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_serialize(inst, (const tapmp_state *)state, (char *)bytes, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte bytes[], size_t size, fmi3FMUState *state)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     return (fmi3Status)tapmp_deserialize(inst, (const char *)bytes, size, (tapmp_state **)state);
 }
 
@@ -432,7 +282,7 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
                       fmi3Float64 *lastSuccessfulTime)
 {
     (void)noSetFMUStatePriorToCurrentPoint;
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     if (inst->model_exchange)
         return unsupported(c, "DoStep", "the instance is a Model Exchange instance (fmi3InstantiateModelExchange)");
     int event = 0, early = 0;
@@ -446,15 +296,24 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
 }
 
 #ifdef MODEL_HAS_EVENTS
-fmi3Status fmi3EnterEventMode(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_enter_event_mode(inst); }
-fmi3Status fmi3EnterStepMode(fmi3Instance c) { INSTANCE(c); return (fmi3Status)tapmp_enter_step_mode(inst); }
+fmi3Status fmi3EnterEventMode(fmi3Instance c)
+{
+    INSTANCE(c, fmi3Error);
+    return (fmi3Status)tapmp_enter_event_mode(inst);
+}
+
+fmi3Status fmi3EnterStepMode(fmi3Instance c)
+{
+    INSTANCE(c, fmi3Error);
+    return (fmi3Status)tapmp_enter_step_mode(inst);
+}
 
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate,
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime)
 {
-    INSTANCE(c);
+    INSTANCE(c, fmi3Error);
     int changed = 0, defined = 0;
     double next = 0.0;
     int status = tapmp_update_discrete_states(inst, &changed, &defined, &next);
@@ -540,121 +399,3 @@ NOT_PROVIDED(GetOutputDerivatives, "maxOutputDerivativeOrder is 0",
              (void)vr, (void)n, (void)o, (void)v, (void)nv)
 NOT_PROVIDED(ActivateModelPartition, NO_CLOCKS, (fmi3Instance c, fmi3ValueReference clock, fmi3Float64 t),
              (void)clock, (void)t)
-
-#ifdef MODEL_N_STATES
-/* --- Model Exchange: the version-neutral operations of instance.c (tapmp_me_*) --------------
- * A Co-Simulation instance of this model has no Event Mode (hasEventMode is false). */
-#ifdef MODEL_HAS_EVENTS
-#error "a model with time events for Co-Simulation and a continuous state for Model Exchange is not supported"
-#endif
-
-fmi3Status fmi3EnterEventMode(fmi3Instance c)
-{
-    INSTANCE(c);
-    if (!inst->model_exchange) return unsupported(c, "EnterEventMode", "hasEventMode is false");
-    return (fmi3Status)tapmp_me_enter_event_mode(inst);
-}
-
-fmi3Status fmi3EnterStepMode(fmi3Instance c)
-{
-    INSTANCE(c);
-    return unsupported(c, "EnterStepMode", inst->model_exchange ? "the instance is a Model Exchange instance "
-                       "(allowed: fmi3EnterContinuousTimeMode)" : "hasEventMode is false");
-}
-
-fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate,
-                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
-                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
-                                    fmi3Float64 *nextEventTime)
-{
-    INSTANCE(c);
-    if (!inst->model_exchange) return unsupported(c, "UpdateDiscreteStates", "hasEventMode is false");
-    int defined = 0;
-    double next = 0.0;
-    int status = tapmp_me_update(inst, "UpdateDiscreteStates", &defined, &next);
-    if (status != ST_OK) return (fmi3Status)status;
-    /* no discrete state: the time event changes the forces only */
-    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
-    if (terminateSimulation) *terminateSimulation = fmi3False;
-    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
-    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
-    if (nextEventTimeDefined) *nextEventTimeDefined = defined ? fmi3True : fmi3False;
-    if (nextEventTime) *nextEventTime = next;
-    return fmi3OK;
-}
-
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_enter_continuous_time_mode(inst);
-}
-
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
-{
-    (void)noSetFMUStatePriorToCurrentPoint;
-    INSTANCE(c);
-    int enter = 0, terminate = 0, status = tapmp_me_allowed(inst, "CompletedIntegratorStep", ME_CONTINUOUS);
-    if (status == ST_OK) status = tapmp_require_pointer(inst, enterEventMode, "CompletedIntegratorStep", "enterEventMode");
-    if (status == ST_OK)
-        status = tapmp_require_pointer(inst, terminateSimulation, "CompletedIntegratorStep", "terminateSimulation");
-    if (status == ST_OK) status = tapmp_me_completed_integrator_step(inst, &enter, &terminate);
-    if (status != ST_OK) return (fmi3Status)status;
-    *enterEventMode = enter ? fmi3True : fmi3False;
-    *terminateSimulation = terminate ? fmi3True : fmi3False;
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_set_time(inst, time);
-}
-
-fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 x[], size_t nx)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_set_states(inst, x, nx);
-}
-
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 dx[], size_t nx)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_get_derivatives(inst, "GetContinuousStateDerivatives", dx, nx);
-}
-
-fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 z[], size_t ni)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_event_indicators(inst, z, ni);
-}
-
-fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 x[], size_t nx)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_get_states(inst, "GetContinuousStates", x, nx);
-}
-
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominals[], size_t nx)
-{
-    INSTANCE(c);
-    return (fmi3Status)tapmp_me_nominals(inst, nominals, nx);
-}
-
-/* Allowed in every mode (the numbers are fixed); only the pointer is checked. */
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *n)
-{
-    INSTANCE(c);
-    if (tapmp_require_pointer(inst, n, "GetNumberOfEventIndicators", "nEventIndicators") != ST_OK) return fmi3Error;
-    *n = 0;
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *n)
-{
-    INSTANCE(c);
-    if (tapmp_require_pointer(inst, n, "GetNumberOfContinuousStates", "nContinuousStates") != ST_OK) return fmi3Error;
-    *n = MODEL_N_STATES;
-    return fmi3OK;
-}
-#endif

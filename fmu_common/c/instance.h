@@ -1,6 +1,6 @@
 /* The FMI-version-neutral part of every TAPMP FMU: one instance's values, the
- * co-simulation state machine, error reporting and the FMU state. fmi2_api.c and
- * fmi3_api.c map the FMI 2.0 and 3.0 functions onto it. The model operations declared at
+ * state machine, error reporting and the FMU state (the runtime's files by concern:
+ * runtime.h). fmi2_api.c and fmi3_api.c map the FMI 2.0 and 3.0 functions onto it. The model operations declared at
  * the end are supplied by the model file: in C for the native FMUs (plant.c, controller.c
  * or trajectory.c), by calling into Python for the pythonfmu FMUs
  * (fmu_common/pyfront/python_model.c), so both families follow the same rules.
@@ -99,7 +99,6 @@ TAPMP_LINKAGE int tapmp_invalid_text(char *buf, size_t size, const char *name, c
  * kind 3, outside the kinematic domain, as a real). */
 TAPMP_LINKAGE int tapmp_range_text(int kind, const char *name, double value, const char *allowed, char *msg,
                                    size_t size);
-TAPMP_LINKAGE int tapmp_mode_error(tapmp_instance *inst, const char *call, const char *allowed);
 
 /* FMI operations, version neutral; each returns a status. */
 TAPMP_LINKAGE int tapmp_setup_experiment(tapmp_instance *inst, double start_time);
@@ -208,17 +207,12 @@ TAPMP_LINKAGE void model_me_derivatives(const tapmp_instance *inst, double dx[])
 TAPMP_LINKAGE double model_me_next_event_time(const tapmp_instance *inst);
 TAPMP_LINKAGE int model_me_check(const tapmp_instance *inst, char *msg, size_t size);
 
-/* Model Exchange operations, FMI version neutral; each returns a status and names its call
- * (`call`, without the fmi2 / fmi3 prefix) in messages. The modes a call is allowed in are bits
- * of `modes`: ME_INIT (Initialization Mode), ME_EVENT (Event Mode), ME_CONTINUOUS (Continuous-Time
- * Mode). No event indicators: the right-hand side is smooth in the state (the Coulomb friction is
- * tanh-smoothed; the force saturation acts on the inputs, which the host sets); the one
- * discontinuity in time, the external force step at disturbance_time, is a time event. */
-enum { ME_INIT = 1, ME_EVENT = 2, ME_CONTINUOUS = 4 };
-#define ME_AFTER_INIT (ME_EVENT | ME_CONTINUOUS)
-#define ME_ANY (ME_INIT | ME_EVENT | ME_CONTINUOUS)
-/* ST_OK if `call` may run now: a Model Exchange instance, no earlier error, in a mode of `modes`. */
-TAPMP_LINKAGE int tapmp_me_allowed(tapmp_instance *inst, const char *call, int modes);
+/* Model Exchange operations, FMI version neutral; each returns a status. The modes each is
+ * allowed in (Initialization Mode, Event Mode, Continuous-Time Mode) are its row of the
+ * allowed-call table (instance.c). No event indicators: the right-hand side is smooth in the state
+ * (the Coulomb friction is tanh-smoothed; the force saturation acts on the inputs, which the host
+ * sets); the one discontinuity in time, the external force step at disturbance_time, is a time
+ * event. */
 /* ExitInitializationMode of a Model Exchange instance: as tapmp_exit_initialization, then the
  * settings checked for Model Exchange (model_me_check); it leaves into Event Mode. */
 TAPMP_LINKAGE int tapmp_me_exit_initialization(tapmp_instance *inst);
@@ -229,8 +223,8 @@ TAPMP_LINKAGE int tapmp_me_set_time(tapmp_instance *inst, double time);
 /* The continuous state (nx = MODEL_N_STATES values): set (after initialization), get (from
  * Initialization Mode on); their derivatives at the instance's time for the inputs set now. */
 TAPMP_LINKAGE int tapmp_me_set_states(tapmp_instance *inst, const double x[], size_t nx);
-TAPMP_LINKAGE int tapmp_me_get_states(tapmp_instance *inst, const char *call, double x[], size_t nx);
-TAPMP_LINKAGE int tapmp_me_get_derivatives(tapmp_instance *inst, const char *call, double dx[], size_t nx);
+TAPMP_LINKAGE int tapmp_me_get_states(tapmp_instance *inst, double x[], size_t nx);
+TAPMP_LINKAGE int tapmp_me_get_derivatives(tapmp_instance *inst, double dx[], size_t nx);
 /* GetReal / GetFloat64 when a value reference is one of the state derivatives: those are the
  * variables first, first + 1, ... (MODEL_N_STATES of them), the others are got as usual. */
 TAPMP_LINKAGE int tapmp_me_get_real(tapmp_instance *inst, unsigned first, const unsigned vr[], size_t n,
@@ -244,7 +238,7 @@ TAPMP_LINKAGE int tapmp_me_nominals(tapmp_instance *inst, double nominals[], siz
 TAPMP_LINKAGE int tapmp_me_enter_event_mode(tapmp_instance *inst);
 TAPMP_LINKAGE int tapmp_me_enter_continuous_time_mode(tapmp_instance *inst);
 TAPMP_LINKAGE int tapmp_me_completed_integrator_step(tapmp_instance *inst, int *enter_event_mode, int *terminate);
-TAPMP_LINKAGE int tapmp_me_update(tapmp_instance *inst, const char *call, int *next_defined, double *next_time);
+TAPMP_LINKAGE int tapmp_me_update(tapmp_instance *inst, int *next_defined, double *next_time);
 #endif
 
 /* A model whose instances hold resources outside the instance (the pythonfmu family: a

@@ -6,7 +6,7 @@
  * time in python-env.txt, or $TAPMP_LIBPYTHON, loaded RTLD_GLOBAL so that numpy's
  * extension modules find it too), then loads the Python binding tapmp_fmi2_python.so
  * from the same folder and forwards every call to it: that binding is the native FMUs'
- * runtime (fmu_common/c: fmi2_api.c, instance.c, which refuse a freed or foreign instance)
+ * runtime (fmu_common/c: fmi2_api.c on the version-neutral files, which refuse a freed or foreign instance)
  * with the Python model operations of python_model.c. Nothing is ever unloaded: the
  * embedded interpreter lives until the process exits (finalizing it while numpy's native
  * libraries are loaded is what crashes hosts at exit). */

@@ -1,6 +1,6 @@
 /* The model operations of instance.h for a pythonfmu TAPMP FMU: each calls one method of
  * the adapter's Python object (fmu_common/slave.py), so the FMI rules, statuses and messages
- * are instance.c's and fmi2_api.c's, the same as the native FMUs'. Compiled per model with
+ * are the runtime's (fmu_common/c) and fmi2_api.c's, the same as the native FMUs'. Compiled per model with
  * them into tapmp_fmi2_python.so, which fmi2_front.c loads once Python is in the process.
  *
  * Values live in the instance (get and set never enter Python); before a Python call they

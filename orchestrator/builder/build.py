@@ -139,23 +139,21 @@ def python_model_vars(model: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-# The pythonfmu binding as one translation unit: the native runtime with the Python model operations.
-PYTHON_UNITY = """#define _GNU_SOURCE /* dladdr */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#define TAPMP_LINKAGE static __attribute__((unused))
-#define TAPMP_DEFINITION static
-#include "instance.c"
-#include "python_model.c"
-#include "fmi2_api.c"
-"""
+def python_unity() -> str:
+    """The pythonfmu binding as one translation unit: the native runtime's FMI 2.0 files
+    (build_native.RUNTIME_SOURCES, API) with the Python model operations."""
+    from .build_native import API, RUNTIME_SOURCES
+    parts = [p.name for p in (*RUNTIME_SOURCES, PYFRONT / "python_model.c", *API["fmi2"])]
+    return "\n".join(["#define _GNU_SOURCE /* dladdr */", "#define PY_SSIZE_T_CLEAN", "#include <Python.h>",
+                      "#define TAPMP_LINKAGE static __attribute__((unused))", "#define TAPMP_DEFINITION static",
+                      *(f'#include "{name}"' for name in parts), ""])
 
 
 def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tuple[Path, dict[str, Path]]:
     """Compile the FMI front (no Python dependency) and, per model, the Python binding into dest.
 
     Returns (front, {model: binding}). A binding is the native FMUs' runtime
-    (fmu_common/c/instance.c, fmi2_api.c) with model operations that call Python
+    (fmu_common/c: the version-neutral files and fmi2_api.c) with model operations that call Python
     (fmu_common/pyfront/python_model.c), built against this interpreter's headers and
     deliberately not linked to libpython: in a Python host it uses the host's, in a C host
     the front loads the recorded one first (RTLD_GLOBAL).
@@ -174,7 +172,7 @@ def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tupl
         src = dest / f"{model}_src"
         src.mkdir(exist_ok=True)
         (src / "model_vars.h").write_text(python_model_vars(model))
-        (src / "python_unity.c").write_text(PYTHON_UNITY)
+        (src / "python_unity.c").write_text(python_unity())
         bindings[model] = dest / f"{model}_{BINDING}"
         _compile([src / "python_unity.c"], bindings[model], flags=flags, extra=["-Wl,-z,nodelete", "-Wl,-z,lazy"],
                  includes=[src, RUNTIME, PYFRONT, fmi_headers, include], libs=["pthread"],

@@ -4,7 +4,7 @@ The runtime steps the nested FMUs Jacobi-style at 0.1 ms and, at
 fmi2ExitInitializationMode, copies every connection once while the FMUs are still in
 Initialization Mode. So the plant's first step runs on the force the controller
 reports in Initialization Mode, which it computes from q_d and q as soon as they are
-set (instance.c: initial unknowns); before that fix it ran on 0 N.
+set (fmu_common/c/values.c: initial unknowns); before that fix it ran on 0 N.
 """
 
 import subprocess

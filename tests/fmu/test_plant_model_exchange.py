@@ -1,5 +1,5 @@
-"""The native FMI 2.0 and 3.0 plants' Model Exchange interface (fmu_common/c/fmi2_api.c and fmi3_api.c on
-instance.c's tapmp_me_* operations and fmu_plant/plant.c's model_me_* hooks), called through FMPy: the
+"""The native FMI 2.0 and 3.0 plants' Model Exchange interface (fmu_common/c/fmi2_api.c and fmi3_model_exchange.c
+on model_exchange.c's tapmp_me_* operations and fmu_plant/plant.c's model_me_* hooks), called through FMPy: the
 states and derivatives are the C model's, the external force step is a time event, and every call
 that does not fit is an error with its message. The controller and the trajectory stay
 Co-Simulation only. Third-party integrators on it: tests/interop/test_model_exchange.py."""

@@ -1,4 +1,4 @@
-"""Serialized FMU states of the TAPMP runtime (fmu_common/c/instance.c, serial_layout), read and
+"""Serialized FMU states of the TAPMP runtime (fmu_common/c/fmu_state.c, serial_layout), read and
 edited field by field, to craft the states a hostile or careless host may hand back.
 
 The layout (format 2, magic TAPMPST2), in the native byte order: 8 bytes magic, 32 bytes model
