@@ -252,7 +252,7 @@ TAPMP_LINKAGE int tapmp_clock_sampled(tapmp_clock *c, double k, double steps);
 TAPMP_LINKAGE void tapmp_clock_missed_text(const tapmp_clock *c, double t, double due, char *text, size_t size);
 TAPMP_LINKAGE void tapmp_clock_skipped_text(const tapmp_clock *c, double t, double steps, char *text, size_t size);
 
-/* --- the hidden values of an FMU state (fmu_common/c/instance.c checks a state whole before it
+/* --- the hidden values of an FMU state (fmu_common/c/fmu_state.c checks a state whole before it
  * applies any of it) --- */
 /* TAPMP_FORCE_CAP [N]: the largest force limit a setting may ask for (force_limit's declared maximum
  * in tapmp/interface.py), the cap of an integral's force when the controller has no limit. */
