@@ -108,7 +108,7 @@ def _settings(cfg: PlantConfig, **others):
     """The C model's tapmp_plant_settings with ``cfg`` and ``others`` (name -> value) filled by name
     from the settings table, the rest at their defaults; ModelInputError for the first setting
     outside its range (tapmp_plant_settings_check)."""
-    from .interface import PLANT
+    from .models import PLANT
     return cmodel.check_settings(PLANT, {**others, **cfg._asdict()})
 
 

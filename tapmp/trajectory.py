@@ -81,7 +81,7 @@ class TrajectoryParams(NamedTuple):
     def validated(self) -> "TrajectoryParams":
         """Return self after the range checks of the settings table (ModelInputError names the
         offender; the C model's generated tapmp_trajectory_settings_check, which every FMU runs too)."""
-        from .interface import TRAJECTORY
+        from .models import TRAJECTORY
         cmodel.check_settings(TRAJECTORY, self._asdict())
         return self
 
@@ -225,7 +225,7 @@ def move_reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
 def _c_trajectory(tp: TrajectoryParams):
     """``tp`` as the C model's tapmp_trajectory (tapmp_trajectory_init: its move planned by
     tapmp_move_plan), from its settings struct filled by name."""
-    from .interface import TRAJECTORY
+    from .models import TRAJECTORY
     ffi, lib = cmodel.load()
     c = ffi.new("tapmp_trajectory *")
     lib.tapmp_trajectory_init(c, cmodel.settings(TRAJECTORY, tp._asdict()))

@@ -40,7 +40,7 @@ from pydantic.dataclasses import dataclass
 from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
 from tapmp import cmodel
-from tapmp.interface import CONTROLLER, ELEMENT, PLANT, TRAJECTORY, VARIABLES
+from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
@@ -48,6 +48,7 @@ from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, referenc
 from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..builder.families import FAMILIES
 from ..engine.schedule import CONNECTION_STARTS, ORDERINGS
+from .roles import ROLES
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
 if sys.version_info >= (3, 11):
@@ -468,7 +469,7 @@ def _check_settings(s: Scenario) -> None:
     the C model's range check that every FMU family runs at initialization: one rule per setting,
     named by the scenario's table. A gains_file's gains are checked once read (read_gains_file)."""
     params = s._parameters(gains=not (s.gains_file and not s.gain_file_values))
-    for model, element in ELEMENT.items():
+    for element, model in ROLES.items():
         try:
             cmodel.check_settings(model, params[element])
         except ModelInputError as err:
