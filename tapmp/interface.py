@@ -351,13 +351,31 @@ PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(m, t) for m, t in (
 VARIABLES = _ByModel("variables")  # {model: its Var rows}, from the records
 
 
-# (source model, source variable, destination model, destination variable)
-CONNECTIONS: tuple[tuple[str, str, str, str], ...] = tuple(
-    [(TRAJECTORY, v.name, CONTROLLER, v.name) for v in TRAJECTORY_VARS[:9]]
-    + [(PLANT, f"q{i}", CONTROLLER, f"q{i}") for i in (1, 2, 3)]
-    + [(PLANT, f"dq{i}", CONTROLLER, f"dq{i}") for i in (1, 2, 3)]
-    + [(CONTROLLER, f"F{i}", PLANT, f"F{i}") for i in (1, 2, 3)]
-)
+def connections() -> tuple[tuple[str, str, str, str], ...]:
+    """(source model, source variable, destination model, destination variable) of every connected
+    input: each record's ``sources`` (input -> (model, output)), in registry and variable order."""
+    return tuple((*r.sources[v.name], r.name, v.name) for r in base_models() for v in r.variables
+                 if v.causality == "input" and v.name in r.sources)
+
+
+class _Connections(Sequence):
+    """:func:`connections`, read when used."""
+
+    def __getitem__(self, i):
+        return connections()[i]
+
+    def __len__(self):
+        return len(connections())
+
+    def __repr__(self):
+        return repr(connections())
+
+
+# The TAPMP loop's inputs, by the output that feeds each (the records' sources, tapmp.records).
+CONTROLLER_SOURCES = {**{v.name: (TRAJECTORY, v.name) for v in TRAJECTORY_VARS[:9]},
+                      **{f"{d}q{i}": (PLANT, f"{d}q{i}") for d in ("", "d") for i in (1, 2, 3)}}
+PLANT_SOURCES = {f"F{i}": (CONTROLLER, f"F{i}") for i in (1, 2, 3)}
+CONNECTIONS = _Connections()
 
 
 # --- Model structure: what every output depends on (FMI <ModelStructure>) ---------------

@@ -13,7 +13,7 @@ the package is imported; this module sits below every model so that the models c
 without importing the table that reads them.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 # The TAPMP models' names (FMU modelName and model identifier).
@@ -35,6 +35,7 @@ class ModelRecord:
     element: str                # its element (role) in the SSP system and the scenario's table name
     variables: tuple = ()       # its tapmp.interface.Var rows, in value-reference order
     dependencies: Callable | None = None  # output name -> tapmp.interface.Dependencies
+    sources: dict = field(default_factory=dict)  # input name -> (model, output) feeding it in the SSP system
     source: str = ""            # the model's C file, e.g. "fmu_plant/plant.c"
     header: str = ""            # the model's C header, e.g. "fmu_plant/plant.h"
     settings_struct: str = ""   # the C settings struct its parameters are read into ("" = none)
@@ -90,3 +91,15 @@ def base_models() -> tuple[ModelRecord, ...]:
 def names() -> tuple[str, ...]:
     """The base models' names, in registry order (the SSP's elements)."""
     return tuple(r.name for r in base_models())
+
+
+def models_table() -> str:
+    """The models as docs/architecture.md lists them ("Adding a model"): a Markdown table, one row per
+    record in registry order (tests/project compare the page with it)."""
+    version = {"fmi2": "2.0", "fmi3": "3.0"}
+    rows = ["| model | SSP element | C file | native FMI | pythonfmu twin | variant of |", "|---|---|---|---|---|---|"]
+    for r in MODELS:
+        rows.append(f"| `{r.name}` | `{r.element}` | `{r.source}` | {', '.join(version[f] for f in r.fmi_versions)} | "
+                    + (f"`{r.adapter}`" if r.adapter else "-") + " | " + (f"`{r.variant_of}`" if r.variant_of else "-")
+                    + " |")
+    return "\n".join(rows) + "\n"

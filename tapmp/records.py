@@ -5,8 +5,8 @@ C files, its settings struct, its description, its documentation's text and equa
 A new model is one more record, in its own module or here (docs/architecture.md, "Adding a model").
 """
 
-from .interface import (CONTROLLER_VARS, PLANT_VARS, TRAJECTORY_VARS, _controller_dependencies,
-                        _plant_dependencies, _trajectory_dependencies)
+from .interface import (CONTROLLER_SOURCES, CONTROLLER_VARS, PLANT_SOURCES, PLANT_VARS, TRAJECTORY_VARS,
+                        _controller_dependencies, _plant_dependencies, _trajectory_dependencies)
 from .models import CLOCKED, CONTROLLER, PLANT, TRAJECTORY, ModelRecord, record, register
 
 CLOCK_NAME = "sample_clock"   # fmu_controller/controller.h: MODEL_CLOCK_NAME
@@ -106,12 +106,13 @@ register(ModelRecord(
     adapter="fmu_controller/TAPMP_Trajectory.py", diagram_note="X_d Z_d B_d (Eq. 1)"))
 register(ModelRecord(
     name=CONTROLLER, element="controller", variables=CONTROLLER_VARS, dependencies=_controller_dependencies,
+    sources=CONTROLLER_SOURCES,
     source="fmu_controller/controller.c", header="fmu_controller/controller.h",
     settings_struct="tapmp_controller_settings", description=_CONTROLLER_DESCRIPTION,
     what=_controller_what, equations=_controller_equations, icon_label="SC-DC",
     adapter="fmu_controller/TAPMP_Controller.py", diagram_note="SC-DC (Eq. 15-26)"))
 register(ModelRecord(
-    name=PLANT, element="plant", variables=PLANT_VARS, dependencies=_plant_dependencies,
+    name=PLANT, element="plant", variables=PLANT_VARS, dependencies=_plant_dependencies, sources=PLANT_SOURCES,
     source="fmu_plant/plant.c", header="fmu_plant/plant.h", settings_struct="tapmp_plant_settings",
     description="Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
                 f"in, encoder positions and platform pose out {_NATIVE}",

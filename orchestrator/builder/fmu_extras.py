@@ -370,6 +370,9 @@ def extra_members(model: str, family: str, host_fmu: Path, platforms=None,
     result of :func:`closed_loop_stimulus` (computed if None)."""
     stimulus = stimulus if stimulus is not None else closed_loop_stimulus()
     rows = stimulus.get(model)
+    if rows is None and inputs(model):  # a model outside the TAPMP loop's stimulus: its inputs held at their starts
+        start = {v.name: v.start for v in VARIABLES[model]}
+        rows = [(k * SERVO_STEP, *(start[n] for n in inputs(model))) for k in range(REFERENCE_STEPS + 1)]
     members = {
         f"{LS_REF}/fmi-ls-manifest.xml": manifest(model),
         f"{LS_REF}/{SCENARIO}.ssv": default_parameter_set(model),
