@@ -7,7 +7,10 @@ them. Defaults come from the model's own parameter tuples, so nothing is typed t
 same rows come the C code that reads an FMU's parameters into the model's settings struct
 (:func:`settings_read_macro`, into model_vars.h), the C range checks every family and the Python
 model run (:func:`settings_check_source`, tapmp_settings.h) and the Python side's filling of
-those structs by field name (tapmp.cmodel.settings).
+those structs by field name (tapmp.cmodel.settings); those C generators live in tapmp.settings_c,
+below the C model, and read the rows through the models' records (tapmp.models, filled by
+tapmp.records). FMU_NAMES, ELEMENT, VARIABLES, SETTINGS_STRUCT and CONNECTIONS are views of the
+records, read when used, so a registered model appears in each.
 """
 
 from collections.abc import Mapping, Sequence
