@@ -8,3 +8,6 @@ tapmp.cmodel), the code every FMU family runs; the Python modules write them rea
 """
 
 __version__ = "0.1.0"
+
+# The models' records (tapmp.models.MODELS), filled once, before any module reads them.
+from . import records  # noqa: E402,F401

@@ -76,7 +76,7 @@ def _settings(values: dict):
     """The C model's tapmp_controller_settings with ``values`` (name -> value) filled by name from
     the settings table, the rest at their defaults; ModelInputError for the first setting outside
     its range (tapmp_controller_settings_check)."""
-    from .interface import CONTROLLER
+    from .models import CONTROLLER
     return cmodel.check_settings(CONTROLLER, values)
 
 

@@ -7,23 +7,58 @@ them. Defaults come from the model's own parameter tuples, so nothing is typed t
 same rows come the C code that reads an FMU's parameters into the model's settings struct
 (:func:`settings_read_macro`, into model_vars.h), the C range checks every family and the Python
 model run (:func:`settings_check_source`, tapmp_settings.h) and the Python side's filling of
-those structs by field name (tapmp.cmodel.settings).
+those structs by field name (tapmp.cmodel.settings); those C generators live in tapmp.settings_c,
+below the C model, and read the rows through the models' records (tapmp.models, filled by
+tapmp.records). FMU_NAMES, ELEMENT, VARIABLES, SETTINGS_STRUCT and CONNECTIONS are views of the
+records, read when used, so a registered model appears in each.
 """
 
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
+from .models import CONTROLLER, PLANT, TRAJECTORY, base_models, names, record
+from .settings_c import allowed_text, settings_check_source, settings_read_macro  # noqa: F401 (the table's API)
 from .params import (DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
                      SERVO_STEP, START_TIME, STOP_TIME)
 from . import laws, settings
 from .plant import PlantConfig
 from .trajectory import TrajectoryParams, circle_reference
 
-PLANT = "TAPMP_Plant"
-CONTROLLER = "TAPMP_Controller"
-TRAJECTORY = "TAPMP_Trajectory"
-FMU_NAMES = (TRAJECTORY, CONTROLLER, PLANT)
-# Element names in the SSP system, per model.
-ELEMENT = {TRAJECTORY: "trajectory", CONTROLLER: "controller", PLANT: "plant"}
+
+
+class _Names(Sequence):
+    """The base models' names in the registry's order (tapmp.models), read when used."""
+
+    def __getitem__(self, i):
+        return names()[i]
+
+    def __len__(self):
+        return len(names())
+
+    def __repr__(self):
+        return repr(names())
+
+
+class _ByModel(Mapping):
+    """{model name: one attribute of its record} over the base models, read when used."""
+
+    def __init__(self, attribute: str):
+        self._attribute = attribute
+
+    def __getitem__(self, model: str):
+        return getattr(record(model), self._attribute)
+
+    def __iter__(self):
+        return iter(names())
+
+    def __len__(self):
+        return len(names())
+
+
+# Derived from the records (tapmp.models, filled by tapmp.records): the models in signal-flow order,
+# each one's element name in the SSP system, its variables and its C settings struct.
+FMU_NAMES = _Names()
+ELEMENT = _ByModel("element")
 # Orderings of one macro step of the FMI-free loop (tapmp.closed_loop), the master's own
 # (orchestrator.engine.schedule.ORDERINGS; docs/master.md): one element after the other on the latest
 # outputs, or all on the outputs at t (one extra step of delay in the feedback path).
@@ -242,9 +277,9 @@ RANGES: dict[str, tuple[float, float]] = {
 }
 
 
-# Each model's C settings struct (tapmp_model.h), with a parameter's member in it (Var.field).
-SETTINGS_STRUCT = {PLANT: "tapmp_plant_settings", CONTROLLER: "tapmp_controller_settings",
-                   TRAJECTORY: "tapmp_trajectory_settings"}
+# Each model's C settings struct (tapmp_model.h, ModelRecord.settings_struct), with a parameter's
+# member in it (Var.field).
+SETTINGS_STRUCT = _ByModel("settings_struct")
 _ARRAYS = ("c_v", "F_c", "cogging_phase", "disturbance_force", *GAIN_NAMES)  # per-motor C arrays [3]
 _INITIAL = ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")
 _CHOICES = {"law": laws.choices_text(),
@@ -300,70 +335,34 @@ def _started(table: tuple[Var, ...]) -> tuple[Var, ...]:
 PLANT_VARS, CONTROLLER_VARS = _started(PLANT_VARS), _started(CONTROLLER_VARS)
 PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(m, t) for m, t in (
     (PLANT, PLANT_VARS), (CONTROLLER, CONTROLLER_VARS), (TRAJECTORY, TRAJECTORY_VARS)))
-VARIABLES = {PLANT: PLANT_VARS, CONTROLLER: CONTROLLER_VARS, TRAJECTORY: TRAJECTORY_VARS}
+VARIABLES = _ByModel("variables")  # {model: its Var rows}, from the records
 
 
-def allowed_text(v: Var) -> str:
-    """What a parameter's range rule allows, as its refusal says: "a number in [0, 1e+09]", "an
-    integer in [1, 10000]" or the named values of an enumeration."""
-    if v.type == "Integer":
-        return v.choices or f"an integer in [{int(v.min)}, {int(v.max)}]"
-    return f"a number in [{v.min:g}, {v.max:g}]"
+def connections() -> tuple[tuple[str, str, str, str], ...]:
+    """(source model, source variable, destination model, destination variable) of every connected
+    input: each record's ``sources`` (input -> (model, output)), in registry and variable order."""
+    return tuple((*r.sources[v.name], r.name, v.name) for r in base_models() for v in r.variables
+                 if v.causality == "input" and v.name in r.sources)
 
 
-def _c_double(x: float) -> str:
-    return repr(float(x))
+class _Connections(Sequence):
+    """:func:`connections`, read when used."""
+
+    def __getitem__(self, i):
+        return connections()[i]
+
+    def __len__(self):
+        return len(connections())
+
+    def __repr__(self):
+        return repr(connections())
 
 
-def _c_string(text: str) -> str:
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
-def settings_check_source() -> str:
-    """tapmp_settings.h: the C model's range check of each model's settings struct, one line per
-    parameter in the order of its FMU variables (every value outside [min, max] refused with
-    allowed_text), then the relations between settings (trajectory_domain_check)."""
-    lines = ["/* Generated from the settings table (tapmp/interface.py, settings_check_source): do not edit.",
-             " * Included at the end of tapmp_model.c, after offender() and the relation checks. */"]
-    relations = {TRAJECTORY: "trajectory_domain_check"}
-    for model, table in VARIABLES.items():
-        struct = SETTINGS_STRUCT[model]
-        lines += ["", f"int {struct}_check(const {struct} *s, const char **name, double *value, const char **allowed)",
-                  "{"]
-        for v in table:
-            if v.causality != "parameter":
-                continue
-            x, kind = f"s->{v.field}", 2 if v.type == "Integer" else 1
-            lines.append(f"    if (!({x} >= {_c_double(v.min)} && {x} <= {_c_double(v.max)}))")
-            lines.append(f"        return offender({_c_string(v.name)}, {x}, {_c_string(allowed_text(v))}, {kind}, "
-                         "name, value, allowed);")
-        lines.append(f"    return {relations[model]}(s, name, value, allowed);" if model in relations
-                     else "    return 0;")
-        lines.append("}")
-    return "\n".join(lines) + "\n"
-
-
-def settings_read_macro(model: str) -> str:
-    """The C macro MODEL_READ_SETTINGS(inst, s) of ``model``'s model_vars.h: every parameter's
-    value in the FMU instance ``inst`` (reals or ints, by value reference VR_<name>) into its
-    member of the settings struct ``*s`` (SETTINGS_STRUCT[model])."""
-    lines = [f"/* The parameters into the {SETTINGS_STRUCT[model]} *s (tapmp/interface.py: Var.field) */",
-             "#define MODEL_READ_SETTINGS(inst, s) do { \\"]
-    for v in VARIABLES[model]:
-        if v.causality == "parameter":
-            values = "ints" if v.type == "Integer" else "reals"
-            lines.append(f"    (s)->{v.field} = (inst)->{values}[VR_{v.name}]; \\")
-    lines.append("} while (0)")
-    return "\n".join(lines) + "\n"
-
-
-# (source model, source variable, destination model, destination variable)
-CONNECTIONS: tuple[tuple[str, str, str, str], ...] = tuple(
-    [(TRAJECTORY, v.name, CONTROLLER, v.name) for v in TRAJECTORY_VARS[:9]]
-    + [(PLANT, f"q{i}", CONTROLLER, f"q{i}") for i in (1, 2, 3)]
-    + [(PLANT, f"dq{i}", CONTROLLER, f"dq{i}") for i in (1, 2, 3)]
-    + [(CONTROLLER, f"F{i}", PLANT, f"F{i}") for i in (1, 2, 3)]
-)
+# The TAPMP loop's inputs, by the output that feeds each (the records' sources, tapmp.records).
+CONTROLLER_SOURCES = {**{v.name: (TRAJECTORY, v.name) for v in TRAJECTORY_VARS[:9]},
+                      **{f"{d}q{i}": (PLANT, f"{d}q{i}") for d in ("", "d") for i in (1, 2, 3)}}
+PLANT_SOURCES = {f"F{i}": (CONTROLLER, f"F{i}") for i in (1, 2, 3)}
+CONNECTIONS = _Connections()
 
 
 # --- Model structure: what every output depends on (FMI <ModelStructure>) ---------------
@@ -441,14 +440,11 @@ def _trajectory_dependencies(name: str) -> Dependencies:
     return Dependencies((TIME,), _ordered(TRAJECTORY_VARS, params | {TIME}))
 
 
-_DEPENDENCIES = {CONTROLLER: _controller_dependencies, PLANT: _plant_dependencies,
-                 TRAJECTORY: _trajectory_dependencies}
-
-
 def dependencies(model: str) -> dict[str, Dependencies]:
     """{output name: Dependencies} of ``model``: what each output depends on at a communication
     point and in Initialization Mode, as the FMUs of every family compute it."""
-    return {v.name: _DEPENDENCIES[model](v.name) for v in VARIABLES[model] if v.causality == "output"}
+    depends = record(model).dependencies
+    return {v.name: depends(v.name) for v in VARIABLES[model] if v.causality == "output"}
 
 
 def dependency_attributes(names, reference: dict, position: dict | None = None) -> dict:

@@ -26,7 +26,7 @@ class ModelParams(NamedTuple):
     def validated(self) -> "ModelParams":
         """Return self after checking every field's range in the settings table (ModelInputError
         otherwise; the C model's generated tapmp_plant_settings_check, which every FMU runs too)."""
-        from .interface import PLANT
+        from .models import PLANT
         cmodel.check_settings(PLANT, self._asdict())
         return self
 

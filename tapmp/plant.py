@@ -36,6 +36,7 @@ from . import cmodel
 from .dynamics import task_acceleration
 from .errors import KinematicDomainError, require_finite
 from .kinematics import inverse, joint_velocity, rotation_column, S3
+from .models import PLANT
 from .params import ModelParams
 
 TWO_PI = 2.0 * math.pi
@@ -108,7 +109,6 @@ def _settings(cfg: PlantConfig, **others):
     """The C model's tapmp_plant_settings with ``cfg`` and ``others`` (name -> value) filled by name
     from the settings table, the rest at their defaults; ModelInputError for the first setting
     outside its range (tapmp_plant_settings_check)."""
-    from .interface import PLANT
     return cmodel.check_settings(PLANT, {**others, **cfg._asdict()})
 
 

@@ -37,6 +37,7 @@ from functools import lru_cache
 from typing import NamedTuple
 
 from . import cmodel
+from .models import TRAJECTORY
 from .params import DEG
 
 TWO_PI = 2.0 * math.pi
@@ -81,7 +82,6 @@ class TrajectoryParams(NamedTuple):
     def validated(self) -> "TrajectoryParams":
         """Return self after the range checks of the settings table (ModelInputError names the
         offender; the C model's generated tapmp_trajectory_settings_check, which every FMU runs too)."""
-        from .interface import TRAJECTORY
         cmodel.check_settings(TRAJECTORY, self._asdict())
         return self
 
@@ -225,7 +225,6 @@ def move_reference(t: float, tp: TrajectoryParams) -> tuple[float, ...]:
 def _c_trajectory(tp: TrajectoryParams):
     """``tp`` as the C model's tapmp_trajectory (tapmp_trajectory_init: its move planned by
     tapmp_move_plan), from its settings struct filled by name."""
-    from .interface import TRAJECTORY
     ffi, lib = cmodel.load()
     c = ffi.new("tapmp_trajectory *")
     lib.tapmp_trajectory_init(c, cmodel.settings(TRAJECTORY, tp._asdict()))

@@ -25,7 +25,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from tapmp.interface import CONTROLLER, PLANT, TRAJECTORY, VARIABLES, dependencies
+from tapmp.interface import VARIABLES, dependencies
+from tapmp.models import names, record
 
 import ctoolchain as toolchain
 from tapmp import cmodel
@@ -35,11 +36,6 @@ from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 # The package's root: the repository in a checkout, site-packages in an installed wheel
 # (the adapters and the C sources are package data there).
 ROOT = Path(__file__).resolve().parents[2]
-SCRIPTS = {
-    PLANT: ROOT / "fmu_plant" / "TAPMP_Plant.py",
-    CONTROLLER: ROOT / "fmu_controller" / "TAPMP_Controller.py",
-    TRAJECTORY: ROOT / "fmu_controller" / "TAPMP_Trajectory.py",
-}
 BUNDLED_PACKAGES = (ROOT / "tapmp", ROOT / "fmu_common")
 PYFRONT = ROOT / "fmu_common" / "pyfront"
 RUNTIME = ROOT / "fmu_common" / "c"
@@ -127,11 +123,11 @@ def python_model_vars(model: str) -> str:
     """model_vars.h of ``model``'s pythonfmu binary: the native FMUs' table (build_native.py)
     with the Python model's data (python_model.h), its output block, and the fmuGUID read
     from resources/guid.txt at run time (pythonfmu makes a new one per build)."""
-    from .build_native import MODEL_FILES, model_vars_header
+    from .build_native import model_files, model_vars_header
     outputs = [vr for vr, v in enumerate(VARIABLES[model]) if v.causality == "output"]
     if outputs != list(range(outputs[0], outputs[0] + len(outputs))):
         raise BuildError(f"the outputs of {model} are not contiguous: the runtime publishes them as one block")
-    text = model_vars_header(model).replace(f'#include "{MODEL_FILES[model][1].name}"', '#include "python_model.h"')
+    text = model_vars_header(model).replace(f'#include "{model_files(model)[1].name}"', '#include "python_model.h"')
     lines = [("#define INSTANTIATION_TOKEN tapmp_python_token" if line.startswith("#define INSTANTIATION_TOKEN ")
               else line) for line in text.splitlines()]
     at = lines.index("#endif")
@@ -149,9 +145,20 @@ def python_unity() -> str:
                       *(f'#include "{name}"' for name in parts), ""])
 
 
-def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tuple[Path, dict[str, Path]]:
+def python_models() -> tuple[str, ...]:
+    """The models with a pythonfmu twin (ModelRecord.adapter), in registry order."""
+    return tuple(m for m in names() if record(m).adapter)
+
+
+def adapter_script(model: str) -> Path:
+    """The pythonfmu adapter script of ``model`` (its record's adapter)."""
+    return ROOT / record(model).adapter
+
+
+def compile_binaries(dest: Path, models=None) -> tuple[Path, dict[str, Path]]:
     """Compile the FMI front (no Python dependency) and, per model, the Python binding into dest.
 
+    ``models``: the models to bind (default: every model with a pythonfmu twin, :func:`python_models`).
     Returns (front, {model: binding}). A binding is the native FMUs' runtime
     (fmu_common/c: the version-neutral files and fmi2_api.c) with model operations that call Python
     (fmu_common/pyfront/python_model.c), built against this interpreter's headers and
@@ -168,7 +175,7 @@ def compile_binaries(dest: Path, models=(PLANT, CONTROLLER, TRAJECTORY)) -> tupl
     _compile([PYFRONT / "fmi2_front.c"], front, flags=flags, includes=[fmi_headers, PYFRONT],
              libs=["dl", "pthread"], what="the pythonfmu FMUs' front binary")
     bindings = {}
-    for model in models:
+    for model in python_models() if models is None else models:
         src = dest / f"{model}_src"
         src.mkdir(exist_ok=True)
         (src / "model_vars.h").write_text(python_model_vars(model))
@@ -206,7 +213,7 @@ def build_fmu(model: str, out_dir: Path, binaries: tuple[Path, Path] | None = No
     ``script`` replaces the model's adapter (the benchmark's pass-through FMUs)."""
     from pythonfmu import FmuBuilder
 
-    script = Path(script) if script else SCRIPTS[model]
+    script = Path(script) if script else adapter_script(model)
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
     with tempfile.TemporaryDirectory(prefix="tapmp_build_") as tmp:
@@ -265,7 +272,7 @@ def build_all(out_dir: Path = DEFAULT_BUILD_DIR, log=print, every: float = 10.0)
         log(f"pythonfmu: compiling the FMI front and the three Python bindings ({toolchain.HOST})")
         with still_running(log, "pythonfmu", every):
             binaries = compile_binaries(Path(tmp))
-        for model in (PLANT, CONTROLLER, TRAJECTORY):
+        for model in python_models():
             paths[model] = build_fmu(model, out_dir, binaries)
             log(f"built {paths[model]}")
     paths["ssp"] = write_ssp(out_dir / SSP_NAME, paths)

@@ -29,11 +29,15 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, ELEMENT, INITIAL_STATE, PLANT, TRAJECTORY, UNITS, VARIABLES,
                              allowed_text)
+from tapmp.models import CLOCKED, base_models, record
+from tapmp.records import CLOCK_NAME
 from tapmp.params import SERVO_STEP
 from tapmp import laws
 
 from .model_description import to_bytes
 from .ssp import qname
+
+TEMPLATES = Path(__file__).resolve().with_name("templates")  # the HTML and SVG templates (package data)
 
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref"
 LS_NS = "http://fmi-standard.org/fmi-ls-manifest"
@@ -236,26 +240,9 @@ def terminals(model: str) -> bytes:
     return to_bytes(root)
 
 
-ICON_SVG = """<?xml version="1.0" encoding="UTF-8"?>
-<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 200 200" width="200" height="200">
-  <rect x="4" y="4" width="192" height="192" rx="12" fill="#f4f6fa" stroke="#24476b" stroke-width="6"/>
-  <rect x="30" y="150" width="140" height="10" fill="#24476b"/>
-  <rect x="38" y="130" width="28" height="20" fill="#5b8dc9"/>
-  <rect x="86" y="130" width="28" height="20" fill="#5b8dc9"/>
-  <rect x="134" y="130" width="28" height="20" fill="#5b8dc9"/>
-  <line x1="52" y1="130" x2="70" y2="70" stroke="#24476b" stroke-width="5"/>
-  <line x1="100" y1="130" x2="100" y2="70" stroke="#24476b" stroke-width="5"/>
-  <line x1="148" y1="130" x2="130" y2="70" stroke="#24476b" stroke-width="5"/>
-  <rect x="55" y="55" width="90" height="16" rx="3" fill="#e07b39" transform="rotate(-6 100 63)"/>
-  <text x="100" y="36" font-family="sans-serif" font-size="26" text-anchor="middle" fill="#24476b">{label}</text>
-</svg>
-"""
-ICON_LABEL = {PLANT: "plant", CONTROLLER: "SC-DC", TRAJECTORY: "ref"}
-
-
 def icon_svg(model: str) -> bytes:
     """The FMU's icon as SVG: the platform (three movers, links, the tilted platform) and a label."""
-    return ICON_SVG.format(label=ICON_LABEL[model]).encode()
+    return template("icon.svg").format(label=record(model).icon_label).encode()
 
 
 def icon_png(model: str) -> bytes:
@@ -278,7 +265,7 @@ def icon_png(model: str) -> bytes:
         ax.add_patch(Rectangle((x, 130), 28, 20, fc="#5b8dc9"))
         ax.plot([x + 14, top], [130, 70], color="#24476b", lw=3)
     ax.add_patch(Rectangle((55, 55), 90, 16, fc="#e07b39", angle=-6, rotation_point="center"))
-    ax.text(100, 36, ICON_LABEL[model], ha="center", va="center", fontsize=16, color="#24476b")
+    ax.text(100, 36, record(model).icon_label, ha="center", va="center", fontsize=16, color="#24476b")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", metadata={"Software": None})
     plt.close(fig)
@@ -287,101 +274,40 @@ def icon_png(model: str) -> bytes:
 
 # --- documentation/ ----------------------------------------------------------------------
 
-DIAGRAM_SVG = """<?xml version="1.0" encoding="UTF-8"?>
-<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 720 250" width="720" height="250" font-family="sans-serif"
-     font-size="14">
-  <title>TAPMP closed loop: trajectory, controller, plant</title>
-  <defs><marker id="a" markerWidth="10" markerHeight="8" refX="9" refY="4" orient="auto">
-    <path d="M0,0 L10,4 L0,8 z" fill="#24476b"/></marker></defs>
-  <g stroke="#24476b" stroke-width="2">
-    <rect x="20" y="70" width="170" height="90" rx="8" fill="{fill_traj}"/>
-    <rect x="275" y="70" width="170" height="90" rx="8" fill="{fill_ctrl}"/>
-    <rect x="530" y="70" width="170" height="90" rx="8" fill="{fill_plant}"/>
-    <line x1="190" y1="115" x2="273" y2="115" marker-end="url(#a)"/>
-    <line x1="445" y1="105" x2="528" y2="105" marker-end="url(#a)"/>
-    <polyline points="615,160 615,215 360,215 360,162" fill="none" marker-end="url(#a)"/>
-  </g>
-  <g text-anchor="middle" fill="#102030">
-    <text x="105" y="110">TAPMP_Trajectory</text><text x="105" y="132" font-size="12">X_d Z_d B_d (Eq. 1)</text>
-    <text x="360" y="110">TAPMP_Controller</text><text x="360" y="132" font-size="12">SC-DC (Eq. 15-26)</text>
-    <text x="615" y="110">TAPMP_Plant</text><text x="615" y="132" font-size="12">dynamics (Eq. 5-14), RK4</text>
-    <text x="232" y="100" font-size="12">pose_d, q_d</text>
-    <text x="487" y="92" font-size="12">F1 F2 F3 [N]</text>
-    <text x="487" y="235" font-size="12">q1..q3 [m], dq1..dq3 [m/s]</text>
-  </g>
-  <text x="360" y="40" text-anchor="middle" font-size="16" fill="#102030">This FMU is the highlighted block</text>
-</svg>
-"""
+
+
+def template(name: str) -> str:
+    """The text of the template ``name`` (orchestrator/builder/templates/, package data)."""
+    return (TEMPLATES / name).read_text()
+
+
+BOX_PITCH = 255  # px from one model's box to the next in the diagram (box 170 px wide, arrow 85 px)
 
 
 def diagram_svg(model: str) -> bytes:
-    """documentation/diagram.svg: the closed loop of the three FMUs with ``model`` highlighted."""
-    fill = {m: ("#ffe2c8" if m == model else "#eef2f8") for m in (TRAJECTORY, CONTROLLER, PLANT)}
-    return DIAGRAM_SVG.format(fill_traj=fill[TRAJECTORY], fill_ctrl=fill[CONTROLLER], fill_plant=fill[PLANT]).encode()
+    """documentation/diagram.svg: one box per model of the registry (tapmp.models), left to right in
+    signal-flow order, ``model`` highlighted, with forward arrows between neighbours; the feedback arrow
+    and the signal labels of the TAPMP loop are the template's own."""
+    models = base_models()
+    boxes, arrows, labels = [], [], []
+    for i, r in enumerate(models):
+        x = 20 + BOX_PITCH * i
+        fill = "#ffe2c8" if r.name == model else "#eef2f8"
+        boxes.append(f'    <rect x="{x}" y="70" width="170" height="90" rx="8" fill="{fill}"/>')
+        if i:  # alternate heights so that the labels above two arrows keep apart
+            y = (115, 105)[(i - 1) % 2]
+            arrows.append(f'    <line x1="{x - 85}" y1="{y}" x2="{x - 2}" y2="{y}" marker-end="url(#a)"/>')
+        labels.append(f'    <text x="{x + 85}" y="110">{r.name}</text><text x="{x + 85}" y="132" '
+                      f'font-size="12">{r.diagram_note}</text>')
+    width = BOX_PITCH * len(models) - 45
+    return template("diagram.svg").format(
+        width=width, middle=width // 2, title=", ".join(r.element for r in models),
+        boxes="\n".join(boxes + arrows), names="\n".join(labels)).encode()
 
 
 def _n(model: str, name: str) -> str:
     """The start value of ``model``'s parameter ``name`` as the page writes it."""
     return f"{next(v.start for v in VARIABLES[model] if v.name == name):g}"
-
-
-def _what(model: str) -> str:
-    n = lambda name: _n(PLANT, name)  # noqa: E731
-    return {
-        PLANT: ("The plant of the three-axis parallel motion platform (TAPMP) of Zhou, Gao and Zhang, "
-                f"<i>Actuators</i> 2024, 13, 166: a platform (m_p = {n('m_p')} kg, I_y = {n('I_y')} kg m2, "
-                f"width L_1 = {n('L_1')} m) on three linear motors whose movers (m_1 = {n('m_1')} kg, "
-                f"m_2 = {n('m_2')} kg, m_3 = {n('m_3')} kg) slide on one axis; the platform moves in X and Z and "
-                "rotates about Y by B. The motor forces F1..F3 [N] drive it; it outputs the encoder positions, "
-                "the true positions and velocities of the motors, and the pose. Inside, fixed-step RK4 "
-                "integrates the dynamics over each communication step with the force of that step."),
-        CONTROLLER: ("The SC-DC synchronization controller with dynamics compensation of the TAPMP (Zhou, Gao, "
-                     "Zhang, <i>Actuators</i> 2024, 13, 166), with the APD-DC and modal PID-DC baselines: it "
-                     f"samples the reference pose and the measured motor positions every T_s = "
-                     f"{float(_n(CONTROLLER, 'T_s')) * 1e3:g} ms and holds the force commands F1..F3 [N] between "
-                     "samples."),
-        TRAJECTORY: ("The reference of the TAPMP paper's simulation (Section 5.2): a circle in the XZ plane and a "
-                     "sinusoid in B; outputs the desired pose with its first two derivatives and the desired motor "
-                     "positions q_d (Eq. 2)."),
-    }[model]
-
-
-def _equations(model: str) -> list[tuple[str, str]]:
-    p, c, t = (lambda name, m=m: _n(m, name) for m in (PLANT, CONTROLLER, TRAJECTORY))
-    kinematics = ("Inverse kinematics (Eq. 2)", "q1 = X + sqrt(3) Z + L_1 (1 - cos B + sqrt(3) sin B), q2 = X, "
-                  "q3 = X - sqrt(3) Z - L_1 (1 - cos B - sqrt(3) sin B), L_1 = " + p("L_1") + " m")
-    return {
-        PLANT: [
-            kinematics,
-            ("Dynamics (Eq. 5-14)", "M(x) ddx + C(x, dx) dx + G(x) = J(x)^T (F - F_f - F_pull + F_dist), "
-                                    "x = (X, Z, B), dq = J(x) dx (Eq. 3), g = " + p("g") + " m/s2"),
-            ("Friction", f"F_f,i = c_v,i dq_i + F_c,i tanh(dq_i / v_s), c_v = {p('c_v1')} N s/m, "
-                         f"F_c = {p('F_c1')} N, v_s = {p('v_s')} m/s"),
-            ("Saturation", f"|F_i| <= force_limit = {p('force_limit')} N"),
-            ("Mutual pulling", f"k_pull = {p('k_pull')} N/m on the change of the gaps q2 - q1 and q3 - q2"),
-            ("Encoder", f"q_i (measured) = r round(q_i / r), r = encoder_resolution = {p('encoder_resolution')} m"),
-            ("Integration", "RK4, `substeps` = " + p("substeps") + " step(s) per communication step"),
-        ],
-        CONTROLLER: [
-            ("Errors (Eq. 15, 18, 21)", "e_i = q_d,i - q_i; e_s,i = e_i - e_(i+1); c = (e_s1 - e_s3, e_s2 - e_s1, "
-                                        "e_s3 - e_s2)"),
-            ("Coupled errors (Eq. 22-24)", "e_c = e + b int(c) dt, de_c = de + b c, n = de_c + D e_c, "
-                                           f"b = {c('b1')} 1/s, D = {c('D1')} 1/s"),
-            ("SC-DC command (Eq. 25)", f"u = K_T u_d + Lambda_v n + Lambda_p c, Lambda_p = {c('Lambda_p1')} 1/m, "
-                                       f"Lambda_v = {c('Lambda_v1')} s/m, K_T = {c('K_T1')} 1/N; F = u / K_T"),
-            ("Dynamics compensation (Eq. 26)", "u_d = J^-T(x) (M(x) ddx_d + C(x, dx) dx_d + G(x)), x = FK(q) (Eq. 1)"),
-            *laws.equation_rows(),
-            ("Sampling", f"at t0 + k T_s, T_s = {c('T_s')} s; velocity by backward difference of q"),
-        ],
-        TRAJECTORY: [
-            ("Circle", f"X_d = X_c + R sin(2 pi f_xz t + phase_xz), Z_d = Z_c + R cos(2 pi f_xz t + phase_xz), "
-                       f"X_c = {t('X_c')} m, Z_c = {t('Z_c')} m, R = {t('radius')} m, f_xz = {t('f_xz')} Hz"),
-            ("Rotation", f"B_d = B_offset + A sin(2 pi f_B t + phase_B), A = {t('B_amplitude')} rad (5 deg), "
-                         f"f_B = {t('f_B')} Hz"),
-            kinematics,
-            ("Other profiles", "profile = 1 step, 2 ramp, 3 jerk-limited S-curve from pose A to pose B"),
-        ],
-    }[model]
 
 
 _PLATFORMS = {"fmi2": "linux64, aarch64-linux, win64, win32, darwin64 (universal x86_64 + arm64)",
@@ -407,79 +333,21 @@ def documentation_html(model: str, family: str, platforms=None) -> bytes:
         start = "" if v.causality == "output" else e(value_text("Integer" if v.type == "Integer" else "Real", v.start))
         rows.append(f"<tr><td><code>{e(v.name)}</code></td><td>{e(v.causality)}</td><td>{e(v.unit)}</td>"
                     f"<td>{start}</td><td>{_range(v)}</td><td>{e(v.description)}</td></tr>")
-    eqs = "".join(f"<tr><th>{e(name)}</th><td><code>{e(text)}</code></td></tr>" for name, text in _equations(model))
+    eqs = "".join(f"<tr><th>{e(name)}</th><td><code>{e(text)}</code></td></tr>" for name, text in record(model).text("equations"))
     stim = ("" if not inputs(model) else
             f" <code>fmusim ... --input-file {LS_REF}/{SCENARIO}_in.csv</code> feeds the stimulus.")
     fmpy_input = "" if not inputs(model) else (
         f"\n    input=read_csv('{SCENARIO}_in.csv'),")
-    me = model == PLANT and family == "fmi2"  # the plant offers Model Exchange in FMI 2.0 (build_native.ME_STATES)
+    me = bool(record(model).me_states) and family == "fmi2"  # Model Exchange in FMI 2.0 (ModelRecord.me_states)
     interfaces = "Co-Simulation and Model Exchange" if me else "Co-Simulation"
-    me_section = "" if not me else f"""<h2>Model Exchange</h2>
-<p>The same model identifier offers FMI 2.0 Model Exchange: the host integrates the continuous states
-<code>X, Z, B, dX, dZ, dB</code> (the outputs of those names) from their derivatives <code>der(X)</code> ...
-<code>der(dB)</code>, computed by the same C model as the Co-Simulation step. There are no event indicators:
-the right-hand side is smooth in the state (the Coulomb friction is tanh-smoothed; the force saturation acts
-on the inputs F1..F3, which the host sets). The one discontinuity, the external force step at
-<code>disturbance_time</code>, is a time event. The encoder positions <code>q1..q3</code> are a
-piecewise-constant function of the state (quantized to <code>encoder_resolution</code>); they feed no
-derivative, so they need no event, and are declared continuous. The measurement noise is drawn once per
-communication step, so <code>noise_rms</code> must be 0 in Model Exchange. OMSimulator picks Model Exchange
-when an FMU offers both (<code>--mode=cs</code> selects the FMU's own RK4).</p>
-<p>What the host sets is checked. A state set by <code>fmi2SetContinuousStates</code> (or an FMU state set) must
-be finite with |X|, |Z| &lt;= 3 m (the initial pose's range [-1, 1] m widened by its 2 m stroke on each side),
-|B| &lt; pi/2 and each rate within what the plant's forces can reach across that domain: 1e3 (the initial
-rates' range) plus sqrt(2 (F/m) D) m/s, F the sum of the force bounds the settings allow, m the lightest body,
-D = 6 m (the message names the bound). Otherwise, and for a derivative or output that is not finite, the call
-is an error naming the state, its value and what is allowed. <code>fmi2SetTime</code> never goes before the
-last accepted time (the end of initialization, an event or a completed integrator step). An FMU state keeps
-Continuous-Time Mode or Event Mode.</p>
-<pre>fmusim --interface-type me --solver cvode --tolerance 1e-10 --stop-time {REFERENCE_STOP!r} --output-interval 1e-4 --output-file out.csv {model}.fmu
-simulate_fmu('{model}.fmu', fmi_type='ModelExchange', solver='CVode', relative_tolerance=1e-10, stop_time={REFERENCE_STOP!r})</pre>
-"""
-    page = f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{model} (FMI {version})</title>
-<style>body{{font-family:sans-serif;max-width:60em;margin:1em auto;padding:0 1em;color:#102030}}
-table{{border-collapse:collapse}}td,th{{border:1px solid #bcc7d6;padding:2px 6px;text-align:left;vertical-align:top}}
-code,pre{{background:#f4f6fa}}pre{{padding:6px;overflow-x:auto}}</style></head>
-<body>
-<h1>{model}</h1>
-<p>{_what(model)}</p>
-<figure><img src="diagram.svg" alt="The closed loop of the three TAPMP FMUs: trajectory, controller, plant"
- width="720" height="250"><figcaption>The closed loop this FMU belongs to; its defaults are the paper's
-simulation, so the three FMUs wired as shown with no parameter set run it (the plant starts on the
-reference, moving at 25.1 mm/s in X and 0.219 rad/s in B).</figcaption></figure>
-<h2>Equations</h2>
-<table>{eqs}</table>
-<h2>Variables</h2>
-<p>Ranges are enforced: a parameter outside its range is refused with an error status and a log message naming
-the variable, the value and what is allowed.</p>
-<table><tr><th>name</th><th>causality</th><th>unit</th><th>start</th><th>range</th><th>description</th></tr>
-{''.join(rows)}
-</table>
-<h2>This FMU</h2>
-<p>FMI {version} {interfaces}, native C (no Python at run time), model identifier <code>{model}</code>;
-binaries for {e(plats)}; the C sources in <code>sources/</code> (compile <code>sources/all.c</code>).
-DefaultExperiment: 0 to {DEFAULT_EXPERIMENT['stopTime']:g} s at the {SERVO_STEP * 1e3:g} ms servo step.</p>
-<h2>Reference experiment</h2>
-<p><code>{LS_REF}/fmi-ls-manifest.xml</code> (FMI-LS-REF) lists the paper scenario's parameter set
-<code>{SCENARIO}.ssv</code>, {'the input stimulus <code>' + SCENARIO + '_in.csv</code>, ' if inputs(model) else ''}
-the options <code>{SCENARIO}_ref.opt</code> and the expected outputs <code>{SCENARIO}_ref.csv</code>: the first
-{REFERENCE_STOP * 1e3:g} ms at 0.1 ms steps.</p>
-<h2>How to run it</h2>
-<p>FMPy (Python):</p>
-<pre>from fmpy import simulate_fmu
-from fmpy.util import read_csv
-result = simulate_fmu('{model}.fmu', stop_time={REFERENCE_STOP!r}, step_size=1e-4, output_interval=1e-4,{fmpy_input})</pre>
-<p>fmusim (Modelica Reference-FMUs):</p>
-<pre>fmusim --interface-type cs --stop-time {REFERENCE_STOP!r} --output-interval 1e-4 --output-file out.csv {model}.fmu</pre>
-<p>{stim}</p>
-<p>OMSimulator:</p>
-<pre>OMSimulator --mode=cs --stopTime={REFERENCE_STOP!r} --stepSize=1e-4 --resultFile=out.csv {model}.fmu</pre>
-<p>Wire it with the other two TAPMP FMUs as in the diagram (the SSP TAPMP.ssp does this) to run the closed loop.</p>
-{me_section}<h2>License</h2>
-<p>MIT, see <a href="licenses/license.txt">licenses/license.txt</a>.</p>
-</body></html>
-"""
+    me_section = "" if not me else template("model_exchange.html").format(stop=repr(REFERENCE_STOP), model=model)
+    page = template("documentation.html").format(
+        model=model, version=version, what=record(model).text("what"), eqs=eqs, rows="".join(rows),
+        interfaces=interfaces, platforms=e(plats), stop_time=f"{DEFAULT_EXPERIMENT['stopTime']:g}",
+        step_ms=f"{SERVO_STEP * 1e3:g}", LS_REF=LS_REF, SCENARIO=SCENARIO,
+        stimulus_file=f"the input stimulus <code>{SCENARIO}_in.csv</code>, " if inputs(model) else "",
+        reference_ms=f"{REFERENCE_STOP * 1e3:g}", reference_stop=repr(REFERENCE_STOP), fmpy_input=fmpy_input,
+        stim=stim, me_section=me_section)
     return page.encode()
 
 
@@ -503,6 +371,9 @@ def extra_members(model: str, family: str, host_fmu: Path, platforms=None,
     result of :func:`closed_loop_stimulus` (computed if None)."""
     stimulus = stimulus if stimulus is not None else closed_loop_stimulus()
     rows = stimulus.get(model)
+    if rows is None and inputs(model):  # a model outside the TAPMP loop's stimulus: its inputs held at their starts
+        start = {v.name: v.start for v in VARIABLES[model]}
+        rows = [(k * SERVO_STEP, *(start[n] for n in inputs(model))) for k in range(REFERENCE_STEPS + 1)]
     members = {
         f"{LS_REF}/fmi-ls-manifest.xml": manifest(model),
         f"{LS_REF}/{SCENARIO}.ssv": default_parameter_set(model),
@@ -535,7 +406,7 @@ def cross_check_readme(model: str, platform: str, version: str) -> bytes:
                    "0.1 ms communication point); hold each value until the next row.\n" if inputs(model) else
                    "The FMU has no inputs.\n")
     import re
-    what = re.sub(r"<[^>]+>", "", _what(model))  # the documentation's HTML as plain text
+    what = re.sub(r"<[^>]+>", "", record(model).text("what"))  # the documentation's HTML as plain text
     return (f"{model} {version}: {what}\n\n"
             f"Exported by tapmp {version} (three-axis parallel motion platform co-simulation), FMI 2.0 "
             f"Co-Simulation, platform {platform}. The FMU carries its documentation in documentation/index.html.\n\n"
@@ -588,8 +459,7 @@ def cross_check_tree(fmus: dict[str, Path], out_dir: Path, version: str | None =
 
 # --- the clocked controller (TAPMP_ControllerClocked.fmu, FMI 3.0) ---------------------------
 
-CLOCKED = "TAPMP_ControllerClocked"  # build_native.CLOCKED (not imported: build_native imports this module)
-CLOCK = "sample_clock"               # build_native.CLOCK_NAME
+CLOCK = CLOCK_NAME  # the clocked controller's input clock (tapmp.records)
 TICKS_FILE = f"{SCENARIO}_ticks.csv"
 
 # How an importer replays the clocked controller's reference experiment on FMPy's FMI 3.0 API, from the folder
@@ -707,29 +577,7 @@ def clocked_documentation_html(platforms=None) -> bytes:
     head = head.replace(f"the options <code>{SCENARIO}_ref.opt</code>",
                         f"the tick schedule <code>{TICKS_FILE}</code>, the options <code>{SCENARIO}_ref.opt</code>")
     e = html.escape
-    clock = f"""<h2>The input clock</h2>
-<p><code>{CLOCK}</code> is a periodic input clock (interval <code>T_s</code> = {_n(CONTROLLER, 'T_s')} s, first tick
-at the start time, <code>intervalVariability="fixed"</code>). Every output is clocked by it: the controller samples
-its inputs at a tick, computes the command and holds it until the next tick. Instantiate it with
-<code>eventModeUsed = true</code> (without it the FMU refuses to instantiate); at every tick t0 + k T_s the host
-enters Event Mode, sets the inputs, activates the clock (<code>fmi3SetClock</code>),
-calls <code>fmi3UpdateDiscreteStates</code>, reads the outputs and enters Step Mode. After
-<code>fmi3ExitInitializationMode</code> the FMU is in Event Mode at the start time: the first tick happens there.
-A host that never activates the clock gets the command of initialization throughout and one warning.</p>
-<h2>How to run it</h2>
-<p>FMPy's FMI 3.0 API (<code>fmpy.fmi3.FMU3Slave</code>): this replays the reference experiment with its tick
-schedule and prints whether the result equals the expected outputs (run it in the folder of the FMU):</p>
-<pre>{e(REPLAY_PY)}</pre>
-<p>The closed loop (the plant and trajectory FMUs with this one, <code>TAPMP_Clocked.ssp</code>) the same way, one
-macro step per tick: the TAPMP repository's <code>examples/clocked_fmpy_host.py</code> gives
-<code>tapmp run</code> on that SSP bit for bit. The FMI Library (C) and any C host: the same calls
-(<code>fmi3EnterEventMode</code>, <code>fmi3SetClock</code>, <code>fmi3UpdateDiscreteStates</code>,
-<code>fmi3EnterStepMode</code>, <code>fmi3DoStep</code>). tapmp: <code>tapmp run ... --ssp TAPMP_Clocked.ssp
---set event_mode=true</code>.</p>
-<p>FMPy's <code>simulate_fmu</code>, fmusim and FMU Manipulation Toolbox's container do not activate input
-clocks: they run it with the command of initialization held. Use <code>TAPMP_Controller.fmu</code> there, the same
-controller with its samples as time events (Event Mode) or at every communication point.</p>
-"""
+    clock = template("clocked_clock.html").format(CLOCK=CLOCK, T_s=_n(CONTROLLER, "T_s"), replay=e(REPLAY_PY))
     return (head + clock + tail).encode()
 
 

@@ -6,10 +6,11 @@ is TAPMP_Plant, TAPMP_Controller, TAPMP_Trajectory, whatever the SSP calls it; t
 role name, so the TAPMP system records the same columns under any element names.
 """
 
-from tapmp.interface import ELEMENT
+from tapmp.models import base_models
 
-# Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address.
-ROLES = {role: model for model, role in ELEMENT.items()}
+# Role names (the scenario's tables, the recorded columns) -> the modelName of the FMU they address:
+# each model record's element (tapmp.models), as registered when the tool is imported.
+ROLES = {r.element: r.name for r in base_models()}
 # A scenario's own tables besides the roles: a misspelled one reaches the master as an element
 # table, so these are among the names offered when a table addresses no element.
 SCENARIO_TABLES = ("gain_overrides", "limits", "mismatch")

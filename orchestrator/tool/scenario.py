@@ -41,7 +41,7 @@ from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
 from tapmp import cmodel
 # ORDERINGS: the model's (tapmp.closed_loop's), which the master's own (engine.schedule) equals (a test)
-from tapmp.interface import CONTROLLER, ELEMENT, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
+from tapmp.interface import CONTROLLER, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
 from tapmp.laws import C_IDS
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
@@ -51,6 +51,7 @@ from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..builder.families import FAMILIES
 from ..engine.schedule import CONNECTION_STARTS
 from .folders import RESULT_FORMATS
+from .roles import ROLES
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
 
 if sys.version_info >= (3, 11):
@@ -470,7 +471,7 @@ def _check_settings(s: Scenario) -> None:
     the C model's range check that every FMU family runs at initialization: one rule per setting,
     named by the scenario's table. A gains_file's gains are checked once read (read_gains_file)."""
     params = s._parameters(gains=not (s.gains_file and not s.gain_file_values))
-    for model, element in ELEMENT.items():
+    for element, model in ROLES.items():
         try:
             cmodel.check_settings(model, params[element])
         except ModelInputError as err:

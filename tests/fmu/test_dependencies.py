@@ -17,7 +17,8 @@ from fmpy import read_model_description
 
 from tests.support.fmu_host import Host
 from tests.support.fmil_gaps import fmil_messages, terminal_messages
-from orchestrator.builder.build_native import ME_STATES, state_derivative_dependencies
+from orchestrator.builder.build_native import state_derivative_dependencies
+from tapmp.models import record
 from orchestrator.builder.container import CONTAINER, container_dependencies
 from tapmp.interface import CONTROLLER, FMU_NAMES, PLANT, TIME, TRAJECTORY, VARIABLES, dependencies
 from tapmp.kinematics import inverse
@@ -60,7 +61,7 @@ def test_model_description_declares_the_interface(fmus, family, model):
     expected = _expected(model, fmi3)
     # the native plant's Model Exchange state derivatives (FMI 2.0 and 3.0): <Derivatives> or
     # <ContinuousStateDerivative>, and <InitialUnknowns>
-    derivatives = state_derivative_dependencies(model) if family != "python" and model in ME_STATES else {}
+    derivatives = state_derivative_dependencies(model) if family != "python" and record(model).me_states else {}
     expected[1].update({name: initial for name, (_, initial) in derivatives.items()})
     assert _declared(md, fmi3) == expected
     # the knowns in the FMU's own variable order (FMI 3.0 declares the forces F1..F3 before the states)
@@ -154,7 +155,7 @@ def test_fmil_reads_the_declared_dependencies(fmus, built, tmp_path):
             got = {k: {o: tuple(sorted(v)) for o, v in read[str(path)][k].items()} for k in "OI"}
         else:
             step, initial = _expected(model, family == "fmi3")
-            if family in ("fmi2", "fmi3") and model in ME_STATES:  # the Model Exchange state derivatives
+            if family in ("fmi2", "fmi3") and record(model).me_states:  # the Model Exchange state derivatives
                 initial = {**initial, **{n: i for n, (_, i) in state_derivative_dependencies(model).items()}}
             got = read[str(path)]
         for kind, expected in (("O", step), ("I", initial)):

@@ -1,7 +1,7 @@
 """Fault injection, in one place: the real pythonfmu plant with some of its methods overridden,
 built into a real FMU, and an SSP of it with the real controller and trajectory.
 
-The plant's adapter (``orchestrator.builder.build.SCRIPTS[PLANT]``) is copied with its class
+The plant's adapter (``orchestrator.builder.build.adapter_script(PLANT)``) is copied with its class
 renamed ``_RealPlant``, and a class ``TAPMP_Plant(_RealPlant)`` holding the given methods is
 appended, so the faulty FMU has the real plant's interface, numbers and model description and
 misbehaves only where a test says.
@@ -41,10 +41,10 @@ def faulty_plant_script(folder: Path, methods: str, doc: str = "The real plant, 
     """Write ``folder/TAPMP_Plant.py``: the real plant's adapter as ``_RealPlant`` and a
     ``TAPMP_Plant(_RealPlant)`` with ``methods`` (source indented by four spaces) and the
     docstring ``doc``; returns its path."""
-    from orchestrator.builder.build import SCRIPTS
+    from orchestrator.builder.build import adapter_script
     from tapmp.interface import PLANT
 
-    real = SCRIPTS[PLANT].read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
+    real = adapter_script(PLANT).read_text().replace("class TAPMP_Plant(", "class _RealPlant(")
     real = real.replace("TAPMP_Plant.block(", "_RealPlant.block(")
     script = Path(folder) / "TAPMP_Plant.py"
     script.parent.mkdir(parents=True, exist_ok=True)
