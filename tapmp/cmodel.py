@@ -27,6 +27,8 @@ import re
 import tempfile
 from pathlib import Path
 
+from .errors import UserError
+
 C_DIR = Path(__file__).resolve().with_name("c")
 SOURCE = C_DIR / "tapmp_model.c"
 HEADER = C_DIR / "tapmp_model.h"
@@ -38,7 +40,7 @@ FILTER_SOURCE = C_DIR / "tapmp_filter.c"
 FILTER_HEADER = C_DIR / "tapmp_filter.h"
 
 
-class CModelError(RuntimeError):
+class CModelError(RuntimeError, UserError):
     """The C model cannot be built or loaded; the message says why in one line."""
 
 

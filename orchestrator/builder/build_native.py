@@ -39,6 +39,7 @@ from tapmp.cmodel import SETTINGS_HEADER, settings_header
 
 import ctoolchain as toolchain
 from .families import default_build_dir
+from ..errors import UserError
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 from ctoolchain import PLATFORMS, ToolchainError
 
@@ -76,7 +77,7 @@ DESCRIPTIONS = {
 }
 
 
-class NativeBuildError(RuntimeError):
+class NativeBuildError(RuntimeError, UserError):
     """Building a native FMU failed; the message says which step and why."""
 
 
