@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from orchestrator import cli
+from orchestrator.cli import options
 from orchestrator.builder.families import data_dir
 from orchestrator.tool.scenario import RESULT_FORMATS
 
@@ -78,7 +78,7 @@ def test_an_argparse_error_is_one_line_naming_the_help_exit_2(tmp_path, argv, ex
 
 
 def test_the_format_option_offers_the_scenario_formats():
-    assert cli.RESULT_FORMATS == RESULT_FORMATS
+    assert options.RESULT_FORMATS == RESULT_FORMATS
 
 
 @pytest.mark.parametrize("kind, argv, close", [
