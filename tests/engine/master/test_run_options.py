@@ -30,7 +30,7 @@ def test_the_master_takes_the_options_record_and_nothing_in_its_place(tmp_path):
     (RunOptions(ordering="jacobi", order=("plant",)), "order = ('plant',) is invalid with ordering = 'jacobi'"),
     (RunOptions(connection_start="late"), "connection_start = 'late' is invalid: allowed are propagated, zero"),
     (RunOptions(open_inputs="plant.F1"), "open_inputs = 'plant.F1' is invalid: allowed is a list of"),
-])
+], ids=["ordering", "step_size", "order", "connection_start", "open_inputs"])
 def test_bad_options_are_refused_when_the_co_simulation_is_made(tmp_path, options, message):
     with pytest.raises(CoSimulationError, match=message.replace("(", r"\(").replace(")", r"\)")):
         CoSimulation(tmp_path / "x.ssp", {}, options)
