@@ -39,7 +39,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     """Print the wall time of each stage of one `tapmp compare` run in this process."""
     start = time.perf_counter()
     sys.path.insert(0, str(ROOT))
-    from orchestrator import cli
+    from orchestrator.builder.families import resolve_ssp
     from orchestrator.tool import compare, plots, pool
     from orchestrator.tool.scenario import load
     times = {"imports": time.perf_counter() - start}
@@ -69,7 +69,7 @@ def stages(scenario: str, jobs: int, stop_time: float | None, ssp: str | None) -
     for method in ("__init__", "draw_next", "draw_rest"):  # the figures, during the runs and after them
         timed(plots.FigureSet, method, "figures")
     sc = load(scenario, [f"stop_time={stop_time}"] if stop_time else [])
-    ssp = cli.resolve_ssp(ssp, sc.fmus)
+    ssp = resolve_ssp(ssp, sc.fmus)
     with tempfile.TemporaryDirectory(prefix="tapmp_bench_compare_") as tmp:
         t = time.perf_counter()
         compare.run_comparison(sc, ssp, Path(tmp) / "compare", True, False, "bench_compare", jobs)

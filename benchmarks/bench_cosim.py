@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from orchestrator.builder import build  # noqa: E402
-from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.engine.master import CoSimulation, RunOptions  # noqa: E402
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.results import run_scenario  # noqa: E402
 from orchestrator.tool.scenario import load  # noqa: E402
@@ -146,8 +146,9 @@ def build_systems(tmp: Path, log) -> dict[str, Path]:
 def time_loop(ssp: Path, scenario, stepper: str = "python") -> float:
     """Wall seconds of the master loop (steps and rows stored in blocks, no file output) with
     the Python loop or the compiled core (``stepper``)."""
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                      scenario.ordering, stepper=stepper, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                             ordering=scenario.ordering, stepper=stepper,
+                                                             roles=ROLES)) as sim:
         block = np.empty((1000, len(sim.columns)))
         left = scenario.n_steps
         start = time.perf_counter()

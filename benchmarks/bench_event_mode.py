@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
 
@@ -24,7 +24,8 @@ def timed(ssp: Path, stepper: str, steps: int, repeat: int, parameters: dict):
     """The fastest time per macro step [s] of ``repeat`` runs of ``steps`` steps, and the rows of the last."""
     best = float("inf")
     for _ in range(repeat):
-        with CoSimulation(ssp, parameters, 0.0, 1e-4, event_mode=True, stepper=stepper, roles=ROLES) as sim:
+        with CoSimulation(ssp, parameters, RunOptions(start_time=0.0, step_size=1e-4, event_mode=True, stepper=stepper,
+                                                      roles=ROLES)) as sim:
             rows = np.zeros((steps, len(sim.columns)))
             start = time.perf_counter()
             sim.advance(rows)

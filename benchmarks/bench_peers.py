@@ -29,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.engine.master import CoSimulation, RunOptions  # noqa: E402
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.envelope import envelope  # noqa: E402
 from orchestrator.tool.scenario import load  # noqa: E402
@@ -39,8 +39,9 @@ INTEGER_PARAMETERS = {"law", "velocity_source", "substeps"}
 
 def time_tapmp(ssp: Path, scenario, stepper: str) -> float:
     """Wall seconds of the tapmp master's stepping (rows stored, as tapmp run does)."""
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, scenario.ordering,
-                      check=envelope(scenario), stepper=stepper, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                             ordering=scenario.ordering, check=envelope(scenario),
+                                                             stepper=stepper, roles=ROLES)) as sim:
         block = np.empty((1000, len(sim.columns)))
         start = time.perf_counter()
         left = scenario.n_steps

@@ -35,9 +35,7 @@ import numpy as np  # noqa: E402
 from orchestrator.cli import main  # noqa: E402
 from orchestrator.builder.families import resolve_ssp  # noqa: E402
 from orchestrator.engine.master import CoSimulation  # noqa: E402
-from orchestrator.tool.roles import ROLES
-from orchestrator.tool.envelope import envelope  # noqa: E402
-from orchestrator.tool.results import BLOCK  # noqa: E402
+from orchestrator.tool.results import BLOCK, run_options  # noqa: E402
 from orchestrator.tool.scenario import load  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_simulation.toml"
@@ -46,10 +44,7 @@ SCENARIO = ROOT / "scenarios" / "paper_simulation.toml"
 def cosim_alone(scenario, ssp) -> float:
     """Wall time [s] of opening the co-simulation and stepping it to stop_time."""
     start = time.perf_counter()
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, scenario.ordering,
-                      check=envelope(scenario), clock=scenario.clock,
-                      connection_start=scenario.connection_start, open_inputs=scenario.open_inputs,
-                      roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), run_options(scenario)) as sim:  # the options of tapmp run
         block = np.empty((BLOCK, len(sim.columns)))
         left = scenario.n_steps
         while left:  # the stepping of tapmp run: blocks of rows, compiled core unless TAPMP_STEPPER=python

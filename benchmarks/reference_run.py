@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from orchestrator.builder.build import build_all  # noqa: E402
-from orchestrator.engine.master import CoSimulation  # noqa: E402
+from orchestrator.engine.master import CoSimulation, RunOptions  # noqa: E402
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load  # noqa: E402
 
@@ -30,8 +30,8 @@ def run_case(ssp: Path, law: str, ordering: str):
     scenario = load(ROOT / "scenarios" / "paper_simulation.toml",
                     [f"law={law!r}", f"ordering={ordering!r}", f"stop_time={STOP}"])
     rows = []
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                      scenario.ordering, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                             ordering=scenario.ordering, roles=ROLES)) as sim:
         index = [sim.columns.index(s) for s in ("time", *SIGNALS)]
         for k in range(scenario.n_steps + 1):
             if k:

@@ -23,6 +23,8 @@ import tempfile
 import threading
 from pathlib import Path
 
+from .errors import UserError
+
 # FMI 3.0 platform name -> Zig target. Linux against glibc 2.17 (CentOS 7, 2014) so that the
 # binaries load on every Linux of the last decade; Windows with mingw-w64's start-up code linked
 # in and the Universal C Runtime of Windows 10 and later (api-ms-win-crt-*); macOS against
@@ -200,7 +202,7 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tapmp"
 
 
-class CacheTrustError(RuntimeError):
+class CacheTrustError(RuntimeError, UserError):
     """The cache folder, a folder above it or a library in it could be changed by another user;
     the message names the path and what is wrong in one line."""
 

@@ -27,7 +27,7 @@ import re
 import tempfile
 from pathlib import Path
 
-from .errors import KinematicDomainError, ModelInputError
+from .errors import KinematicDomainError, ModelInputError, UserError
 from .models import record
 from .settings_c import settings_check_source
 
@@ -42,7 +42,7 @@ FILTER_SOURCE = C_DIR / "tapmp_filter.c"
 FILTER_HEADER = C_DIR / "tapmp_filter.h"
 
 
-class CModelError(RuntimeError):
+class CModelError(RuntimeError, UserError):
     """The C model cannot be built or loaded; the message says why in one line."""
 
 

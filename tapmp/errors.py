@@ -3,8 +3,11 @@
 import difflib
 import math
 
+# the base lives in ctoolchain, the lowest package (it imports no other), so that every layer's errors share it
+from ctoolchain.errors import UserError
 
-class ModelInputError(ValueError):
+
+class ModelInputError(ValueError, UserError):
     """A value given to the model is outside what the model allows.
 
     The message always names the variable, the value and what is allowed.

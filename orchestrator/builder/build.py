@@ -31,6 +31,7 @@ from tapmp.models import names, record
 import ctoolchain as toolchain
 from tapmp import cmodel
 from .families import default_build_dir
+from ..errors import UserError
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 
 # The package's root: the repository in a checkout, site-packages in an installed wheel
@@ -76,7 +77,7 @@ def complete_model_description(xml: bytes, model: str) -> bytes:
     return to_bytes(root)
 
 
-class BuildError(RuntimeError):
+class BuildError(RuntimeError, UserError):
     """Building an FMU failed; the message says which step and why."""
 
 

@@ -42,6 +42,7 @@ from tapmp import laws
 
 import ctoolchain as toolchain
 from .families import default_build_dir
+from ..errors import UserError
 from .model_description import fmi2_model_structure, to_bytes, unit_definitions
 from ctoolchain import PLATFORMS, ToolchainError
 
@@ -81,7 +82,7 @@ def native_models(family: str) -> tuple[str, ...]:
     return tuple(m for m in names() if family in record(m).fmi_versions)
 
 
-class NativeBuildError(RuntimeError):
+class NativeBuildError(RuntimeError, UserError):
     """Building a native FMU failed; the message says which step and why."""
 
 

@@ -1,6 +1,9 @@
 """The errors of a co-simulation: where and when it failed, and the FMUs' log up to then."""
 
-class CoSimulationError(RuntimeError):
+from ..errors import UserError
+
+
+class CoSimulationError(RuntimeError, UserError):
     """A failure of the co-simulation, with where and when it happened."""
 
     def __init__(self, message: str, element: str | None = None, time: float | None = None,

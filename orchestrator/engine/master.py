@@ -66,7 +66,8 @@ from . import stepper as stepper_core
 from .archive import ExtractBudget, ExtractLimitError
 from .clocks import Clock
 from .errors import CoSimulationError, DivergenceError
-from .model_exchange import DEFAULT_TOLERANCE as DEFAULT_ME_TOLERANCE, ModelExchangeUnit, model_exchange_units
+from .model_exchange import ModelExchangeUnit, model_exchange_units
+from .options import OutputCheck, RunOptions
 from .schedule import (CONNECTION_STARTS, ORDERINGS, Connection, ScheduleError, check_algebraic_loops, check_order,
                        gauss_seidel_order, initialization_order)
 from .loaded import LoadedFMUs, LoadedSystem
@@ -77,97 +78,72 @@ STEPPERS = stepper_core.STEPPERS  # auto: the compiled core if it can be built, 
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 
 
-class OutputCheck:
-    """The per-step check of the recorded outputs that the caller supplies (``check`` of
-    :class:`CoSimulation`; TAPMP's platform envelope: orchestrator.tool.envelope).
-
-    :attr:`bounds` is data, so that the compiled core checks it too: (column, limit) pairs,
-    |value| <= limit in the column's unit after every step. :meth:`breach` and
-    :meth:`not_finite` word the DivergenceError. This base class bounds nothing."""
-
-    bounds: tuple = ()
-
-    def breach(self, column: str, value: float, limit: float, t: float) -> str:
-        """The message of ``column`` = ``value`` outside |column| <= ``limit`` at ``t`` [s]."""
-        return f"{column} = {value:.6g} at t = {t:.6g} s is outside |{column}| <= {limit:g}"
-
-    def not_finite(self, column: str, value: float, t: float) -> str:
-        """The message of a non-finite output ``column`` = ``value`` at ``t`` [s]."""
-        return f"{column} = {value!r} at t = {t:.6g} s is not finite: the co-simulation diverged"
-
-
 class CoSimulation:
     """A running co-simulation of an SSP system; use as a context manager.
 
     ``parameters`` maps element name -> {parameter name: value}. After entering,
     :attr:`columns` names the recorded values and :meth:`row` returns them.
-    Every step checks that every output is finite and that the columns of ``check.bounds``
-    (an :class:`OutputCheck` from the caller, e.g. TAPMP's platform envelope) stay within
-    their limits; a breach raises DivergenceError naming the time, the signal and the value.
-    ``start_time`` and ``step_size`` are in s; ``clock`` and ``connection_start`` select
-    the conventions described in the module docstring. Every FMU input must be driven by
-    a connection unless ``open_inputs`` names it ("element.variable"): such an input keeps
-    its start value. ``parameters`` keys are element names or the role names of ``roles``
-    ({role: modelName}, which also name that element's columns: ssd.column_prefixes);
-    ``other_tables`` are further names offered when a parameter table addresses nothing.
-    ``order`` (Gauss-Seidel only) lists every element once in the order they step; without
-    it the order comes from the graph (``orchestrator.engine.schedule``). After entering,
-    :attr:`step_order` and :attr:`init_order` hold the element names in the orders used.
-    ``model_exchange`` names elements (or roles) whose FMU runs as Model Exchange, integrated by the
-    master between communication points with CVODE at the relative tolerance ``me_tolerance``
-    (orchestrator.engine.model_exchange).
+    ``options`` (a :class:`RunOptions`) says how it steps: start time and step [s], ordering,
+    clock, connection start, event mode, the roles, the Model Exchange elements. Every step checks
+    that every output is finite and that the columns of ``options.check.bounds`` (an
+    :class:`OutputCheck` from the caller, e.g. TAPMP's platform envelope) stay within their
+    limits; a breach raises DivergenceError naming the time, the signal and the value. Every FMU
+    input must be driven by a connection unless ``options.open_inputs`` names it
+    ("element.variable"): such an input keeps its start value. ``parameters`` keys are element
+    names or the role names of ``options.roles``. After entering, :attr:`step_order` and
+    :attr:`init_order` hold the element names in the orders used. ``loaded`` (LoadedFMUs) keeps
+    the FMUs loaded between co-simulations.
     """
 
-    def __init__(self, ssp_path, parameters: dict, start_time: float = 0.0,
-                 step_size: float = 1e-4, ordering: str = "gauss-seidel", *,
-                 check: OutputCheck | None = None, clock: str = "exact",
-                 connection_start: str = "propagated", open_inputs=(), order=None, stepper: str | None = None,
-                 event_mode: bool = False, roles: dict | None = None, other_tables=(), model_exchange=(),
-                 me_tolerance: float = DEFAULT_ME_TOLERANCE, loaded: LoadedFMUs | None = None):
-        if ordering not in ORDERINGS:
-            raise CoSimulationError(f"ordering = {ordering!r} is invalid: allowed are "
+    def __init__(self, ssp_path, parameters: dict, options: RunOptions = RunOptions(),
+                 loaded: LoadedFMUs | None = None):
+        if not isinstance(options, RunOptions):
+            raise TypeError(f"options = {options!r} is invalid: allowed is a RunOptions")
+        self.options = o = options
+        if o.ordering not in ORDERINGS:
+            raise CoSimulationError(f"ordering = {o.ordering!r} is invalid: allowed are "
                                     f"{', '.join(ORDERINGS)}")
-        if order is not None and ordering != "gauss-seidel":
-            raise CoSimulationError(f"order = {order!r} is invalid with ordering = {ordering!r}: allowed is an "
+        if o.order is not None and o.ordering != "gauss-seidel":
+            raise CoSimulationError(f"order = {o.order!r} is invalid with ordering = {o.ordering!r}: allowed is an "
                                     "order only with ordering = 'gauss-seidel' (Jacobi steps all at once)")
-        self.order = order
-        stepper = stepper or os.environ.get("TAPMP_STEPPER") or "auto"
+        self.order = o.order
+        stepper = o.stepper or os.environ.get("TAPMP_STEPPER") or "auto"
         if stepper not in STEPPERS:
             raise CoSimulationError(f"stepper = {stepper!r} is invalid (TAPMP_STEPPER or the stepper argument): "
                                     f"allowed are {', '.join(STEPPERS)}")
-        if event_mode not in (True, False):
-            raise CoSimulationError(f"event_mode = {event_mode!r} is invalid: allowed is true or false")
-        self.event_mode = bool(event_mode)
-        self.model_exchange = model_exchange  # elements or roles run as Model Exchange (model_exchange.py)
-        self.me_tolerance = me_tolerance
-        if model_exchange and stepper == "compiled":
+        if o.event_mode not in (True, False):
+            raise CoSimulationError(f"event_mode = {o.event_mode!r} is invalid: allowed is true or false")
+        self.event_mode = bool(o.event_mode)
+        self.model_exchange = o.model_exchange  # elements or roles run as Model Exchange (model_exchange.py)
+        self.me_tolerance = o.me_tolerance
+        if o.model_exchange and stepper == "compiled":
             raise CoSimulationError("stepper = 'compiled' is unavailable with a Model Exchange FMU (model_exchange): "
                                     "allowed are 'python' or 'auto' (the master's integrator runs in Python)")
         self.stepper = stepper
         self._core = None        # the CompiledStepper once opened, if used
         self.filled = 0          # rows the last advance() stored, also when it raised
         self._log_count, self._log_errors = c_int64(), c_int64()  # read by the compiled core
-        if not step_size > 0.0:
-            raise CoSimulationError(f"step_size = {step_size!r} is invalid: allowed is a number > 0")
-        if connection_start not in CONNECTION_STARTS:
-            raise CoSimulationError(f"connection_start = {connection_start!r} is invalid: allowed are "
+        if not o.step_size > 0.0:
+            raise CoSimulationError(f"step_size = {o.step_size!r} is invalid: allowed is a number > 0")
+        if o.connection_start not in CONNECTION_STARTS:
+            raise CoSimulationError(f"connection_start = {o.connection_start!r} is invalid: allowed are "
                                     f"{', '.join(CONNECTION_STARTS)}")
         try:
-            self.clock = Clock(clock, start_time, step_size)
+            self.clock = Clock(o.clock, o.start_time, o.step_size)
         except ValueError as err:
             raise CoSimulationError(str(err)) from None
-        self.connection_start = connection_start
-        if isinstance(open_inputs, str) or not all(isinstance(x, str) for x in open_inputs):
-            raise CoSimulationError(f"open_inputs = {open_inputs!r} is invalid: allowed is a list of "
+        self.connection_start = o.connection_start
+        if isinstance(o.open_inputs, str) or not all(isinstance(x, str) for x in o.open_inputs):
+            raise CoSimulationError(f"open_inputs = {o.open_inputs!r} is invalid: allowed is a list of "
                                     "\"element.variable\" strings")
-        self.open_inputs = tuple(open_inputs)
+        self.open_inputs = tuple(o.open_inputs)
         self.ssp_path = Path(ssp_path)
         self.parameters = parameters
-        self.roles = dict(roles or {})
-        self.other_tables = tuple(other_tables)
-        self.t0 = float(start_time)
-        self.h = float(step_size)
-        self.ordering = ordering
+        self.roles = dict(o.roles or {})
+        self.other_tables = tuple(o.other_tables)
+        self.t0 = float(o.start_time)
+        self.h = float(o.step_size)
+        self.ordering = o.ordering
         self.units: dict[str, Unit] = {}
         self.log: list[str] = []
         self.tmp = None
@@ -175,7 +151,7 @@ class CoSimulation:
         self._system = None      # the LoadedSystem while open
         self.k = 0
         self.guids = {}
-        self.check = check or OutputCheck()
+        self.check = o.check or OutputCheck()
 
     # --- setup ---------------------------------------------------------------------
     def _logger(self, env, instance, status, category, message):

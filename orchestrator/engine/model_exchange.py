@@ -1,6 +1,6 @@
 """A Model Exchange FMU in the co-simulation (FMI 2.0 or 3.0, loaded by fmpy): the master integrates
 its continuous state itself between communication points, so that the FMU acts as a co-simulation
-unit to the rest of the system (``CoSimulation(..., model_exchange=...)``; the TAPMP scenario key
+unit to the rest of the system (``CoSimulation(..., RunOptions(model_exchange=...))``; the TAPMP scenario key
 ``plant_interface = "me"``).
 
 The integrator is SUNDIALS' CVODE (BDF with Newton iterations on a dense Jacobian, fmpy.sundials), with

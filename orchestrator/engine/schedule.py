@@ -30,6 +30,8 @@ gives Gauss-Seidel controller, plant, trajectory and initialization trajectory, 
 
 from dataclasses import dataclass
 
+from ..errors import UserError
+
 # Orderings of one macro step (docs/master.md): one element after the other on the latest outputs,
 # or all on the outputs at t (one extra step of delay in a feedback path).
 ORDERINGS = ("gauss-seidel", "jacobi")
@@ -38,7 +40,7 @@ ORDERINGS = ("gauss-seidel", "jacobi")
 CONNECTION_STARTS = ("propagated", "zero")
 
 
-class ScheduleError(ValueError):
+class ScheduleError(ValueError, UserError):
     """The system cannot be ordered (an algebraic loop) or a given order is invalid."""
 
 

@@ -16,12 +16,13 @@ from fmpy.ssp.ssd import read_ssd
 
 from .archive import ExtractBudget, ExtractLimitError, MEMBER_RULE, inside_archive
 from .errors import CoSimulationError
+from ..errors import UserError
 
 ELEMENT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 NAME_RULE = "a name matching [A-Za-z_][A-Za-z0-9_]* (letters, digits, _), unique in the system"
 
 
-class ParameterAddressError(ValueError):
+class ParameterAddressError(ValueError, UserError):
     """A parameter table addresses no element, several, or sets a value twice; ``element`` names it."""
 
     def __init__(self, message: str, element: str):

@@ -18,12 +18,13 @@ from tapmp.params import GAIN_NAMES
 
 from ..tool.config import finite_number, is_int, is_number, known_keys, one_line, read_toml, require, rule
 from ..tool.scenario import SECTION_PARAMS, Scenario, ScenarioError, load
+from ..errors import UserError
 
 DISTRIBUTIONS = ("uniform", "loguniform", "normal")
 _SECTIONS = ("plant", "controller", "trajectory")
 
 
-class StudyError(ValueError):
+class StudyError(ValueError, UserError):
     """A study file or value is invalid, or its output folder is in the way; the message says which."""
 
 

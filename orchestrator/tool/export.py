@@ -35,6 +35,7 @@ from ..builder.fmu_extras import SSV, value_text
 from ..engine.ssd import ParameterAddressError, resolve_parameters
 from ..builder.ssp import SSC, SSD, default_experiment, qname, set_system_step
 from .folders import atomic_file
+from ..errors import UserError
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 
@@ -49,7 +50,7 @@ _SSV_TYPES = {"Real": "Real", "Float64": "Real", "Float32": "Real", "Integer": "
               "UInt8": "Integer", "Boolean": "Boolean", "String": "String"}
 
 
-class ExportError(ValueError):
+class ExportError(ValueError, UserError):
     """The scenario cannot be exported; the message names the path or variable and what is allowed."""
 
 

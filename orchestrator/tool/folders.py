@@ -42,6 +42,8 @@ from pathlib import Path
 
 from filelock import FileLock, Timeout
 
+from ..errors import UserError
+
 FORMATS = {"csv": "results.csv", "mat": "results.mat"}  # scenario key format / --format -> file
 RESULT_FORMATS = tuple(FORMATS)  # the allowed values of a scenario's format and of --format
 PART_FILE = "results.part.npy"  # a MAT run's rows while it runs (writers.MatBlocks)
@@ -50,11 +52,11 @@ COMPARISON_JSON = "comparison.json"  # marks a comparison folder (kind "comparis
 LOCK_FILE = ".tapmp.lock"  # in every output folder while a tapmp writer holds it
 
 
-class OutputExistsError(RuntimeError):
+class OutputExistsError(RuntimeError, UserError):
     """The output folder already holds results and overwriting was not asked for."""
 
 
-class OutputInUseError(RuntimeError):
+class OutputInUseError(RuntimeError, UserError):
     """Another tapmp process (or thread) is writing into the output folder."""
 
 
@@ -62,7 +64,7 @@ class LinkInTheWayError(OutputExistsError):
     """A symbolic link stands where tapmp would write a file (never written through)."""
 
 
-class ResultsWriteError(RuntimeError):
+class ResultsWriteError(RuntimeError, UserError):
     """A result file could not be written (e.g. the disk is full); the message names it."""
 
 

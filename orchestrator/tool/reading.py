@@ -10,10 +10,11 @@ import numpy as np
 import orjson
 
 from .folders import FORMATS, PART_FILE
+from ..errors import UserError
 from .writers import mat_names
 
 
-class ResultFolderError(ValueError):
+class ResultFolderError(ValueError, UserError):
     """A folder given to read or plot is missing or holds no readable results."""
 
 

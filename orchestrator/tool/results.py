@@ -24,6 +24,7 @@ import numpy as np
 
 from . import metrics
 from ..engine.master import CoSimulation
+from ..engine.options import RunOptions
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
 from .folders import (FORMATS, MANIFEST, PART_FILE, ResultsWriteError, check_output, output_lock, prepare_output,
@@ -98,6 +99,17 @@ def run_scenario_held(scenario: Scenario, ssp: Path, out: Path, progress=None, s
     return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes, loaded)
 
 
+def run_options(scenario: Scenario) -> RunOptions:
+    """How the master steps ``scenario``: its start time and step [s], ordering and order, clock,
+    connection start, event mode and open inputs, the TAPMP roles and tables, the platform envelope
+    as the output check, and the plant as Model Exchange with plant_interface = "me"."""
+    return RunOptions(start_time=scenario.start_time, step_size=scenario.step, ordering=scenario.ordering,
+                      order=scenario.order, clock=scenario.clock, connection_start=scenario.connection_start,
+                      event_mode=scenario.event_mode, open_inputs=scenario.open_inputs, check=envelope(scenario),
+                      roles=ROLES, other_tables=SCENARIO_TABLES,
+                      model_exchange=("plant",) if scenario.plant_interface == "me" else ())
+
+
 def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, keep_rows=None,
                 keep_bytes: int = 0, loaded=None) -> dict:
     """run_scenario's body, in the locked and prepared output folder ``out``."""
@@ -128,12 +140,7 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
         try:
             stop.check(scenario.start_time)
             remove_stale_folders()  # of processes killed before they could remove their own
-            with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step,
-                              scenario.ordering, check=envelope(scenario), clock=scenario.clock,
-                              connection_start=scenario.connection_start, event_mode=scenario.event_mode,
-                              open_inputs=scenario.open_inputs, order=scenario.order, roles=ROLES,
-                              other_tables=SCENARIO_TABLES, loaded=loaded,
-                              model_exchange=("plant",) if scenario.plant_interface == "me" else ()) as sim:
+            with CoSimulation(ssp, scenario.parameters(), run_options(scenario), loaded=loaded) as sim:
                 info["guids"] = sim.guids
                 info["columns"] = list(sim.columns)  # on record with the result file (opened)
                 stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes, opened)

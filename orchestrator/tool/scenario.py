@@ -50,6 +50,7 @@ from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, referenc
 from ..engine.clocks import CLOCKS, nanoseconds_problem
 from ..builder.families import FAMILIES
 from ..engine.schedule import CONNECTION_STARTS
+from ..errors import UserError
 from .folders import RESULT_FORMATS
 from .roles import ROLES
 from .config import build, check_type, is_number, known, one_of, read_toml, require, rule, three_numbers
@@ -101,7 +102,7 @@ def model_tuple(kind, table: dict):
     return kind(*(table.get(n, d) for n, d in zip(kind._fields, kind())))
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ValueError, UserError):
     """A scenario file or value is invalid; the message names the key and what is allowed."""
 
 

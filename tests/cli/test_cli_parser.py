@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from orchestrator import cli
+from orchestrator.cli import options
 from orchestrator.builder.families import data_dir
 from orchestrator.tool.scenario import RESULT_FORMATS
 
@@ -77,8 +77,11 @@ def test_an_argparse_error_is_one_line_naming_the_help_exit_2(tmp_path, argv, ex
     assert res.stderr == expected + "\n"
 
 
-def test_the_format_option_offers_the_scenario_formats():
-    assert cli.RESULT_FORMATS == RESULT_FORMATS
+def test_the_format_option_offers_the_scenario_formats(tmp_path):
+    # the option's metavar and its refusal list what a scenario's `format` accepts
+    assert "--format {" + ",".join(RESULT_FORMATS) + "}" in _tapmp("run", "--help", cwd=tmp_path).stdout
+    res = _tapmp("run", "--format", "hdf5", cwd=tmp_path)
+    assert res.returncode == 2 and "format = 'hdf5' is invalid: allowed are " + ", ".join(RESULT_FORMATS) in res.stderr
 
 
 @pytest.mark.parametrize("kind, argv, close", [

@@ -16,7 +16,7 @@ import pytest
 
 from tests.support.runs import paper_scenario
 from orchestrator.engine.loaded import LoadedFMUs
-from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError, RunOptions
 from orchestrator.tool.envelope import envelope
 from orchestrator.tool.roles import ROLES, SCENARIO_TABLES
 
@@ -29,8 +29,9 @@ def family_ssp(family, built, native_built):
 
 def run(ssp, parameters, scenario, loaded=None, steps=500):
     """(columns, rows of ``steps`` steps after row 0, GUIDs) of one co-simulation."""
-    with CoSimulation(ssp, parameters, scenario.start_time, scenario.step, scenario.ordering,
-                      check=envelope(scenario), roles=ROLES, other_tables=SCENARIO_TABLES, loaded=loaded) as sim:
+    with CoSimulation(ssp, parameters, RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                  ordering=scenario.ordering, check=envelope(scenario), roles=ROLES,
+                                                  other_tables=SCENARIO_TABLES), loaded=loaded) as sim:
         rows = np.empty((steps + 1, len(sim.columns)))
         rows[0] = sim.row()
         sim.advance(rows[1:])
@@ -125,13 +126,15 @@ def test_another_ssp_written_to_the_same_path_gets_its_own_fmus(native_built, tm
 def test_closing_frees_the_instances_and_removes_the_extracted_files(native_built):
     ssp, sc = native_built["fmi2"]["ssp"], paper_scenario(0.01)
     loaded = LoadedFMUs()
-    with CoSimulation(ssp, sc.parameters(), roles=ROLES, other_tables=SCENARIO_TABLES, loaded=loaded) as sim:
+    with CoSimulation(ssp, sc.parameters(), RunOptions(roles=ROLES, other_tables=SCENARIO_TABLES),
+                      loaded=loaded) as sim:
         folder, units = sim.tmp, list(sim.units.values())
     assert folder.is_dir() and all(u.instantiated for u in units)  # kept, reset, for the next case
     loaded.close()
     assert not folder.exists() and not any(u.instantiated for u in units)
     # a system given back after the close is closed at once
-    with CoSimulation(ssp, sc.parameters(), roles=ROLES, other_tables=SCENARIO_TABLES, loaded=loaded) as sim:
+    with CoSimulation(ssp, sc.parameters(), RunOptions(roles=ROLES, other_tables=SCENARIO_TABLES),
+                      loaded=loaded) as sim:
         folder = sim.tmp
     assert not folder.exists()
 
@@ -179,7 +182,7 @@ RUN_CASES = '''
 import hashlib, json, sys
 import numpy as np
 from orchestrator.engine.loaded import LoadedFMUs
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 
 def rows(loaded=None):
     with CoSimulation(sys.argv[1], {}, loaded=loaded) as sim:

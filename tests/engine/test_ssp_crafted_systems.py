@@ -176,7 +176,7 @@ WARNING_STEP = """
 
 
 def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
-    from orchestrator.engine.master import CoSimulation
+    from orchestrator.engine.master import CoSimulation, RunOptions
     from orchestrator.tool.roles import ROLES
     from orchestrator.tool.scenario import load
 
@@ -184,7 +184,8 @@ def test_a_warning_logged_during_a_step_does_not_stop_the_run(built, tmp_path):
                                                       "step from t = 0.5 ms.")
     ssp = faulty_ssp(tmp_path / "warn.ssp", plant, built)
     sc = load(PAPER, ["stop_time=0.002"])
-    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, roles=ROLES) as sim:
+    with CoSimulation(ssp, sc.parameters(), RunOptions(start_time=0.0, step_size=sc.step,
+                                                       roles=ROLES)) as sim:
         for _ in range(sc.n_steps):
             sim.step()
         assert sim.time == pytest.approx(0.002)

@@ -13,7 +13,7 @@ import pytest
 
 from orchestrator.engine import stepper
 from tapmp import cmodel
-from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.envelope import envelope
 from orchestrator.tool.reading import read_results
@@ -24,8 +24,9 @@ from tests.support.runs import PAPER, paper_scenario
 
 def rows_of(ssp, scenario, stepper_kind, ordering, clock="exact", blocks=(7, 300, 193)):
     """Row 0 and the rows of ``sum(blocks)`` steps, stepped in blocks of those sizes."""
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      check=envelope(scenario), clock=clock, stepper=stepper_kind, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                             ordering=ordering, check=envelope(scenario), clock=clock,
+                                                             stepper=stepper_kind, roles=ROLES)) as sim:
         assert (sim._core is not None) == (stepper_kind == "compiled")
         out = [np.array([sim.row()])]
         for n in blocks:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from tapmp.interface import CONNECTIONS, CONTROLLER, ELEMENT, PLANT, TRAJECTORY
 from tests.support.c_hosts import compile_c_host, unzip_fmu
 from tests.support.native_fmi3_runs import fmi3  # noqa: F401 (a fixture)
@@ -46,7 +46,8 @@ def test_c_host_ticking_the_clock_gives_the_masters_event_mode_forces_bit_for_bi
     assert done.stderr == ""  # no warning, nothing logged
     rows = np.array([[float(x) for x in line.split()] for line in done.stdout.splitlines()])
     assert rows.shape == (STEPS + 1, 1 + len(PRINTED))
-    with CoSimulation(fmi3["ssp"], {}, 0.0, 1e-4, "gauss-seidel", event_mode=True) as sim:
+    with CoSimulation(fmi3["ssp"], {}, RunOptions(start_time=0.0, step_size=1e-4, ordering="gauss-seidel",
+                                                  event_mode=True)) as sim:
         expected = [sim.row()]
         for _ in range(STEPS):
             sim.step()

@@ -88,7 +88,7 @@ def test_the_paper_scenario_only_restates_every_fmus_defaults():
 def test_native_fmus_wired_with_their_defaults_run_the_paper_scenario_bit_for_bit(family, native_built):
     """The master on the native SSP with no parameter set gives the same doubles as the paper
     scenario with its parameters, in both orderings."""
-    from orchestrator.engine.master import CoSimulation
+    from orchestrator.engine.master import CoSimulation, RunOptions
     from orchestrator.tool.roles import ROLES
 
     scenario = paper_scenario(0.05)
@@ -96,7 +96,8 @@ def test_native_fmus_wired_with_their_defaults_run_the_paper_scenario_bit_for_bi
     for ordering in ("gauss-seidel", "jacobi"):
         ours = orchestrator_rows(native_built[family]["ssp"], scenario, names, ordering)
         rows = []
-        with CoSimulation(native_built[family]["ssp"], {}, 0.0, scenario.step, ordering, roles=ROLES) as sim:
+        with CoSimulation(native_built[family]["ssp"], {}, RunOptions(start_time=0.0, step_size=scenario.step,
+                                                                      ordering=ordering, roles=ROLES)) as sim:
             index = [sim.columns.index(n) for n in names]
             rows.append([sim.row()[i] for i in index])
             for _ in range(scenario.n_steps):

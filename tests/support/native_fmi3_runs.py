@@ -22,12 +22,13 @@ def run(ssp, step, n, ordering="gauss-seidel", **kw):
     """Rows (time [s] and every output) at t0 and after each of n macro steps of ``step`` [s], the
     column names and the controller's events handled (None without a controller element); the
     controller samples every T_s = 0.1 ms. ``kw`` are CoSimulation's options (event_mode, stepper)."""
-    from orchestrator.engine.master import CoSimulation
+    from orchestrator.engine.master import CoSimulation, RunOptions
     from orchestrator.tool.roles import ROLES
     from orchestrator.tool.scenario import load
     scenario = load(PAPER, ["stop_time=0.05"])
     rows = []
-    with CoSimulation(ssp, scenario.parameters(), 0.0, step, ordering, **kw, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=0.0, step_size=step, ordering=ordering, **kw,
+                                                             roles=ROLES)) as sim:
         rows.append(sim.row())
         for _ in range(n):
             sim.step()

@@ -18,11 +18,11 @@ def orchestrator_rows(ssp, scenario, names, ordering="jacobi", **conventions):
     communication point; ``conventions`` are CoSimulation's clock / connection_start."""
     import numpy as np
 
-    from orchestrator.engine.master import CoSimulation
+    from orchestrator.engine.master import CoSimulation, RunOptions
     from orchestrator.tool.roles import ROLES
     rows = []
-    with CoSimulation(ssp, scenario.parameters(), scenario.start_time, scenario.step, ordering,
-                      **conventions, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                             ordering=ordering, **conventions, roles=ROLES)) as sim:
         index = [sim.columns.index(n) for n in names]
         rows.append([sim.row()[i] for i in index])
         for _ in range(scenario.n_steps):

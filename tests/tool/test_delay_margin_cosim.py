@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from orchestrator.tool import analysis
 from orchestrator.tool.baselines import compare_runs
 from orchestrator.tool.roles import ROLES
@@ -48,7 +48,8 @@ def growth_per_sample(ssp, scenario, n: int, ordering: str) -> float:
     1e4 from its first 50 steps."""
     params = scenario.parameters()  # T_s = the scenario's step, whatever the communication step
     h = scenario.step / n
-    with CoSimulation(ssp, params, scenario.start_time, h, ordering, roles=ROLES) as sim:
+    with CoSimulation(ssp, params, RunOptions(start_time=scenario.start_time, step_size=h, ordering=ordering,
+                                              roles=ROLES)) as sim:
         cols = [sim.columns.index(f"plant.q{i}_true") for i in (1, 2, 3)]
         q_prev, motion = None, []
         for k in range(round(RUN / h)):

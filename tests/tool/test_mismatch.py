@@ -6,7 +6,7 @@ family, and by the feedforward the controller computes with them."""
 
 import pytest
 
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import ScenarioError, load
 from tapmp.params import PAPER_MODEL
@@ -57,7 +57,8 @@ def test_mismatch_reaches_the_controller_fmu_and_not_the_plant_fmu(built, native
     nominal = load(PAPER, ["stop_time=0.001", "plant.m_p=2.0"])
     F = {}
     for key, scen in (("mismatch", s), ("nominal", nominal)):
-        with CoSimulation(ssp, scen.parameters(), scen.start_time, scen.step, scen.ordering, roles=ROLES) as sim:
+        with CoSimulation(ssp, scen.parameters(), RunOptions(start_time=scen.start_time, step_size=scen.step,
+                                                             ordering=scen.ordering, roles=ROLES)) as sim:
             ctrl, plant = sim.units["controller"], sim.units["plant"]
             got_c = {n: _read(ctrl, n) for n in NAMES}
             got_p = {n: _read(plant, n) for n in NAMES}

@@ -184,7 +184,7 @@ def edited_ssd(ssd: str, edits) -> str:
 @SETTINGS
 @given(edits=connection_edits(18))
 def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path, edits):
-    from orchestrator.engine.master import CoSimulation, CoSimulationError
+    from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
     from orchestrator.tool.roles import ROLES
     from orchestrator.tool.scenario import load
     from tests.support.runs import PAPER
@@ -199,7 +199,8 @@ def test_any_connection_edit_is_one_clear_error_or_a_finite_run(built, tmp_path,
             zout.writestr(name, data)
     sc = load(PAPER, ["stop_time=0.002"])
     try:
-        with CoSimulation(dst, sc.parameters(), 0.0, sc.step, roles=ROLES) as sim:
+        with CoSimulation(dst, sc.parameters(), RunOptions(start_time=0.0, step_size=sc.step,
+                                                           roles=ROLES)) as sim:
             for _ in range(sc.n_steps):
                 sim.step()
                 assert all(math.isfinite(x) for x in sim.row())

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.results import run_scenario
 from orchestrator.tool.scenario import load
@@ -32,7 +32,8 @@ def test_fmu_closed_loop_equals_the_plain_python_loop(built, ordering):
     scenario = load(PAPER, [f'ordering="{ordering}"', "stop_time=0.1"])
     expected = plain_loop(scenario)
     got = []
-    with CoSimulation(built["ssp"], scenario.parameters(), 0.0, scenario.step, ordering, roles=ROLES) as sim:
+    with CoSimulation(built["ssp"], scenario.parameters(), RunOptions(start_time=0.0, step_size=scenario.step,
+                                                                      ordering=ordering, roles=ROLES)) as sim:
         names = ["time", "controller.F1", "controller.F2", "controller.F3", "plant.q1", "plant.q2", "plant.q3",
                  "plant.q1_true", "plant.q2_true", "plant.q3_true"]
         idx = [sim.columns.index(n) for n in names]
@@ -83,7 +84,7 @@ def test_failing_step_stops_keeps_results_and_leaves_nothing_behind(built, tmp_p
 
 def test_unknown_parameter_is_named_with_what_is_allowed(built):
     with pytest.raises(CoSimulationError, match=r"plant.mass is not a parameter of TAPMP_Plant: allowed are .*m_p"):
-        with CoSimulation(built["ssp"], {"plant": {"mass": 1.0}}, roles=ROLES):
+        with CoSimulation(built["ssp"], {"plant": {"mass": 1.0}}, RunOptions(roles=ROLES)):
             pass
 
 

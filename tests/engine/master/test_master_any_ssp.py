@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.engine.schedule import (Connection, ScheduleError, check_algebraic_loops, gauss_seidel_order,
                                           initialization_order)
 from orchestrator.tool.roles import ROLES
@@ -135,7 +135,8 @@ def rewrite_ssp(ssp: Path, out: Path, rename=None, add=(), rewire=None) -> Path:
 
 def record(ssp, parameters, n, ordering="gauss-seidel", order=None):
     """(columns, rows as an array, step order, initialization order) of n steps."""
-    with CoSimulation(ssp, parameters, 0.0, 1e-4, ordering, order=order, roles=ROLES) as sim:
+    with CoSimulation(ssp, parameters, RunOptions(start_time=0.0, step_size=1e-4, ordering=ordering, order=order,
+                                                  roles=ROLES)) as sim:
         rows = [sim.row()]
         for _ in range(n):
             sim.step()
@@ -284,7 +285,7 @@ def test_a_bad_order_through_the_cli_is_one_line_and_exit_2(built, tmp_path, cap
 
 
 def _orders(ssp):
-    with CoSimulation(ssp, {}, roles=ROLES) as sim:
+    with CoSimulation(ssp, {}, RunOptions(roles=ROLES)) as sim:
         return sim.step_order, sim.init_order
 
 

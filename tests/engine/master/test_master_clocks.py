@@ -5,7 +5,7 @@ controller (TAPMP_Controller with eventModeUsed, time events at the same instant
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
 from tests.support.native_fmi3_runs import T_S, fmi3, run  # noqa: F401 (fmi3 is a fixture)
@@ -36,8 +36,9 @@ def test_the_clocked_controller_with_the_compiled_core_gives_the_python_loops_ro
     rows = {}
     for stepper in ("compiled", "python"):
         scenario = load(PAPER, ["stop_time=0.05"])
-        with CoSimulation(fmi3["clocked_ssp"], scenario.parameters(), 0.0, 1e-3, event_mode=True, stepper=stepper,
-                          roles=ROLES) as sim:
+        with CoSimulation(fmi3["clocked_ssp"], scenario.parameters(), RunOptions(start_time=0.0, step_size=1e-3,
+                                                                                 event_mode=True, stepper=stepper,
+                                                                                 roles=ROLES)) as sim:
             rows[stepper] = np.zeros((20, len(sim.columns)))
             sim.advance(rows[stepper])
             assert (sim._core is not None) == (stepper == "compiled")

@@ -4,7 +4,7 @@ the macro step, and a run on its grid is today's run bit for bit."""
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
 from tests.support.native_fmi3_runs import FORCES, T_S, fmi3, run  # noqa: F401 (fmi3 is a fixture)
@@ -52,7 +52,8 @@ def advance(ssp, step, n, stepper):
     """Rows after each of n macro steps in event mode through CoSimulation.advance, and whether the
     compiled core ran."""
     scenario = load(PAPER, ["stop_time=0.05"])
-    with CoSimulation(ssp, scenario.parameters(), 0.0, step, event_mode=True, stepper=stepper, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=0.0, step_size=step, event_mode=True,
+                                                             stepper=stepper, roles=ROLES)) as sim:
         rows = np.zeros((n, len(sim.columns)))
         sim.advance(rows)
         return rows, sim._core is not None

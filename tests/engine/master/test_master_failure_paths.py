@@ -11,7 +11,7 @@ chain from) naming the element, the call and the time."""
 
 import pytest
 
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.tool.roles import ROLES
 from tests.support.runs import PAPER
 
@@ -20,7 +20,8 @@ def run(ssp, ordering, steps=20):
     """Step the paper scenario's system ``steps`` times; returns the closed CoSimulation."""
     from orchestrator.tool.scenario import load
     sc = load(PAPER)
-    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, roles=ROLES) as sim:
+    with CoSimulation(ssp, sc.parameters(), RunOptions(start_time=0.0, step_size=sc.step, ordering=ordering,
+                                                       roles=ROLES)) as sim:
         for _ in range(steps):
             sim.step()
     return sim

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.engine.model_exchange import ModelExchangeUnit
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
@@ -46,8 +46,9 @@ def closed_loop(ssp, model_exchange=(), substeps=1, **kw):
     scenario = load(PAPER, ["stop_time=0.05"])
     parameters = scenario.parameters()
     parameters.setdefault("plant", {})["substeps"] = substeps
-    with CoSimulation(ssp, parameters, scenario.start_time, scenario.step, scenario.ordering, roles=ROLES,
-                      model_exchange=model_exchange, **kw) as sim:
+    with CoSimulation(ssp, parameters, RunOptions(start_time=scenario.start_time, step_size=scenario.step,
+                                                  ordering=scenario.ordering, roles=ROLES,
+                                                  model_exchange=model_exchange, **kw)) as sim:
         rows = np.zeros((scenario.n_steps, len(sim.columns)))
         sim.advance(rows)
         return sim.columns, rows, sim.units["plant"]
@@ -110,8 +111,9 @@ def test_a_time_event_inside_a_macro_step_ends_the_integration_there(native):
     def run(model_exchange, force, time):
         scenario = load(PAPER, ["stop_time=0.02", f"plant.disturbance_force1={force}",
                                 f"plant.disturbance_time={time}"])
-        with CoSimulation(ssp, scenario.parameters(), 0.0, scenario.step, scenario.ordering, roles=ROLES,
-                          model_exchange=model_exchange) as sim:
+        with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=0.0, step_size=scenario.step,
+                                                                 ordering=scenario.ordering, roles=ROLES,
+                                                                 model_exchange=model_exchange)) as sim:
             rows = np.zeros((scenario.n_steps, len(sim.columns)))
             sim.advance(rows)
             return sim.columns, rows, sim.units["plant"]

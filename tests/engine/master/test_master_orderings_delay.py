@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from tests.support.runs import paper_scenario
 
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from orchestrator.tool.roles import ROLES
 
 FORCES = [f"controller.F{i}" for i in (1, 2, 3)]
@@ -18,7 +18,8 @@ def plant_inputs_and_commands(ssp, ordering, steps=300):
     controller's published commands at t_k and at t_{k+1} [N]."""
     sc = paper_scenario(steps * 1e-4)
     applied, before, after = [], [], []
-    with CoSimulation(ssp, sc.parameters(), sc.start_time, sc.step, ordering, roles=ROLES) as sim:
+    with CoSimulation(ssp, sc.parameters(), RunOptions(start_time=sc.start_time, step_size=sc.step, ordering=ordering,
+                                                       roles=ROLES)) as sim:
         plant = sim.units["plant"]
         vrs = [v.valueReference for v in plant.md.modelVariables if v.name in ("F1", "F2", "F3")]
         cols = [sim.columns.index(f) for f in FORCES]

@@ -4,7 +4,7 @@ message, checked the same by the Python loop and the compiled core."""
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation, DivergenceError, OutputCheck
+from orchestrator.engine.master import CoSimulation, DivergenceError, OutputCheck, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.envelope import Envelope
 from tests.support.runs import paper_scenario
@@ -22,7 +22,9 @@ class ReferenceBound(OutputCheck):
 @pytest.mark.parametrize("stepper", ["python", "compiled"])
 def test_a_caller_supplied_bound_on_any_column_stops_the_run_with_its_message(built, stepper):
     sc = paper_scenario(0.05)
-    with CoSimulation(built["ssp"], sc.parameters(), 0.0, sc.step, check=ReferenceBound(), stepper=stepper, roles=ROLES) as sim:
+    with CoSimulation(built["ssp"], sc.parameters(), RunOptions(start_time=0.0, step_size=sc.step,
+                                                                check=ReferenceBound(), stepper=stepper,
+                                                                roles=ROLES)) as sim:
         rows = np.full((sc.n_steps, len(sim.columns)), np.nan)
         with pytest.raises(DivergenceError) as info:
             sim.advance(rows)
@@ -37,7 +39,7 @@ def test_a_caller_supplied_bound_on_any_column_stops_the_run_with_its_message(bu
 
 def test_without_a_check_only_non_finite_outputs_stop_a_run(built):
     sc = paper_scenario(0.01, "limits.motor_travel=0.000001")  # the scenario's limits are not the master's
-    with CoSimulation(built["ssp"], sc.parameters(), 0.0, sc.step, roles=ROLES) as sim:
+    with CoSimulation(built["ssp"], sc.parameters(), RunOptions(start_time=0.0, step_size=sc.step, roles=ROLES)) as sim:
         rows = np.empty((sc.n_steps, len(sim.columns)))
         assert sim.advance(rows) == sc.n_steps
 

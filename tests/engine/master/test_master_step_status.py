@@ -14,7 +14,7 @@ import pytest
 
 from tests.support.runs import PAPER
 from tests.support.faults import faulty_plant_fmu, faulty_ssp
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.tool.roles import ROLES
 
 ORDERINGS = {"gauss-seidel": ["plant", "controller", "trajectory"], "jacobi": None}  # the plant steps first
@@ -29,7 +29,8 @@ def run_with_nan_force(ssp, ordering, steps_before=3):
     """Step ``steps_before`` times, then once with NaN as the controller's F1 output;
     returns (the CoSimulationError, the plant's doStep times, the step's start time)."""
     sc = scenario()
-    with CoSimulation(ssp, sc.parameters(), 0.0, sc.step, ordering, order=ORDERINGS[ordering], roles=ROLES) as sim:
+    with CoSimulation(ssp, sc.parameters(), RunOptions(start_time=0.0, step_size=sc.step, ordering=ordering,
+                                                       order=ORDERINGS[ordering], roles=ROLES)) as sim:
         plant, controller = sim.units["plant"], sim.units["controller"]
         calls = []
         do_step = plant.do_step

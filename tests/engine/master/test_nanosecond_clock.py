@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from orchestrator.engine.clocks import Clock
-from orchestrator.engine.master import CoSimulation, CoSimulationError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
 
@@ -31,10 +31,12 @@ def test_the_clock_knows_its_last_representable_step():
 def test_steps_beyond_the_int64_clock_are_refused_before_any_step(built, stepper):
     parameters = load(PAPER).parameters()
     with pytest.raises(CoSimulationError) as start:
-        CoSimulation(built["ssp"], parameters, 9.3e9, 1.0, clock="nanoseconds", stepper=stepper, roles=ROLES)
+        CoSimulation(built["ssp"], parameters, RunOptions(start_time=9.3e9, step_size=1.0, clock="nanoseconds",
+                                                          stepper=stepper, roles=ROLES))
     assert str(start.value) == ("start_time = 9300000000.0 s is invalid for clock = 'nanoseconds': allowed are times "
                                 "within +-9223372037 s (an int64 count of nanoseconds), or another clock")
-    with CoSimulation(built["ssp"], parameters, 9223372036.84, 1e-4, clock="nanoseconds", stepper=stepper, roles=ROLES) as sim:
+    with CoSimulation(built["ssp"], parameters, RunOptions(start_time=9223372036.84, step_size=1e-4,
+                                                           clock="nanoseconds", stepper=stepper, roles=ROLES)) as sim:
         last = sim.clock.last_k  # t_last <= 2^63 - 1 ns < t_(last + 1)
         assert 100 < last < 200
         rows = np.zeros((last + 1, len(sim.columns)))

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError
+from orchestrator.engine.master import CoSimulation, CoSimulationError, DivergenceError, RunOptions
 from orchestrator.engine.master import OutputCheck
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.scenario import load
@@ -41,8 +41,9 @@ def run(ssp, step, n, stepper, ordering="gauss-seidel", blocks=(7,), params=None
     with one Python-loop step() between the blocks; the error raised (or None), the rows stored before it,
     the controller's events handled and whether the compiled core ran."""
     rows = None
-    with CoSimulation(ssp, params or parameters(), 0.0, step, ordering, event_mode=True, stepper=stepper,
-                      roles=ROLES, check=check, clock=clock) as sim:
+    with CoSimulation(ssp, params or parameters(), RunOptions(start_time=0.0, step_size=step, ordering=ordering,
+                                                              event_mode=True, stepper=stepper, roles=ROLES,
+                                                              check=check, clock=clock)) as sim:
         rows = np.full((n, len(sim.columns)), np.nan)
         done, error = 0, None
         try:

@@ -15,7 +15,7 @@ import pytest
 from scipy.io import loadmat
 
 from orchestrator.cli import main
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool import metrics
 from orchestrator.tool.reading import read_results
@@ -29,7 +29,8 @@ PAPER = ROOT / "scenarios" / "paper_simulation.toml"
 
 def alone(ssp, scenario, steps):
     """Rows of the co-simulation stepped by hand, no writer: the reference values."""
-    with CoSimulation(ssp, scenario.parameters(), 0.0, scenario.step, scenario.ordering, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=0.0, step_size=scenario.step,
+                                                             ordering=scenario.ordering, roles=ROLES)) as sim:
         return sim.columns, np.array([sim.row()] + [sim.step() or sim.row() for _ in range(steps)])
 
 

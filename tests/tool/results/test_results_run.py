@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.engine.master import CoSimulation
+from orchestrator.engine.master import CoSimulation, RunOptions
 from orchestrator.tool.roles import ROLES
 from orchestrator.tool.results import run_scenario
 from orchestrator.tool.scenario import load
@@ -68,7 +68,8 @@ def test_the_same_scenario_twice_gives_a_bit_identical_results_csv(built, tmp_pa
 
 
 def run_alone(ssp, scenario, steps):
-    with CoSimulation(ssp, scenario.parameters(), 0.0, scenario.step, scenario.ordering, roles=ROLES) as sim:
+    with CoSimulation(ssp, scenario.parameters(), RunOptions(start_time=0.0, step_size=scenario.step,
+                                                             ordering=scenario.ordering, roles=ROLES)) as sim:
         return [sim.row()] + [sim.step() or sim.row() for _ in range(steps)]
 
 
@@ -77,8 +78,10 @@ def test_two_closed_loops_side_by_side_do_not_affect_each_other(built):
     apd = load(PAPER, ['law="apd-dc"', 'ordering="jacobi"'])
     alone = {"sc-dc": run_alone(built["ssp"], scdc, 300), "apd-dc": run_alone(built["ssp"], apd, 300)}
     together = {"sc-dc": [], "apd-dc": []}
-    with CoSimulation(built["ssp"], scdc.parameters(), 0.0, 1e-4, scdc.ordering, roles=ROLES) as a, \
-            CoSimulation(built["ssp"], apd.parameters(), 0.0, 1e-4, apd.ordering, roles=ROLES) as b:
+    with CoSimulation(built["ssp"], scdc.parameters(), RunOptions(start_time=0.0, step_size=1e-4,
+                                                                  ordering=scdc.ordering, roles=ROLES)) as a, \
+            CoSimulation(built["ssp"], apd.parameters(), RunOptions(start_time=0.0, step_size=1e-4,
+                                                                    ordering=apd.ordering, roles=ROLES)) as b:
         for k in range(301):
             if k:
                 a.step()
