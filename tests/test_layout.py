@@ -13,15 +13,18 @@ TESTS = ROOT / "tests"
 PKG = ROOT / "orchestrator"
 PACKAGES = ("ctoolchain", "tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator")
 # A layer may import from itself and from the layers before it, never from a later one: the engine
-# (FMUs, SSP, the master), the tool (scenarios, runs, results, reports, for any controller), the
-# paper study (its tables, reproduction, calibration), the studies on Dask.
+# (the SSP reader, the master, any FMUs), the builder (TAPMP's FMUs and SSP), the tool (scenarios,
+# runs, results, reports, for any controller), the paper study (its tables, reproduction,
+# calibration), the studies on Dask (which know no paper either: FORBIDDEN).
 LAYERS = ("engine", "builder", "tool", "paper", "studies")
 
-# {package: what it must not import}: the model knows no FMU and no master; the FMI runtime knows
-# only the model; the FMU adapters know the model and the runtime; the orchestrator's engine knows
-# no scenario, paper, study or command line; the tool knows no paper, study or command line; the
-# paper study knows no study or command line; studies no command line. Standard library and
-# third-party imports are free.
+# {package: what it must not import}: the C toolchain knows nothing of the project; the model knows
+# no FMU and no master; the FMI runtime knows only the model; the FMU adapters know the model and the
+# runtime; the orchestrator's engine knows no TAPMP (model, FMUs, builder), scenario, paper, study or
+# command line; the builder no tool, paper, study or command line; the tool knows no paper, study or
+# command line; the paper study knows no study or command line; studies no paper and no command
+# line (a tuning's published rows are handed in by the command). Standard library and third-party
+# imports are free.
 FORBIDDEN = {
     "ctoolchain": ("tapmp", "fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
     "tapmp": ("fmu_common", "fmu_plant", "fmu_controller", "orchestrator"),
@@ -32,7 +35,7 @@ FORBIDDEN = {
     "orchestrator.builder": ("orchestrator.tool", "orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
     "orchestrator.tool": ("orchestrator.paper", "orchestrator.studies", "orchestrator.cli"),
     "orchestrator.paper": ("orchestrator.studies", "orchestrator.cli"),
-    "orchestrator.studies": ("orchestrator.cli",),
+    "orchestrator.studies": ("orchestrator.paper", "orchestrator.cli"),
 }
 
 # Test folders, named like the package's parts (tool and paper as orchestrator's); "cli" holds the

@@ -79,6 +79,10 @@ def cmd_study(args) -> int:
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
                          "or tapmp build) or pass --ssp")
+    reference = None
+    if study.tune:  # the paper's rows beside a tuning of a paper scenario (None for any other)
+        from ..paper.paper_tables import reference_rows
+        reference = reference_rows(study.base_scenario().name)
     remote = None
     with output_lock(out):  # before starting a cluster; run_study takes it again (re-entrant)
         if args.scheduler:
@@ -92,7 +96,7 @@ def cmd_study(args) -> int:
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
                           not args.no_progress, command, args.write_docs, remote, max_cases, case_list,
-                          args.retry_failed)
+                          args.retry_failed, reference)
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped

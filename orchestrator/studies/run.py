@@ -19,7 +19,7 @@ from .tuning import run_tuning
 def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: bool = False,
               overwrite: bool = False, progress: bool = True, command: str = "", write_docs: bool = False,
               remote: dict | None = None, max_cases: int = MAX_CASES, case_list: list | None = None,
-              retry_failed: bool = False) -> dict:
+              retry_failed: bool = False, reference: dict | None = None) -> dict:
     """Run a study on a Dask client; returns a summary (counts by status, paths, wall time,
     bytes of case files received). The output folder is locked for the whole study
     (results.OutputInUseError if in use).
@@ -29,7 +29,9 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
     workers are checked before the first case (orchestrator.studies.remote.shipping).
     max_cases: a grid / Monte Carlo study with more cases is refused (StudyError). case_list: the
     study's cases (study.cases) if the caller has listed them already. retry_failed (with resume, a
-    grid / Monte Carlo study): the cases whose row says "failed" run again, their rows replaced."""
+    grid / Monte Carlo study): the cases whose row says "failed" run again, their rows replaced.
+    reference: a tuning's published rows for comparison.md, laid out as
+    orchestrator.tool.report.comparison_tables takes them (the caller's: studies know no paper)."""
     ssp = Path(ssp)
     if not ssp.is_file():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, or "
@@ -44,7 +46,8 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
         ship = nullcontext(Shipping())
     with output_lock(out), ship as ship:  # one writer per study folder (cases lock their own folders)
         if study.tune:
-            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command, write_docs, ship)
+            return run_tuning(study, ssp, client, out, resume, overwrite, progress, command, write_docs, ship,
+                              reference)
         return _run_cases(study, case_list, ssp, client, out, resume, overwrite, progress, command, ship,
                           retry_failed)
 

@@ -113,10 +113,11 @@ def _preset_text(law, gains, objective_start, objective_tuned, base, command) ->
 
 
 def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: bool, progress: bool,
-               command: str, write_docs: bool = False, ship=None) -> dict:
+               command: str, write_docs: bool = False, ship=None, reference: dict | None = None) -> dict:
     """Tune every law of the study's [tune] table; write presets, comparison.md and objective.png
     into out/tuning, or into the table's write_to folder if ``write_docs``. ``ship``: how the
-    cases reach the workers (study.Shipping; default the local cluster's)."""
+    cases reach the workers (study.Shipping; default the local cluster's). ``reference``: published
+    rows comparison.md prints beside the tuned laws' (orchestrator.tool.report.comparison_tables)."""
     from ..tool.folders import write_json
 
     spec = study.tune
@@ -172,7 +173,7 @@ def run_tuning(study, ssp: Path, client, out: Path, resume: bool, overwrite: boo
         table.close()
     from .study_plots import plot_objective
     fig = plot_objective(write_to / "objective.png", results)
-    text = _comparison_md(write_to / "comparison.md", study, base, results, compare, spec, command)
+    text = _comparison_md(write_to / "comparison.md", study, base, results, compare, spec, command, reference)
     for r in results.values():
         r.pop("rows")
     statuses = [row["status"] for row in table.rows.values()]
@@ -208,9 +209,9 @@ def _compare(study, ssp, client, out, table, results, spec, progress, ship=None)
     return {"base": base, "metrics": metrics, "rows": by_case}
 
 
-def _comparison_md(path: Path, study, short, results, compare, spec, command) -> str:
-    """comparison.md: starting vs tuned gains per law, and SC-DC vs APD-DC with both laws tuned."""
-    from ..paper.paper_tables import reference_rows
+def _comparison_md(path: Path, study, short, results, compare, spec, command, reference=None) -> str:
+    """comparison.md: starting vs tuned gains per law, and SC-DC vs APD-DC with both laws tuned
+    (beside ``reference``'s published rows, if given)."""
     from ..tool.report import comparison_tables
     from .study import objective
 
@@ -256,7 +257,7 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command) ->
     if all(tuned.values()) and len(tuned) == 2:
         lines += ["", "## SC-DC vs APD-DC, both laws tuned", "",
                   "Laid out like `tapmp compare` (paper Tables 1-3): both rows use their own tuned gains.", "",
-                  comparison_tables(tuned, reference_rows(base.name))]
+                  comparison_tables(tuned, reference)]
     text = "\n".join(lines) + "\n"
     write_text(path, text)
     return text

@@ -8,7 +8,6 @@ import sys
 
 import pytest
 
-from orchestrator.cli import options
 from orchestrator.builder.families import data_dir
 from orchestrator.tool.scenario import RESULT_FORMATS
 
