@@ -499,19 +499,7 @@ def build_clocked_controller(out_dir: Path, platforms=None, built: dict | None =
         # the reference experiment (with its tick schedule), documentation, license, terminals and icon
         host = _host_fmu(Path(tmp), src, CLOCKED, "fmi3", md, binaries)
         extra = clocked_extra_members(host, platforms, stimulus)
-    partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
-    try:
-        with zipfile.ZipFile(partial, "w") as z:
-            _zip_write(z, "modelDescription.xml", md)
-            for name, data in sorted(files.items()):
-                _zip_write(z, f"sources/{name}", data)
-            for name, data in binaries.items():
-                _zip_write(z, name, data)
-            for name, data in sorted(extra.items()):
-                _zip_write(z, name, data)
-        partial.replace(fmu)
-    finally:
-        partial.unlink(missing_ok=True)
+    _write_fmu(fmu, md, files, binaries, extra)
     return fmu
 
 
@@ -579,6 +567,24 @@ def _zip_write(z: zipfile.ZipFile, name: str, data: bytes) -> None:
     info.compress_type = zipfile.ZIP_DEFLATED
     info.external_attr = 0o644 << 16
     z.writestr(info, data)
+
+
+def _write_fmu(fmu: Path, md: bytes, files: dict, binaries: dict, extra: dict) -> None:
+    """The FMU archive at ``fmu``: its modelDescription, sources/, binaries and extra members; the
+    whole archive or nothing (written beside it, then renamed)."""
+    partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
+    try:
+        with zipfile.ZipFile(partial, "w") as z:
+            _zip_write(z, "modelDescription.xml", md)
+            for name, data in sorted(files.items()):
+                _zip_write(z, f"sources/{name}", data)
+            for name, data in binaries.items():
+                _zip_write(z, name, data)
+            for name, data in sorted(extra.items()):
+                _zip_write(z, name, data)
+        partial.replace(fmu)
+    finally:
+        partial.unlink(missing_ok=True)
 
 
 def staged_sources(files: dict[str, bytes], model: str, family: str) -> Path:
@@ -747,19 +753,7 @@ def build_native_fmu(model: str, family: str, out_dir: Path, windows: bool = Tru
             host = _host_fmu(Path(tmp), src, model, family, md, binaries)
             folders = tuple(dict.fromkeys(PLATFORM_DIRS[family][p] for p in platforms))  # darwin64 once
             extra = fmu_extras.extra_members(model, family, host, folders, stimulus)
-        partial = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
-        try:
-            with zipfile.ZipFile(partial, "w") as z:
-                _zip_write(z, "modelDescription.xml", md)
-                for name, data in sorted(files.items()):
-                    _zip_write(z, f"sources/{name}", data)
-                for name, data in binaries.items():
-                    _zip_write(z, name, data)
-                for name, data in sorted(extra.items()):
-                    _zip_write(z, name, data)
-            partial.replace(fmu)
-        finally:
-            partial.unlink(missing_ok=True)
+        _write_fmu(fmu, md, files, binaries, extra)
     return fmu
 
 
