@@ -9,7 +9,7 @@
 #    third-party FMI tools in ../shared/tools: fmusim, OMSimulator), clang and libclang-rt-14-dev
 #    (libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer for the native FMUs' fuzz
 #    targets and sanitizer builds; TAPMP_FUZZ_SECONDS sets the seconds per fuzz target,
-#    default 60), chromium (renders the documentation inside the native FMUs headless: one slow
+#    default 30), chromium (renders the documentation inside the native FMUs headless: one slow
 #    test, so not for a run whose arguments say "not slow"), and python3-dev if this Python has
 #    no C headers (Python.h, for the pythonfmu FMUs' binary). The FMUs' binaries need no system
 #    compiler: zig cc from PyPI's ziglang package builds them for every platform. As root

@@ -9,7 +9,7 @@ Model Exchange instance of the plant; both abort (a finding) when a call returns
 non-finite or out-of-range output, a Model Exchange state outside the plant's domain, or a clock
 tick that outlives its event.
 
-* Every target runs for TAPMP_FUZZ_SECONDS seconds (default 60) with no finding: no
+* Every target runs for TAPMP_FUZZ_SECONDS seconds (default 30) with no finding: no
   AddressSanitizer, LeakSanitizer or UndefinedBehaviorSanitizer report, no crash, no timeout.
 * Every input on which the fuzzer found a defect is kept in tests/fmu/fuzz/regressions/<target>/
   and replayed here: each must run clean.
@@ -30,7 +30,7 @@ import pytest
 from tests.support.ctools import compile_c, extract_sources
 from tapmp.interface import FMU_NAMES
 
-pytestmark = pytest.mark.slow  # libFuzzer runs each target for TAPMP_FUZZ_SECONDS (60 s by default)
+pytestmark = pytest.mark.slow  # libFuzzer runs each target for TAPMP_FUZZ_SECONDS (30 s by default)
 
 FUZZ = Path(__file__).parent / "fuzz"
 REGRESSIONS = FUZZ / "regressions"
@@ -39,7 +39,7 @@ FAMILIES = ("fmi2", "fmi3", "states")
 SOURCES = {"fmi2": "fmi2", "fmi3": "fmi3", "states": "fmi2"}  # the FMUs whose sources each target includes
 CLOCKED = "TAPMP_ControllerClocked"  # FMI 3.0 only
 TARGETS = [f"{family}_{model}" for family in FAMILIES for model in FMU_NAMES] + [f"fmi3_{CLOCKED}"]
-SECONDS = int(os.environ.get("TAPMP_FUZZ_SECONDS", "60"))
+SECONDS = int(os.environ.get("TAPMP_FUZZ_SECONDS", "30"))
 FLAGS = ["-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-fno-sanitize-recover=undefined"]
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "print_stacktrace=1"}
 
