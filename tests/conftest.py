@@ -8,6 +8,7 @@ the environment variable CI or TAPMP_REQUIRE_SHARED is set (``.ci/run`` sets it)
 fails the test instead.
 """
 
+import json
 import os
 import shutil
 import tempfile
@@ -17,6 +18,10 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import pytest  # noqa: E402
+# pythonfmu from site-packages before any pythonfmu FMU runs in this process: such an FMU puts its
+# resources (a copy of pythonfmu's .py files, removed with the FMU) first on sys.path, and a first
+# import after that would make FmuBuilder build from that copy, without pythonfmu's binaries
+import pythonfmu  # noqa: E402,F401
 
 from orchestrator.builder.build import build_all  # noqa: E402
 from tests.support.fmus import LoadedFMU  # noqa: E402
@@ -108,10 +113,34 @@ def own_temp_folder(request, tmp_path_factory, monkeypatch):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def _paths(tree):
+    """A fixture's result read back from JSON: every leaf is a path."""
+    return {key: _paths(value) if isinstance(value, dict) else Path(value) for key, value in tree.items()}
+
+
+def built_once(tmp_path_factory, name: str, build):
+    """``build(folder)`` (returning {name: path or {name: path}}) run once for the whole test run:
+    alone, into a folder of this session; on pytest-xdist workers (tests/run.sh runs two), by the
+    first worker that asks, under a file lock, into a folder every worker of the run shares, and
+    read back by the others from its result file."""
+    from filelock import FileLock
+
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return build(tmp_path_factory.mktemp(name))
+    run = tmp_path_factory.getbasetemp().parent  # this run's base folder: the workers' folders are in it
+    folder, result = run / name, run / f"{name}.json"
+    with FileLock(run / f"{name}.lock"):
+        if result.is_file():
+            return _paths(json.loads(result.read_text()))
+        paths = build(folder)
+        result.write_text(json.dumps(paths, default=str))
+    return paths
+
+
 @pytest.fixture(scope="session")
 def built(tmp_path_factory):
     """Paths of the three FMUs and TAPMP.ssp, built into a temporary folder."""
-    return build_all(tmp_path_factory.mktemp("fmus"), log=lambda *_: None)
+    return built_once(tmp_path_factory, "fmus", lambda folder: build_all(folder, log=lambda *_: None))
 
 
 @pytest.fixture(scope="session")
@@ -119,7 +148,7 @@ def faulty_ssps(built, tmp_path_factory):
     """{fault: SSP path}: the real controller and trajectory with a plant FMU that misbehaves
     from t = 0.5 ms on, one per fault of tests/support/faults.py's FAULTY ("status", "error_log", "info_log")."""
     from tests.support.faults import faulty_ssps as build
-    return build(built, tmp_path_factory.mktemp("faulty"))
+    return built_once(tmp_path_factory, "faulty", lambda folder: build(built, folder))
 
 
 @pytest.fixture(scope="session")
@@ -127,7 +156,8 @@ def native_built(tmp_path_factory):
     """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real for every
     platform (zig cc) into a temporary folder laid out as build/native/."""
     from orchestrator.builder.build_native import build_native
-    return build_native(tmp_path_factory.mktemp("native"), log=lambda *_: None, windows=True)
+    return built_once(tmp_path_factory, "native",
+                      lambda folder: build_native(folder, log=lambda *_: None, windows=True))
 
 
 @pytest.fixture

@@ -15,7 +15,8 @@
 #    compiler: zig cc from PyPI's ziglang package builds them for every platform. As root
 #    directly, else through sudo; `apt-get update` only if installing fails (empty or stale
 #    package lists). The README lists the packages with their download sizes.
-# 2. Creates .venv with the package and its test extras and runs every test with pytest.
+# 2. Creates .venv with the package and its test extras and runs every test with pytest, on one
+#    pytest-xdist worker per CPU (at most 4).
 # Each setup step prints a line when it starts, one every TAPMP_HEARTBEAT_S seconds (default 20)
 # while it runs and one with its time when it ends.
 set -euo pipefail
@@ -69,5 +70,11 @@ fi
 step "creating .venv (python3 -m venv)" python3 -m venv .venv
 step "installing the package and its test extras into .venv (pip install -e '.[test]': about 250 MB of wheels the first time)" \
     .venv/bin/pip install -e '.[test]'
-echo "tests/run.sh: running the tests (pytest -q $*)" >&2
-exec .venv/bin/python -m pytest -q "$@"
+# pytest-xdist workers, one per CPU this process may use (nproc), at most 4 (TAPMP_TEST_WORKERS
+# to choose; 0 runs every test in this process); each test file runs whole on one worker, so a
+# module's fixtures are set up once (--dist loadfile); the FMUs are built once for every worker
+# (tests/conftest.py). Arguments given here come after, so `-n 0` wins.
+cpus=$(nproc)
+workers=${TAPMP_TEST_WORKERS:-$((cpus < 4 ? cpus : 4))}
+echo "tests/run.sh: running the tests (pytest -q -n $workers --dist loadfile $*)" >&2
+exec .venv/bin/python -m pytest -q -n "$workers" --dist loadfile "$@"

@@ -14,6 +14,7 @@ Everything in a row is deterministic: no time stamps, versions as the tools prin
 differences bucketed to a power of ten (:func:`difference`), rows sorted by key.
 """
 
+import fcntl
 import json
 import math
 import os
@@ -41,8 +42,8 @@ def key_of(row: dict) -> tuple:
 
 
 def committed_rows(path: Path = JSON_FILE) -> dict[tuple, dict]:
-    """{key: row} of the committed JSON file (empty if it does not exist)."""
-    if not path.exists():
+    """{key: row} of the committed JSON file (empty if it does not exist or is empty)."""
+    if not path.exists() or path.stat().st_size == 0:
         return {}
     return {key_of(r): r for r in json.loads(path.read_text())["rows"]}
 
@@ -82,12 +83,15 @@ def recorded_by(nodeid: str) -> set[tuple]:
 
 
 def _write(row: dict) -> None:
-    rows = committed_rows()
-    if row["test"] not in _updated_tests:  # the test's old rows go: it records all of its rows again
-        _updated_tests.add(row["test"])
-        rows = {k: r for k, r in rows.items() if r["test"] != row["test"]}
-    rows[key_of(row)] = row
-    write(list(rows.values()))
+    # read, changed and written under a lock on the file: tests/run.sh's pytest-xdist workers record at once
+    with open(JSON_FILE, "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        rows = committed_rows()
+        if row["test"] not in _updated_tests:  # the test's old rows go: it records all of its rows again
+            _updated_tests.add(row["test"])
+            rows = {k: r for k, r in rows.items() if r["test"] != row["test"]}
+        rows[key_of(row)] = row
+        write(list(rows.values()))
 
 
 def write(rows: list[dict]) -> None:

@@ -14,7 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 FUZZ_PACKAGES = ["clang", "libclang-rt-14-dev", "chromium"]  # libFuzzer and the sanitizers; the FMU docs' renderer
 PACKAGES = ["libtbb12", "wine64", "qemu-user", "libc6-arm64-cross", "libminizip1", "libxml2", *FUZZ_PACKAGES]
-TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod", "sleep")  # the real programs the script and stand-ins use
+TOOLS = ("bash", "dirname", "env", "mkdir", "cat", "chmod", "sleep", "nproc")  # the real programs the script and stand-ins use
 
 STANDINS = {
     "dpkg": '[ "$1" = -s ] || exit 2\ncase " $INSTALLED " in *" $2 "*) exit 0;; esac\nexit 1\n',
@@ -33,13 +33,13 @@ STANDINS = {
 
 
 def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once=False, args=(), headers=True,
-           venv_seconds=None, heartbeat_s=None):
+           venv_seconds=None, heartbeat_s=None, env_more=None):
     """Run a copy of tests/run.sh; returns (exit code, stderr, lines of the command log).
     ``headers``: whether the stand-in python3's include folder holds Python.h; ``venv_seconds``: how
-    long its venv creation takes; ``heartbeat_s``: TAPMP_HEARTBEAT_S."""
+    long its venv creation takes; ``heartbeat_s``: TAPMP_HEARTBEAT_S; ``env_more``: more variables."""
     repo, bin_dir, log = tmp_path / "repo", tmp_path / "bin", tmp_path / "log"
     include = tmp_path / "include"
-    include.mkdir()
+    include.mkdir(parents=True)
     if headers:
         (include / "Python.h").write_text("/* stand-in */\n")
     (repo / "tests").mkdir(parents=True)
@@ -59,19 +59,33 @@ def run_sh(tmp_path: Path, installed=PACKAGES, uid=0, sudo=False, apt_fails_once
         env["VENV_SECONDS"] = str(venv_seconds)
     if heartbeat_s is not None:
         env["TAPMP_HEARTBEAT_S"] = str(heartbeat_s)
+    env.update(env_more or {})
     res = subprocess.run([str(bin_dir / "bash"), str(repo / "tests" / "run.sh"), *args], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=60)
     return res.returncode, res.stderr, log.read_text().splitlines()
 
 
-def the_tests(repo: Path, args: str) -> list:
-    return [f"python3 -m venv .venv in {repo}", "pip install -e .[test]", f"python -m pytest -q {args}".rstrip()]
+def workers() -> int:
+    """The pytest-xdist workers tests/run.sh starts here: one per CPU this process may use, at most 4."""
+    return min(4, len(os.sched_getaffinity(0)))
+
+
+def the_tests(repo: Path, args: str, n: int | None = None) -> list:
+    return [f"python3 -m venv .venv in {repo}", "pip install -e .[test]",
+            f"python -m pytest -q -n {workers() if n is None else n} --dist loadfile {args}".rstrip()]
 
 
 def test_with_every_package_present_it_installs_nothing_and_runs_pytest_with_the_arguments(tmp_path):
     code, err, log = run_sh(tmp_path, args=("-k", "ssp"))
     assert code == 7, err  # pytest's exit code, through exec
     assert log == the_tests(tmp_path / "repo", "-k ssp")
+
+
+def test_tapmp_test_workers_sets_the_number_of_workers_and_zero_runs_the_tests_in_one_process(tmp_path):
+    for n in (0, 3):
+        code, err, log = run_sh(tmp_path / str(n), env_more={"TAPMP_TEST_WORKERS": str(n)})
+        assert code == 7, err
+        assert log == the_tests(tmp_path / str(n) / "repo", "", n)
 
 
 def test_as_root_it_installs_only_the_missing_packages_without_questions(tmp_path):
@@ -126,7 +140,7 @@ def test_every_setup_step_says_what_it_starts_and_when_it_is_done(tmp_path):
                     "tests/run.sh: creating .venv (python3 -m venv)",
                     "tests/run.sh: creating .venv (python3 -m venv): done",
                     *[line for line in said if "pip install" in line],
-                    "tests/run.sh: running the tests (pytest -q -k ssp)"]
+                    f"tests/run.sh: running the tests (pytest -q -n {workers()} --dist loadfile -k ssp)"]
     assert len([line for line in said if "pip install" in line]) == 2
 
 

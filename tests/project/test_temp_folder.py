@@ -11,7 +11,11 @@ passed (the same policy); after a failure it keeps the base folder, with the fai
 for their post-mortem. So what a passing suite leaves is whatever its tests put in the session's
 folder outside pytest's base folder (written at import or collection, by child processes that
 outlive a test), which is what this counts. Files a test writes to a hard-coded /tmp path are not
-seen (tests/studies/test_study_remote.py's workers' venv is one; its fixture removes it)."""
+seen (tests/studies/test_study_remote.py's workers' venv is one; its fixture removes it).
+
+On pytest-xdist's workers (tests/run.sh) each worker has its own session folder, inside the
+controller's: this test runs after every test of the worker it lands on (its file is the last one
+handed out) and measures that worker's folder."""
 
 import os
 from pathlib import Path
