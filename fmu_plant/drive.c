@@ -10,6 +10,7 @@
  * computed once per step size. The variables and their ranges (checked by the runtime) are
  * tapmp/interface.py's DRIVE_VARS. */
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "instance.h"
@@ -27,11 +28,17 @@ static void read_settings(const tapmp_instance *inst, ModelData *m)
     m->limit = inst->reals[VR_force_limit];
 }
 
-/* Every setting's range is the record's min/max, which the runtime checks; nothing relates them. */
+/* Every setting's range is the record's min/max, which the runtime checks after this; the delay is checked here
+ * first, as the integer it is (the runtime words every range as a number's), since it indexes the buffer. */
 int model_validate(const tapmp_instance *inst, char *msg, size_t size)
 {
-    (void)inst, (void)msg, (void)size;
-    return 1;
+    const tapmp_var *var = &VARS[VR_delay_samples];
+    int d = inst->ints[VR_delay_samples];
+    if (d >= var->min && d <= var->max && var->max <= DRIVE_MAX_DELAY) return 1;
+    char value[24], allowed[64];
+    snprintf(value, sizeof value, "%d", d);
+    snprintf(allowed, sizeof allowed, "an integer in [%d, %d]", (int)var->min, (int)var->max);
+    return tapmp_invalid_text(msg, size, var->name, value, allowed, 0, 0.0);
 }
 
 static double limited(const ModelData *m, double c)
