@@ -81,3 +81,19 @@ def test_a_bad_drive_setting_is_refused_with_one_line_and_exit_2(tmp_path, capsy
     assert main(["run", PAPER, "--set", setting, "--out", str(tmp_path / "x"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
+
+
+@pytest.mark.slow  # builds the native FMUs, starts a Dask cluster
+def test_a_study_whose_base_scenario_has_the_drive_runs_every_case_with_it(fmus_dir, tmp_path):
+    base = tmp_path / "driven.toml"
+    base.write_text("drive = true\n" + Path(PAPER).read_text())  # a top-level key before the tables
+    study = tmp_path / "s.toml"
+    study.write_text(f'[study]\nname = "s"\nbase = "{base}"\noutput = "{tmp_path / "out"}"\nkeep_results = true\n'
+                     '[set]\nstop_time = 0.02\n[grid]\nlaw = ["sc-dc", "apd-dc"]\n')
+    assert main(["study", str(study), "--fmus-dir", str(fmus_dir), "--workers", "1", "--no-progress"]) == 0
+    runs = list((tmp_path / "out").rglob("run.json"))
+    assert len(runs) == 2
+    for path in runs:
+        run = json.loads(path.read_text())
+        assert run["status"] == "completed" and run["ssp"].endswith("fmi2/TAPMP_Drive.ssp")
+        assert "drive.F1" in columns(path.parent / "results.csv")
