@@ -192,3 +192,26 @@ def test_the_default_drive_delays_the_command_by_one_sample(native, family):
     rows = orchestrator_rows(native[family][f"{DRIVE}_ssp"], sc, ["controller.F1", "drive.F1"],
                              ordering="gauss-seidel", order=DRIVE_ORDER)
     assert np.array_equal(rows[2:, 1], rows[1:-1, 0]) and rows[1, 1] == rows[0, 0]
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_the_drive_carries_a_reference_experiment_fmpy_replays_and_its_documentation(native, family, tmp_path):
+    import html
+    import zipfile
+
+    from fmpy.util import read_csv
+    from orchestrator.builder import fmu_extras
+    fmu = native[family][DRIVE]
+    ref = f"{fmu_extras.LS_REF}/{fmu_extras.SCENARIO}"
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(tmp_path)
+        page = z.read("documentation/index.html").decode()
+        diagram = z.read("documentation/diagram.svg").decode()
+    for v in DRIVE_VARS:
+        assert f"<code>{v.name}</code>" in page
+    assert html.escape("y'' = w_n^2 (s - y) - 2 zeta w_n y'") in page and ">TAPMP_Drive</text>" in diagram
+    names, expected = fmu_extras.read_csv((tmp_path / f"{ref}_ref.csv").read_bytes())
+    res = simulate_fmu(str(fmu), stop_time=fmu_extras.REFERENCE_STOP, step_size=H, output_interval=H,
+                       input=read_csv(str(tmp_path / f"{ref}_in.csv")))
+    assert [list(r) for r in res] == expected  # the same doubles
+    assert max(abs(x) for row in expected for x in row[1:]) > 1.0  # the stimulus is the controller's commands
