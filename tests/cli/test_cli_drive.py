@@ -97,3 +97,9 @@ def test_a_study_whose_base_scenario_has_the_drive_runs_every_case_with_it(fmus_
         run = json.loads(path.read_text())
         assert run["status"] == "completed" and run["ssp"].endswith("fmi2/TAPMP_Drive.ssp")
         assert "drive.F1" in columns(path.parent / "results.csv")
+
+
+def test_check_says_its_loop_has_no_drive(capsys):
+    assert main(["check", PAPER, "--set", "drive=true"]) == 0  # the loop without the drive is stable
+    out, err = capsys.readouterr()
+    assert "stable: spectral radius" in out and "note: the check's loop has no drive" in err
