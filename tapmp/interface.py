@@ -399,6 +399,17 @@ PLANT_SOURCES = {f"F{i}": (CONTROLLER, f"F{i}") for i in (1, 2, 3)}
 # The drive's system: the controller's commands into the drive, the drive's forces into the plant.
 DRIVE_SOURCES = {f"F_cmd{i}": (CONTROLLER, f"F{i}") for i in (1, 2, 3)}
 DRIVE_FEEDS = {(PLANT, f"F{i}"): f"F{i}" for i in (1, 2, 3)}
+
+
+def step_order(extra: str) -> list[str]:
+    """The elements of the system with the optional model ``extra`` in the Gauss-Seidel order it must step in:
+    the controller (the loop's sampler) first, ``extra`` next, then the models it feeds, then the others in
+    registry order. ``extra`` declares no direct feedthrough (its output after doStep(t, h) is held over the
+    step, like the controller's), so a master ordering by the declared dependencies would step its consumers
+    first, on its output of the step before."""
+    fed = list(dict.fromkeys(model for model, _ in record(extra).feeds))
+    first = [CONTROLLER, extra, *fed]
+    return [record(m).element for m in first] + [r.element for r in system_models(extra) if r.name not in first]
 CONNECTIONS = _Connections()
 
 

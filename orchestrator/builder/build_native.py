@@ -12,8 +12,9 @@ variabilities, units, descriptions, start values and value references of the pyt
 FMUs, and an SSP accepts either family.
 
 Layout (``build/native/<fmi2|fmi3>/``): TAPMP_Plant.fmu, TAPMP_Controller.fmu,
-TAPMP_Trajectory.fmu and TAPMP.ssp, TAPMP_Drive.fmu and TAPMP_Drive.ssp (the loop with the drive); FMI 3.0 also TAPMP_ControllerClocked.fmu, the controller with a
-periodic input clock (:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it.
+TAPMP_Trajectory.fmu and TAPMP.ssp, TAPMP_Drive.fmu and TAPMP_Drive.ssp (the loop with the drive);
+FMI 3.0 also TAPMP_ControllerClocked.fmu, the controller with a periodic input clock
+(:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it.
 Inside each FMU: modelDescription.xml, sources/ (every C file and header of the FMU, but not the
 standard's FMI headers, which the importer brings; one file to compile, all.c, which includes the
 others, so that only the fmi* functions have external linkage; FMI 2.0 lists it in <SourceFiles>,
@@ -811,12 +812,10 @@ def optional_note(model: str, family: str) -> str:
     """The SSD description of the system with the optional ``model``: how it must be stepped (and FMI 3.0's
     note for OMSimulator)."""
     from .ssp import FMI3_NOTE
-    from tapmp.interface import ELEMENT
-    order = ", ".join(ELEMENT[m] for m in (CONTROLLER, model, *(r.name for r in built_models()
-                                                                if r.name not in (CONTROLLER, model)
-                                                                and not r.optional)))
+    from tapmp.interface import ELEMENT, step_order
     note = (f"The TAPMP closed loop with {model} between controller and plant. Step it Gauss-Seidel in the order "
-            f"{order}: the {ELEMENT[model]}'s output after doStep(t, h) is its force over [t, t + h], like the "
+            f"{', '.join(step_order(model))}: the {ELEMENT[model]}'s output after doStep(t, h) is its force over "
+            "[t, t + h], like the "
             "controller's command, so the plant must step after it (a master that orders by the declared "
             "dependencies steps the plant first and adds one communication step of delay).")
     return f"{note} {FMI3_NOTE}" if family == "fmi3" else note

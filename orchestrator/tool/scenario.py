@@ -42,7 +42,8 @@ from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
 from tapmp import cmodel
 # ORDERINGS: the model's (tapmp.closed_loop's), which the master's own (engine.schedule) equals (a test)
-from tapmp.interface import CONTROLLER, DRIVE_VARS, ELEMENT, ORDERINGS, PLANT, TRAJECTORY, VARIABLES, allowed_text
+from tapmp.interface import (CONTROLLER, DRIVE_VARS, ELEMENT, ORDERINGS, PLANT, TRAJECTORY, VARIABLES, allowed_text,
+                             step_order)
 from tapmp.models import DRIVE
 from tapmp.laws import C_IDS
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
@@ -93,7 +94,7 @@ SECTION_PARAMS = {
 # drive = true, or a [drive] table of these settings: the servo drive between controller and plant
 # (TAPMP_Drive, in the SSP TAPMP_Drive.ssp of the native families), stepped Gauss-Seidel in DRIVE_ORDER
 DRIVE_PARAMS = {v.name: v for v in DRIVE_VARS if v.causality == "parameter"}
-DRIVE_ORDER = [ELEMENT[m] for m in (CONTROLLER, DRIVE, PLANT, TRAJECTORY)]
+DRIVE_ORDER = step_order(DRIVE)  # controller, drive, plant, trajectory
 # Set from the scenario's own keys, never in [controller]: the controller samples once per step.
 _FROM_SCENARIO = {"law": "law", "T_s": "step"}
 # The largest integer setting: an FMI Integer (int32), and for record_every far more steps than any run
