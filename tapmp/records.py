@@ -7,7 +7,7 @@ A new model is one more record, in its own module or here (docs/architecture.md,
 
 from .interface import (CONTROLLER_SOURCES, CONTROLLER_VARS, DRIVE_FEEDS, DRIVE_SOURCES, DRIVE_VARS, PLANT_SOURCES,
                         PLANT_VARS, TRAJECTORY_VARS, _controller_dependencies, _drive_dependencies,
-                        _plant_dependencies, _trajectory_dependencies)
+                        _plant_dependencies, _trajectory_dependencies, step_order)
 from .models import CLOCKED, CONTROLLER, DRIVE, PLANT, TRAJECTORY, ModelRecord, record, register
 from . import laws
 
@@ -53,7 +53,7 @@ def _drive_what() -> str:
             f"second-order current loop (natural frequency {d('current_bandwidth')} Hz, damping "
             f"{d('current_damping')}) and a force-constant error per motor. It is not part of TAPMP.ssp: "
             "TAPMP_Drive.ssp is the closed loop with it (trajectory -> controller -> drive -> plant), stepped "
-            "Gauss-Seidel in the order controller, drive, plant, trajectory.")
+            f"Gauss-Seidel in the order {', '.join(step_order(DRIVE))}.")
 
 
 def _drive_equations() -> list[tuple[str, str]]:
