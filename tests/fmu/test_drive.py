@@ -215,3 +215,19 @@ def test_the_drive_carries_a_reference_experiment_fmpy_replays_and_its_documenta
                        input=read_csv(str(tmp_path / f"{ref}_in.csv")))
     assert [list(r) for r in res] == expected  # the same doubles
     assert max(abs(x) for row in expected for x in row[1:]) > 1.0  # the stimulus is the controller's commands
+
+
+@pytest.mark.parametrize("law", ["sc-dc", "apd-dc"])
+def test_a_pass_through_drive_reproduces_the_stored_reference_run(native, law):
+    """tests/data/reference_run.csv's Gauss-Seidel cases (tests/engine/test_reference_run.py, the same 1e-12 m)
+    through TAPMP_Drive.ssp with the drive passing the commands through."""
+    from tests.engine.test_reference_run import reference_run, stored
+    from tests.support.runs import orchestrator_rows, paper_scenario
+    from orchestrator.tool.scenario import DRIVE_ORDER
+    sc = paper_scenario(reference_run.STOP, f"law={law!r}", "drive.delay_samples=0", "drive.current_bandwidth=0.0")
+    rows = orchestrator_rows(native["fmi2"][f"{DRIVE}_ssp"], sc, ["time", *reference_run.SIGNALS],
+                             ordering="gauss-seidel", order=DRIVE_ORDER)[::reference_run.EVERY]
+    expected = np.array(stored(law, "gauss-seidel"))
+    assert rows.shape == expected.shape == (201, 5)
+    assert np.max(np.abs(rows[:, 1:] - expected[:, 1:])) <= 1e-12
+    assert np.max(np.abs(expected[:, 1:4])) > 1e-3  # the platform did move
