@@ -16,7 +16,7 @@ records, read when used, so a registered model appears in each.
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
-from .models import CONTROLLER, PLANT, TRAJECTORY, base_models, names, record
+from .models import CONTROLLER, DRIVE, PLANT, TRAJECTORY, names, record, system_models
 from .settings_c import allowed_text, settings_check_source, settings_read_macro  # noqa: F401 (the table's API)
 from .params import (DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
                      SERVO_STEP, START_TIME, STOP_TIME)
@@ -274,6 +274,10 @@ RANGES: dict[str, tuple[float, float]] = {
     "X_b": (-1.0, 1.0), "Z_b": (-1.0, 1.0), "B_b": (-1.5, 1.5), "t_move": (0.0, 1e6),
     # > 0: a zero limit would make the move endless; the upper bounds keep a move's times finite
     **{f"{k}_max_{a}": (1e-12, 1e9) for k in "vaj" for a in "XZB"},
+    # the drive (TAPMP_Drive): its delay buffer holds 3 commands; a current loop up to 100 kHz, far above any
+    # drive's, and damped (> 0: stable); a motor's force constant from 0.1 to 2 times the nominal one
+    "delay_samples": (0, 3), "current_bandwidth": (0.0, 1e5), "current_damping": (0.01, 10.0),
+    **{f"force_constant_error{i}": (-0.9, 1.0) for i in (1, 2, 3)},
 }
 
 
@@ -333,16 +337,46 @@ def _started(table: tuple[Var, ...]) -> tuple[Var, ...]:
 
 
 PLANT_VARS, CONTROLLER_VARS = _started(PLANT_VARS), _started(CONTROLLER_VARS)
+
+# The servo drive between controller and plant (TAPMP_Drive, fmu_plant/drive.c; docs/native-fmus.md). Its
+# defaults are a typical drive's: one sample of computation delay, a 2 kHz current loop damped 0.7, no
+# force-constant error and the plant's own force limit. The force-constant error is per motor: the motors'
+# mismatch is what the synchronization controller sees.
+DRIVE_DEFAULTS = {"delay_samples": 1, "current_bandwidth": 2000.0, "current_damping": 0.7,
+                  **{f"force_constant_error{i}": 0.0 for i in (1, 2, 3)}, "force_limit": _CFG.force_limit}
+DRIVE_VARS: tuple[Var, ...] = tuple(
+    [Var(f"F_cmd{i}", "input", "N", f"force command of motor {i} (the controller's F{i})",
+         START_OUTPUTS[f"F{i}"]) for i in (1, 2, 3)]
+    + [Var(f"F{i}", "output", "N", f"force of motor {i}: (1 + force_constant_error{i}) times the mean over the "
+           "communication step of the current loop's force, driven by the command of delay_samples steps before, "
+           "limited to force_limit; held over the step") for i in (1, 2, 3)]
+    + [Var("delay_samples", "parameter", "", "computation delay in communication steps (servo cycles) from "
+           "command to current loop", DRIVE_DEFAULTS["delay_samples"], type="Integer", variability="fixed"),
+       Var("current_bandwidth", "parameter", "Hz", "natural frequency f_n of the second-order current (force) "
+           "loop (the -3 dB frequency at damping 0.707, 1.01 f_n at 0.7); 0 = ideal loop (force = command)",
+           DRIVE_DEFAULTS["current_bandwidth"], variability="fixed"),
+       Var("current_damping", "parameter", "1", "damping ratio of the current (force) loop",
+           DRIVE_DEFAULTS["current_damping"], variability="fixed")]
+    + [Var(f"force_constant_error{i}", "parameter", "1", f"relative error of motor {i}'s force constant: its "
+           f"force is (1 + error) times the loop's (0.05 = +5 %)", 0.0, variability="fixed") for i in (1, 2, 3)]
+    + [Var("force_limit", "parameter", "N", "current (force) limit on the command before the current loop, "
+           "|command| <= force_limit; 0 = no limit", DRIVE_DEFAULTS["force_limit"], variability="fixed")]
+)
+DRIVE_VARS = tuple(v._replace(min=RANGES[v.name][0], max=RANGES[v.name][1]) if v.causality == "parameter" else v
+                   for v in DRIVE_VARS)
 PLANT_VARS, CONTROLLER_VARS, TRAJECTORY_VARS = (_ranged(m, t) for m, t in (
     (PLANT, PLANT_VARS), (CONTROLLER, CONTROLLER_VARS), (TRAJECTORY, TRAJECTORY_VARS)))
 VARIABLES = _ByModel("variables")  # {model: its Var rows}, from the records
 
 
-def connections() -> tuple[tuple[str, str, str, str], ...]:
+def connections(extra: str = "") -> tuple[tuple[str, str, str, str], ...]:
     """(source model, source variable, destination model, destination variable) of every connected
-    input: each record's ``sources`` (input -> (model, output)), in registry and variable order."""
-    return tuple((*r.sources[v.name], r.name, v.name) for r in base_models() for v in r.variables
-                 if v.causality == "input" and v.name in r.sources)
+    input: each record's ``sources`` (input -> (model, output)), in registry and variable order; with the
+    optional model ``extra`` inserted, the inputs it feeds (its record's ``feeds``) come from it."""
+    feeds = {key: (extra, output) for key, output in record(extra).feeds.items()} if extra else {}
+    return tuple((*feeds.get((r.name, v.name), r.sources.get(v.name, ())), r.name, v.name)
+                 for r in system_models(extra) for v in r.variables
+                 if v.causality == "input" and (v.name in r.sources or (r.name, v.name) in feeds))
 
 
 class _Connections(Sequence):
@@ -362,6 +396,20 @@ class _Connections(Sequence):
 CONTROLLER_SOURCES = {**{v.name: (TRAJECTORY, v.name) for v in TRAJECTORY_VARS[:9]},
                       **{f"{d}q{i}": (PLANT, f"{d}q{i}") for d in ("", "d") for i in (1, 2, 3)}}
 PLANT_SOURCES = {f"F{i}": (CONTROLLER, f"F{i}") for i in (1, 2, 3)}
+# The drive's system: the controller's commands into the drive, the drive's forces into the plant.
+DRIVE_SOURCES = {f"F_cmd{i}": (CONTROLLER, f"F{i}") for i in (1, 2, 3)}
+DRIVE_FEEDS = {(PLANT, f"F{i}"): f"F{i}" for i in (1, 2, 3)}
+
+
+def step_order(extra: str) -> list[str]:
+    """The elements of the system with the optional model ``extra`` in the Gauss-Seidel order it must step in:
+    the controller (the loop's sampler) first, ``extra`` next, then the models it feeds, then the others in
+    registry order. ``extra`` declares no direct feedthrough (its output after doStep(t, h) is held over the
+    step, like the controller's), so a master ordering by the declared dependencies would step its consumers
+    first, on its output of the step before."""
+    fed = list(dict.fromkeys(model for model, _ in record(extra).feeds))
+    first = [CONTROLLER, extra, *fed]
+    return [record(m).element for m in first] + [r.element for r in system_models(extra) if r.name not in first]
 CONNECTIONS = _Connections()
 
 
@@ -428,6 +476,14 @@ def _plant_dependencies(name: str) -> Dependencies:
         if not name.endswith("_true"):
             initial |= {"encoder_resolution", "noise_rms", "noise_seed"}
     return Dependencies((), _ordered(PLANT_VARS, initial))
+
+
+def _drive_dependencies(name: str) -> Dependencies:
+    """The drive's forces change only in doStep, as the controller's commands (sampled at t, held over the
+    step): none depends on an input at a communication point. Initially each is its motor's command,
+    limited and scaled by its force constant."""
+    i = name[-1]
+    return Dependencies((), _ordered(DRIVE_VARS, {f"F_cmd{i}", "force_limit", f"force_constant_error{i}"}))
 
 
 def _trajectory_dependencies(name: str) -> Dependencies:

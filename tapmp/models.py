@@ -23,6 +23,8 @@ TRAJECTORY = "TAPMP_Trajectory"
 # The native FMI 3.0 controller with a periodic input clock: a variant of CONTROLLER (same variables,
 # same C files) under its own model identifier (orchestrator/builder/build_native.py).
 CLOCKED = "TAPMP_ControllerClocked"
+# The servo drive between controller and plant: an optional element, in its own SSP (TAPMP_Drive.ssp).
+DRIVE = "TAPMP_Drive"
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,11 @@ class ModelRecord:
     adapter: str = ""           # its pythonfmu twin's script ("" = none), e.g. "fmu_plant/TAPMP_Plant.py"
     me_states: tuple[str, ...] = ()  # its Model Exchange states (none: Co-Simulation only)
     variant_of: str = ""        # the model whose variables and C files it shares (the clocked controller)
+    # An optional element (the drive): built in every family of fmi_versions but outside the default system
+    # (TAPMP.ssp, the container, the diagram); its own system is the default one with it inserted, where it
+    # feeds these inputs of other models in place of their sources: {(model, input): its output}.
+    optional: bool = False
+    feeds: dict = field(default_factory=dict)
 
     def text(self, attribute: str):
         """``what`` or ``equations``, computed if given as a function."""
@@ -84,8 +91,23 @@ def record(name: str) -> ModelRecord:
 
 
 def base_models() -> tuple[ModelRecord, ...]:
-    """The models with variables of their own, in registry order (every model but the variants)."""
+    """The default system's models, in registry order (every model but the variants and the optional ones)."""
+    return tuple(r for r in MODELS if not r.variant_of and not r.optional)
+
+
+def system_models(extra: str = "") -> tuple[ModelRecord, ...]:
+    """The models of a system in registry order: the default one, with the optional model ``extra`` if given."""
+    return tuple(r for r in MODELS if not r.variant_of and (not r.optional or r.name == extra))
+
+
+def built_models() -> tuple[ModelRecord, ...]:
+    """Every model with variables of their own, in registry order (the base and the optional models)."""
     return tuple(r for r in MODELS if not r.variant_of)
+
+
+def optional_names() -> tuple[str, ...]:
+    """The optional models' names, in registry order (each has a system of its own)."""
+    return tuple(r.name for r in MODELS if r.optional and not r.variant_of)
 
 
 def names() -> tuple[str, ...]:

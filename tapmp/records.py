@@ -1,13 +1,14 @@
 """The TAPMP models' records (tapmp.models.ModelRecord): the plant, the controller, the reference
-trajectory and the clocked controller, registered in signal-flow order when the package is imported
+trajectory, the drive (optional) and the clocked controller, registered in signal-flow order when the package is imported
 (tapmp/__init__.py). Each record names its variables and output dependencies (tapmp.interface), its
 C files, its settings struct, its description, its documentation's text and equations and its icon.
 A new model is one more record, in its own module or here (docs/architecture.md, "Adding a model").
 """
 
-from .interface import (CONTROLLER_SOURCES, CONTROLLER_VARS, PLANT_SOURCES, PLANT_VARS, TRAJECTORY_VARS,
-                        _controller_dependencies, _plant_dependencies, _trajectory_dependencies)
-from .models import CLOCKED, CONTROLLER, PLANT, TRAJECTORY, ModelRecord, record, register
+from .interface import (CONTROLLER_SOURCES, CONTROLLER_VARS, DRIVE_FEEDS, DRIVE_SOURCES, DRIVE_VARS, PLANT_SOURCES,
+                        PLANT_VARS, TRAJECTORY_VARS, _controller_dependencies, _drive_dependencies,
+                        _plant_dependencies, _trajectory_dependencies, step_order)
+from .models import CLOCKED, CONTROLLER, DRIVE, PLANT, TRAJECTORY, ModelRecord, record, register
 from . import laws
 
 CLOCK_NAME = "sample_clock"   # fmu_controller/controller.h: MODEL_CLOCK_NAME
@@ -42,6 +43,31 @@ def _trajectory_what() -> str:
     return ("The reference of the TAPMP paper's simulation (Section 5.2): a circle in the XZ plane and a "
                      "sinusoid in B; outputs the desired pose with its first two derivatives and the desired motor "
                      "positions q_d (Eq. 2).")
+
+
+def _drive_what() -> str:
+    d = lambda name: _n(DRIVE, name)  # noqa: E731
+    return ("The servo drive of each of the TAPMP's three linear motors, between the controller's force commands "
+            "F_cmd1..F_cmd3 [N] and the plant's forces F1..F3 [N]: a computation delay of delay_samples = "
+            f"{d('delay_samples')} communication step(s), a current (force) limit of {d('force_limit')} N, a "
+            f"second-order current loop (natural frequency {d('current_bandwidth')} Hz, damping "
+            f"{d('current_damping')}) and a force-constant error per motor. It is not part of TAPMP.ssp: "
+            "TAPMP_Drive.ssp is the closed loop with it (trajectory -> controller -> drive -> plant), stepped "
+            f"Gauss-Seidel in the order {', '.join(step_order(DRIVE))}.")
+
+
+def _drive_equations() -> list[tuple[str, str]]:
+    return [
+        ("Computation delay", "c_k = F_cmd,i(t_(k-d)), d = delay_samples communication steps (c = F_cmd(t_0) "
+                              "before the start)"),
+        ("Current (force) limit", "s_k = min(max(c_k, -force_limit), force_limit); force_limit = 0: s_k = c_k"),
+        ("Current (force) loop", "y'' = w_n^2 (s - y) - 2 zeta w_n y', w_n = 2 pi current_bandwidth, zeta = "
+                                 "current_damping; current_bandwidth = 0: y = s"),
+        ("Discretization", "s held over [t_k, t_k + h]; (y, y'/w_n, mean of y over the step) advanced exactly by "
+                           "exp(M h), computed once per step size h"),
+        ("Force", "F_i = (1 + force_constant_error_i) mean of y over [t_k, t_k + h], held over that step"),
+        ("Start", "at rest on the initial command: y = s_0, y' = 0"),
+    ]
 
 
 def _kinematics() -> tuple[str, str]:
@@ -110,6 +136,14 @@ register(ModelRecord(
     settings_struct="tapmp_controller_settings", description=_CONTROLLER_DESCRIPTION,
     what=_controller_what, equations=_controller_equations, icon_label="SC-DC",
     adapter="fmu_controller/TAPMP_Controller.py", diagram_note="SC-DC (Eq. 15-26)"))
+# The drive: optional (outside TAPMP.ssp), between controller and plant in its own system TAPMP_Drive.ssp.
+register(ModelRecord(
+    name=DRIVE, element="drive", variables=DRIVE_VARS, dependencies=_drive_dependencies, sources=DRIVE_SOURCES,
+    source="fmu_plant/drive.c", header="fmu_plant/drive.h",
+    description="Servo drive of the TAPMP's three linear motors: computation delay, current (force) limit, "
+                f"second-order current loop and force-constant error between controller and plant {_NATIVE}",
+    what=_drive_what, equations=_drive_equations, icon_label="drive", diagram_note="delay, current loop",
+    optional=True, feeds=DRIVE_FEEDS))
 register(ModelRecord(
     name=PLANT, element="plant", variables=PLANT_VARS, dependencies=_plant_dependencies, sources=PLANT_SOURCES,
     source="fmu_plant/plant.c", header="fmu_plant/plant.h", settings_struct="tapmp_plant_settings",

@@ -12,8 +12,9 @@ variabilities, units, descriptions, start values and value references of the pyt
 FMUs, and an SSP accepts either family.
 
 Layout (``build/native/<fmi2|fmi3>/``): TAPMP_Plant.fmu, TAPMP_Controller.fmu,
-TAPMP_Trajectory.fmu and TAPMP.ssp; FMI 3.0 also TAPMP_ControllerClocked.fmu, the controller with a
-periodic input clock (:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it.
+TAPMP_Trajectory.fmu and TAPMP.ssp, TAPMP_Drive.fmu and TAPMP_Drive.ssp (the loop with the drive);
+FMI 3.0 also TAPMP_ControllerClocked.fmu, the controller with a periodic input clock
+(:func:`model_description_clocked`), and TAPMP_Clocked.ssp, the system with it.
 Inside each FMU: modelDescription.xml, sources/ (every C file and header of the FMU, but not the
 standard's FMI headers, which the importer brings; one file to compile, all.c, which includes the
 others, so that only the fmi* functions have external linkage; FMI 2.0 lists it in <SourceFiles>,
@@ -35,7 +36,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, TIME, VARIABLES, Var, dependencies,
                              dependency_attributes, settings_read_macro)
-from tapmp.models import CLOCKED, names, record
+from tapmp.models import CLOCKED, built_models, names, optional_names, record
 from tapmp.records import CLOCK_NAME
 from tapmp.cmodel import SETTINGS_HEADER, settings_header
 from tapmp import laws
@@ -78,8 +79,8 @@ def model_files(model: str) -> tuple[Path, Path]:
 
 
 def native_models(family: str) -> tuple[str, ...]:
-    """The base models built in ``family`` ("fmi2" or "fmi3"), in registry order."""
-    return tuple(m for m in names() if family in record(m).fmi_versions)
+    """The models built in ``family`` ("fmi2" or "fmi3"), in registry order: the base and the optional ones."""
+    return tuple(r.name for r in built_models() if family in r.fmi_versions)
 
 
 class NativeBuildError(RuntimeError, UserError):
@@ -793,6 +794,11 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
             log(f"built {paths[model]}")
         paths["ssp"] = write_ssp(folder / "TAPMP.ssp", paths, FMI3_NOTE if family == "fmi3" else None)
         log(f"wrote {paths['ssp']}")
+        for model in optional_names():  # each optional model's own system: TAPMP_Drive.ssp
+            if model in paths:
+                paths[f"{model}_ssp"] = write_ssp(folder / f"{model}.ssp", paths, optional_note(model, family),
+                                                  extra=model)
+                log(f"wrote {paths[f'{model}_ssp']}")
         if family == "fmi3":
             paths[CLOCKED] = build_clocked_controller(folder, platforms, built[(CLOCKED, family)], stimulus)
             log(f"built {paths[CLOCKED]}")
@@ -800,6 +806,19 @@ def build_native(out_dir: Path = NATIVE_BUILD_DIR, families=FAMILIES, log=print,
             log(f"wrote {paths['clocked_ssp']}")
         out[family] = paths
     return out
+
+
+def optional_note(model: str, family: str) -> str:
+    """The SSD description of the system with the optional ``model``: how it must be stepped (and FMI 3.0's
+    note for OMSimulator)."""
+    from .ssp import FMI3_NOTE
+    from tapmp.interface import ELEMENT, step_order
+    note = (f"The TAPMP closed loop with {model} between controller and plant. Step it Gauss-Seidel in the order "
+            f"{', '.join(step_order(model))}: the {ELEMENT[model]}'s output after doStep(t, h) is its force over "
+            "[t, t + h], like the "
+            "controller's command, so the plant must step after it (a master that orders by the declared "
+            "dependencies steps the plant first and adds one communication step of delay).")
+    return f"{note} {FMI3_NOTE}" if family == "fmi3" else note
 
 
 def main(argv=None) -> int:

@@ -24,6 +24,14 @@ ENV = "TAPMP_FMUS_DIR"
 FAMILIES = {"python": Path("TAPMP.ssp"), "native": Path("native") / "fmi2" / "TAPMP.ssp",
             "fmi3": Path("native") / "fmi3" / "TAPMP.ssp"}
 DEFAULT_FAMILY = "native"
+# The families with the optional drive FMU (native only) and the SSP of its system, beside TAPMP.ssp
+DRIVE_FAMILIES = ("native", "fmi3")
+DRIVE_SSP = "TAPMP_Drive.ssp"
+
+
+def with_drive(fmus: str) -> bool:
+    """Whether the family ``fmus`` has the drive FMU (TAPMP_Drive.ssp)."""
+    return fmus in DRIVE_FAMILIES
 
 
 def in_checkout() -> bool:
@@ -60,18 +68,23 @@ class FamilyNotBuilt(FileNotFoundError):
     """The SSP of an FMU family does not exist yet; the message says how to build it."""
 
 
-def family_ssp(fmus: str, folder: str | Path | None = None) -> Path:
-    """The SSP file of family ``fmus`` in the FMU folder ``folder`` (default: :func:`fmus_dir`);
-    ValueError names the allowed families."""
+def family_ssp(fmus: str, folder: str | Path | None = None, drive: bool = False) -> Path:
+    """The SSP file of family ``fmus`` in the FMU folder ``folder`` (default: :func:`fmus_dir`), with the
+    drive in the loop if ``drive``; UsageError names the allowed families."""
     try:
-        return fmus_dir(folder) / FAMILIES[fmus]
+        path = fmus_dir(folder) / FAMILIES[fmus]
     except KeyError:
         raise UsageError(f"fmus = {fmus!r} is invalid: {allowed_are(fmus, FAMILIES)}") from None
+    if drive and not with_drive(fmus):
+        raise UsageError(f"drive = true is invalid with fmus = {fmus!r}: allowed is fmus = \"native\" or \"fmi3\" "
+                         "(the families with the drive FMU TAPMP_Drive), or drive = false")
+    return path.with_name(DRIVE_SSP) if drive else path
 
 
-def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None) -> Path:
+def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None, drive: bool = False) -> Path:
     """``--ssp`` if given (UsageError if it is a folder), else the built SSP of family ``fmus`` in
-    ``folder`` (--fmus-dir, default :func:`fmus_dir`); FamilyNotBuilt if it is missing."""
+    ``folder`` (--fmus-dir, default :func:`fmus_dir`), with the drive if ``drive``; FamilyNotBuilt if it is
+    missing."""
     if ssp:
         if Path(ssp).is_dir():
             inside = [p for p in (Path(ssp) / "TAPMP.ssp", Path(ssp) / FAMILIES[fmus]) if p.is_file()]
@@ -79,7 +92,7 @@ def resolve_ssp(ssp: str | None, fmus: str, folder: str | Path | None = None) ->
             raise UsageError(f"--ssp = {ssp!r} is a folder: allowed is an SSP file (a zip archive holding "
                              f"SystemStructure.ssd and the FMUs){hint}")
         return Path(ssp)
-    path = family_ssp(fmus, folder)
+    path = family_ssp(fmus, folder, drive)
     if not path.is_file():
         raise FamilyNotBuilt(f"the {fmus} FMUs are not built ({path} does not exist): build them with "
                              f"`bash build_fmus.sh` from the repository root, or `tapmp build --out DIR` "

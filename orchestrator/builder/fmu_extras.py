@@ -29,7 +29,7 @@ from xml.etree import ElementTree as ET
 
 from tapmp.interface import (CONTROLLER, DEFAULT_EXPERIMENT, ELEMENT, INITIAL_STATE, PLANT, TRAJECTORY, UNITS, VARIABLES,
                              allowed_text)
-from tapmp.models import CLOCKED, base_models, record
+from tapmp.models import CLOCKED, DRIVE, record, system_models
 from tapmp.records import CLOCK_NAME
 from tapmp.params import SERVO_STEP
 from tapmp import laws
@@ -108,7 +108,8 @@ def closed_loop_stimulus(steps: int = REFERENCE_STEPS, h: float = SERVO_STEP) ->
     t_k = k h [s], k = 0 ... steps, in the paper's closed loop from the FMUs' defaults in the
     Gauss-Seidel ordering (controller, plant, trajectory; tapmp.closed_loop): the controller
     the reference and the measurement at t_k, the plant the command of the step from t_k. The
-    plant's last row repeats its command (no step follows it)."""
+    plant's last row repeats its command (no step follows it); the drive's inputs are the plant's of this loop
+    (the controller's commands)."""
     from tapmp.control import ControllerModel, Gains, ModalGains
     from tapmp.params import GAIN_PRESETS, ModelParams
     from tapmp.plant import PlantConfig, PlantModel
@@ -141,6 +142,7 @@ def closed_loop_stimulus(steps: int = REFERENCE_STEPS, h: float = SERVO_STEP) ->
         q, dq = plant.measured_positions(), plant.joint_velocities()
     rows[CONTROLLER].append((steps * h, *ref, *q, *dq))
     rows[PLANT].append((steps * h, *F))
+    rows[DRIVE] = list(rows[PLANT])  # the drive's inputs are the controller's commands
     return rows
 
 
@@ -288,7 +290,7 @@ def diagram_svg(model: str) -> bytes:
     """documentation/diagram.svg: one box per model of the registry (tapmp.models), left to right in
     signal-flow order, ``model`` highlighted, with forward arrows between neighbours; the feedback arrow
     and the signal labels of the TAPMP loop are the template's own."""
-    models = base_models()
+    models = system_models(model if record(model).optional else "")  # the drive's page shows its own loop
     boxes, arrows, labels = [], [], []
     for i, r in enumerate(models):
         x = 20 + BOX_PITCH * i

@@ -2,7 +2,8 @@
 vendor annotations of its DefaultExperiment (``tapmp export`` writes them too). Reading an SSP
 is orchestrator.engine.ssd.
 
-The connections come from ``tapmp.interface.CONNECTIONS``; fmpy's SSD reader
+The connections come from ``tapmp.interface.connections`` (the default system's, or with an optional
+model such as the drive inserted); fmpy's SSD reader
 (``fmpy.ssp.ssd.read_ssd``) validates the file against the SSP 1.0 schema.
 """
 
@@ -10,7 +11,8 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from tapmp.interface import CONNECTIONS, ELEMENT, FMU_NAMES, UNITS, VARIABLES
+from tapmp.interface import ELEMENT, UNITS, VARIABLES, connections
+from tapmp.models import system_models
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -81,18 +83,22 @@ FMI3_NOTE = ("The TAPMP closed loop of FMI 3.0 FMUs. OMSimulator 3.0.0: run it w
              "after it passes the outputs on to the inputs: the outputs are equal in both.")
 
 
-def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP, description: str | None = None) -> bytes:
+def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP, description: str | None = None,
+                     extra: str = "") -> bytes:
     """The SystemStructure.ssd document of the three-FMU closed loop, run from 0 to
     ``stop_time`` [s] at the fixed communication step ``step`` [s] (given for OMSimulator and
-    libcosim in their vendor annotations); ``description``: the SSD's own (what an importer must know)."""
+    libcosim in their vendor annotations); ``description``: the SSD's own (what an importer must know);
+    ``extra``: an optional model inserted into the loop (tapmp.models.ModelRecord.optional, the drive)."""
+    models = tuple(r.name for r in system_models(extra))
     root = ET.Element(qname(SSD, "SystemStructureDescription"), version="1.0", name="TAPMP")
     if description:
         root.set("description", description)
+    flow = " -> ".join(ELEMENT[m] for m in models if m != models[0])  # the trajectory feeds the loop
     system = ET.SubElement(root, qname(SSD, "System"), name="TAPMP",
-                           description="TAPMP closed loop: trajectory -> controller -> plant -> controller")
+                           description=f"TAPMP closed loop: {ELEMENT[models[0]]} -> {flow} -> controller")
     elements = ET.SubElement(system, qname(SSD, "Elements"))
     used_units = set()
-    for model in FMU_NAMES:
+    for model in models:
         comp = ET.SubElement(elements, qname(SSD, "Component"), name=ELEMENT[model],
                              type="application/x-fmu-sharedlibrary", source=f"resources/{model}.fmu")
         connectors = ET.SubElement(comp, qname(SSD, "Connectors"))
@@ -103,7 +109,7 @@ def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP, descripti
             ET.SubElement(c, qname(SSC, "Real"), unit=v.unit)
             used_units.add(v.unit)
     conns = ET.SubElement(system, qname(SSD, "Connections"))
-    for src, src_var, dst, dst_var in CONNECTIONS:
+    for src, src_var, dst, dst_var in connections(extra):
         ET.SubElement(conns, qname(SSD, "Connection"), startElement=ELEMENT[src], startConnector=src_var,
                       endElement=ELEMENT[dst], endConnector=dst_var)
     units = ET.SubElement(root, qname(SSD, "Units"))
@@ -116,14 +122,14 @@ def system_structure(stop_time: float = 2.5, step: float = SERVO_STEP, descripti
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def write_ssp(path: Path, fmus: dict, description: str | None = None) -> Path:
-    """Write the SSP archive to ``path`` with the FMUs given by model name (``description``: the SSD's);
-    atomic."""
+def write_ssp(path: Path, fmus: dict, description: str | None = None, extra: str = "") -> Path:
+    """Write the SSP archive to ``path`` with the FMUs given by model name (``description``: the SSD's;
+    ``extra``: the optional model inserted, see :func:`system_structure`); atomic."""
     path = Path(path)
     tmp = path.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("SystemStructure.ssd", system_structure(description=description))
-        for model in FMU_NAMES:
+        z.writestr("SystemStructure.ssd", system_structure(description=description, extra=extra))
+        for model in (r.name for r in system_models(extra)):
             z.write(fmus[model], f"resources/{model}.fmu")
     tmp.replace(path)
     return path

@@ -3,6 +3,7 @@ response, margins, poles; with --worst-case the worst margins over poses and a p
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from ..errors import UsageError
@@ -33,6 +34,9 @@ def cmd_check(args) -> int:
     scenario = load(scenario_file(args.scenario), args.set)
     report = check(scenario)
     print(f"{scenario.name}: {report.summary()}")
+    if scenario.drive is not None:  # the FMI-free model has no drive: say so beside the verdict
+        print("note: the check's loop has no drive: the delay and current loop of drive = true are not in it "
+              "(docs/analysis.md, \"With a drive in the loop\")", file=sys.stderr)
     if args.eigenvalues:
         for z in report.eigenvalues:
             print(f"  {z.real:+.6f} {z.imag:+.6f}j   |z| = {abs(z):.6f}")

@@ -81,9 +81,10 @@ def build_cross_check(out: Path, platforms, log) -> int:
     import tempfile
     from ..builder.build_native import build_native
     from ..builder.fmu_extras import cross_check_tree
+    from tapmp.interface import FMU_NAMES
     with tempfile.TemporaryDirectory(prefix="tapmp_cross_check_") as tmp:
         native = build_native(Path(tmp), families=("fmi2",), platforms=platforms, log=log)
-        fmus = {m: p for m, p in native["fmi2"].items() if m != "ssp"}
+        fmus = {m: native["fmi2"][m] for m in FMU_NAMES}  # the default system's FMUs
         for folder in cross_check_tree(fmus, out):
             print(f"wrote {folder}", flush=True)
     return 0

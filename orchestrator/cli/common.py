@@ -59,10 +59,13 @@ def study_file(name: str) -> str:
     return named_file(name, "studies")
 
 
-def ssp_of(args, scenario=None) -> Path:
-    """--ssp, else the SSP of --fmus, else of the scenario's ``fmus`` (default native)."""
+def ssp_of(args, scenario=None, drive: bool | None = None) -> Path:
+    """--ssp, else the SSP of --fmus, else of the scenario's ``fmus`` (default native); with the drive in the
+    loop if ``drive``, by default if the scenario has it."""
     fmus = args.fmus or (scenario.fmus if scenario is not None else DEFAULT_FAMILY)
-    return resolve_ssp(args.ssp, fmus, getattr(args, "fmus_dir", None))
+    if drive is None:
+        drive = scenario is not None and scenario.drive is not None
+    return resolve_ssp(args.ssp, fmus, getattr(args, "fmus_dir", None), drive)
 
 
 def record_every(value) -> int:

@@ -75,7 +75,8 @@ def cmd_study(args) -> int:
         case_list = cases(study, max_cases)  # every case validated before a cluster starts
     if study.keep_results and not study.tune:  # else each case deletes its result file once scored
         check_output_size([study.base_scenario()] * len(case_list), out, study.name, args.workers or 1)
-    ssp = ssp_of(args)  # after the cases (a study file's error first), before starting a cluster
+    # after the cases (a study file's error first), before starting a cluster; the drive's SSP if the base has it
+    ssp = ssp_of(args, drive=study.base_scenario().drive is not None)
     if not ssp.exists():
         raise StudyError(f"SSP file {ssp} does not exist: build the FMUs first (bash build_fmus.sh, "
                          "or tapmp build) or pass --ssp")

@@ -155,8 +155,8 @@ def exported_ssp(scenario: Scenario, source_ssp: Path) -> dict[str, bytes]:
 def start_values(scenario: Scenario) -> list[tuple[str, str]]:
     """The scenario's parameters as (``element.variable``, value text) pairs: the
     ``--start-values`` of ``fmpy simulate`` for the container FMU TAPMP_ClosedLoop.fmu."""
-    from tapmp.interface import ELEMENT, VARIABLES
-    kinds = {f"{ELEMENT[m]}.{v.name}": v.type for m in VARIABLES for v in VARIABLES[m]}
+    from tapmp.models import built_models
+    kinds = {f"{r.element}.{v.name}": v.type for r in built_models() for v in r.variables}  # the drive's too
     return [(f"{element}.{name}", value_text(kinds.get(f"{element}.{name}", "Real"), value))
             for element, table in scenario.parameters().items() for name, value in table.items()]
 

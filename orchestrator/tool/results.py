@@ -104,7 +104,7 @@ def run_options(scenario: Scenario) -> RunOptions:
     connection start, event mode and open inputs, the TAPMP roles and tables, the platform envelope
     as the output check, and the plant as Model Exchange with plant_interface = "me"."""
     return RunOptions(start_time=scenario.start_time, step_size=scenario.step, ordering=scenario.ordering,
-                      order=scenario.order, clock=scenario.clock, connection_start=scenario.connection_start,
+                      order=scenario.step_order(), clock=scenario.clock, connection_start=scenario.connection_start,
                       event_mode=scenario.event_mode, open_inputs=scenario.open_inputs, check=envelope(scenario),
                       roles=ROLES, other_tables=SCENARIO_TABLES,
                       model_exchange=("plant",) if scenario.plant_interface == "me" else ())

@@ -22,7 +22,8 @@ Tables: [gain_overrides] (Lambda_p, Lambda_v, b, D, K_T as a
 number or a list of three), [trajectory], [plant] and [controller] with the
 parameters of the respective FMU (names as in its modelDescription.xml), and
 [limits] (the divergence envelope, see LIMITS), [mismatch] (the controller's model
-error, see MISMATCH_RANGE and docs/disturbances.md).
+error, see MISMATCH_RANGE and docs/disturbances.md). drive = true (or a [drive] table of the drive's
+settings, DRIVE_PARAMS) puts the servo drive TAPMP_Drive between controller and plant (docs/native-fmus.md).
 """
 
 import copy
@@ -41,14 +42,16 @@ from tapmp.control import Gains, ModalGains
 from tapmp.errors import ModelInputError, suggestion
 from tapmp import cmodel
 # ORDERINGS: the model's (tapmp.closed_loop's), which the master's own (engine.schedule) equals (a test)
-from tapmp.interface import CONTROLLER, ORDERINGS, PLANT, TRAJECTORY, VARIABLES
+from tapmp.interface import (CONTROLLER, DRIVE_VARS, ELEMENT, ORDERINGS, PLANT, TRAJECTORY, VARIABLES, allowed_text,
+                             step_order)
+from tapmp.models import DRIVE
 from tapmp.laws import C_IDS
 from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
 from ..engine.clocks import CLOCKS, nanoseconds_problem
-from ..builder.families import FAMILIES
+from ..builder.families import FAMILIES, with_drive
 from ..engine.schedule import CONNECTION_STARTS
 from ..errors import UserError
 from .folders import RESULT_FORMATS
@@ -88,6 +91,10 @@ SECTION_PARAMS = {
     "controller": {v.name: v for v in VARIABLES[CONTROLLER] if v.causality == "parameter"
                    and not v.name[:-1] in GAIN_NAMES and v.name not in ("law", "T_s")},
 }
+# drive = true, or a [drive] table of these settings: the servo drive between controller and plant
+# (TAPMP_Drive, in the SSP TAPMP_Drive.ssp of the native families), stepped Gauss-Seidel in DRIVE_ORDER
+DRIVE_PARAMS = {v.name: v for v in DRIVE_VARS if v.causality == "parameter"}
+DRIVE_ORDER = step_order(DRIVE)  # controller, drive, plant, trajectory
 # Set from the scenario's own keys, never in [controller]: the controller samples once per step.
 _FROM_SCENARIO = {"law": "law", "T_s": "step"}
 # The largest integer setting: an FMI Integer (int32), and for record_every far more steps than any run
@@ -157,6 +164,24 @@ def _section(table: dict, info) -> dict:
         if allowed[k].type == "Integer":  # before the value reaches C (fmi2Integer is an int32)
             require(-MAX_INT - 1 <= out[k] <= MAX_INT, f"{section}.{k} = {v!r} is invalid: allowed is an FMI "
                     f"Integer, from {-MAX_INT - 1} to {MAX_INT}")
+    return out
+
+
+def _drive(value) -> dict | None:
+    """drive = true (the drive at its defaults), false (no drive) or a [drive] table of its settings (the drive
+    with them): None (no drive) or {setting: value}, each within its range."""
+    if value is None or value is False:
+        return None
+    if value is True:
+        return {}
+    require(isinstance(value, dict), f"drive = {value!r} is invalid: allowed is true, false or a [drive] table of "
+            f"the drive's settings ({', '.join(DRIVE_PARAMS)})")
+    out = {}
+    for k, v in value.items():
+        known(k, DRIVE_PARAMS, "drive.")
+        var = DRIVE_PARAMS[k]
+        out[k] = check_type(f"drive.{k}", v, int if var.type == "Integer" else float)
+        require(var.min <= out[k] <= var.max, f"drive.{k} = {v!r} is invalid: allowed is {allowed_text(var)}")
     return out
 
 
@@ -257,6 +282,8 @@ class Scenario:
     # FMI 3.0 Event Mode: FMUs with hasEventMode get eventModeUsed; the master handles their time events and
     # ticks their input clocks (orchestrator.engine.master)
     event_mode: bool = False
+    # the servo drive between controller and plant: None (none) or its settings ({} = its defaults)
+    drive: Annotated[dict | None, BeforeValidator(_drive)] = None
     trajectory: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
     plant: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
     controller: Annotated[dict, BeforeValidator(_section)] = field(default_factory=dict)
@@ -327,7 +354,15 @@ class Scenario:
                 ctrl[f"{name}{i}"] = v
         if "L_1" in self.controller and "L_1" not in traj:
             traj["L_1"] = self.controller["L_1"]  # q_d is the controller's view of the reference
-        return {"trajectory": traj, "controller": ctrl, "plant": plant, **copy.deepcopy(self.elements)}
+        drive = {ELEMENT[DRIVE]: dict(self.drive)} if self.drive is not None else {}
+        return {"trajectory": traj, "controller": ctrl, "plant": plant, **drive, **copy.deepcopy(self.elements)}
+
+    def step_order(self) -> list | None:
+        """The Gauss-Seidel step order: ``order``, else with the drive DRIVE_ORDER (the drive steps after the
+        controller and before the plant, which uses its force of the step), else None (the master's own)."""
+        if self.order is None and self.drive is not None and self.ordering == "gauss-seidel":
+            return list(DRIVE_ORDER)
+        return self.order
 
     def plain_models(self):
         """(PlantModel, ControllerModel, TrajectoryParams) with this scenario's parameters,
@@ -488,7 +523,13 @@ def _check_plant_interface(s: Scenario) -> None:
             "tapmp compare --no-noise)")
 
 
-_CROSS_CHECKS = (_check_times, _check_disturbance, _check_models, _check_initial_state, _check_settings, _check_move,
+def _check_drive(s: Scenario) -> None:
+    """The drive is a native FMU: the pythonfmu family has none."""
+    require(s.drive is None or with_drive(s.fmus), f"drive = true is invalid with fmus = {s.fmus!r}: allowed is "
+            "fmus = \"native\" or \"fmi3\" (the families with the drive FMU TAPMP_Drive), or drive = false")
+
+
+_CROSS_CHECKS = (_check_drive, _check_times, _check_disturbance, _check_models, _check_initial_state, _check_settings, _check_move,
                  _check_order, _check_plant_interface)
 
 
@@ -516,12 +557,12 @@ def from_dict(data: dict, source: str = "") -> Scenario:
         elif key in TABLES:
             require(isinstance(value, dict), f"{key} must be a table ([{key}])", ScenarioError)
             kwargs[key] = dict(value)
-        elif key == "order":
+        elif key in ("order", "drive"):  # drive: true, false or a table
             kwargs[key] = value
         elif isinstance(value, dict):  # a table named after an SSP element (checked by the master)
             kwargs.setdefault("elements", {})[key] = dict(value)
         else:
-            names = [*TOP, *sorted(TABLES), "order"]
+            names = [*TOP, *sorted(TABLES), "drive", "order"]
             raise ScenarioError(f"{key} is unknown: allowed are {', '.join(names[:-1])}, order, or a table "
                                 f"named after an SSP element{suggestion(key, names)}")
     if "name" not in kwargs:
