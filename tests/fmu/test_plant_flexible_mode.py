@@ -80,10 +80,11 @@ def forces(n):
 
 def test_the_flexible_plant_fmu_follows_an_independent_solution_of_its_equations(plant_fmu, load_fmu):
     """30 ms (12 periods of the mode) from a tilted, moving start: the FMU (RK4, 10 substeps) equals
-    solve_ivp (DOP853, rtol 1e-12) of the Lagrangian equations to 1e-8 of each signal's range. RK4's
-    phase error per substep, (w h)^5/120 at w h = 2 pi 420 Hz 1e-5 s, summed over 3000 substeps is
-    1e-9 of the mode's swing (3e-10 observed in dZ); the rigid plant (mode off) differs from the
-    reference by more than 1e-3 of the range in dZ: the mode is what is compared."""
+    solve_ivp (DOP853, rtol 1e-12) of the Lagrangian equations to 1e-6 of each signal's range. RK4's
+    phase error per substep, (w h)^5/120 = 1.1e-10 rad at w h = 2 pi 421 Hz 1e-5 s, summed over 3000
+    substeps bounds the mode's error by 3.2e-7 of its swing (1.0e-8 of the range observed in dZ); the
+    rigid plant (mode off) differs from the reference by more than 1e-3 of the range in dZ: the mode
+    is what is compared."""
     n, p = 300, PAPER_MODEL
     start = dict(X0=1e-3, Z0=-2e-3, B0=0.05, dX0=0.01, dZ0=-0.02, dB0=0.1)
     F = forces(n)
@@ -98,7 +99,7 @@ def test_the_flexible_plant_fmu_follows_an_independent_solution_of_its_equations
         ref.append([*y[0:3], *y[4:7]])
     ref = np.array(ref)
     span = ref.max(axis=0) - ref.min(axis=0)
-    assert (np.abs(fmu - ref) <= 1e-8 * span).all(), np.abs(fmu - ref).max(axis=0) / span
+    assert (np.abs(fmu - ref) <= 1e-6 * span).all(), np.abs(fmu - ref).max(axis=0) / span
     assert np.abs(rigid - ref).max(axis=0)[4] > 1e-3 * span[4]
 
 
