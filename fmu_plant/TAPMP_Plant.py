@@ -12,7 +12,8 @@ from tapmp.plant import PlantConfig, PlantModel
 class TAPMP_Plant(TapmpSlave):
     """TAPMP plant: task-space rigid-body dynamics (Eq. 11) with RK4, friction,
     force saturation, mutual pulling and magnetic attraction of adjacent movers, force
-    ripple (cogging) and encoder quantization (docs/disturbances.md)."""
+    ripple (cogging) and encoder quantization (docs/disturbances.md), and an optional flexible
+    mode of the platform in Z (docs/native-fmus.md)."""
 
     VARIABLES = PLANT_VARS
     description = ("Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): "
