@@ -1,5 +1,7 @@
 """FMI adapter of the TAPMP plant: maps FMU variables to tapmp.plant.PlantModel."""
 
+import math
+
 from fmu_common.slave import TapmpSlave, as_float, is_number, require_state
 from tapmp.errors import ModelInputError
 from tapmp.interface import PLANT_VARS
@@ -10,7 +12,8 @@ from tapmp.plant import PlantConfig, PlantModel
 class TAPMP_Plant(TapmpSlave):
     """TAPMP plant: task-space rigid-body dynamics (Eq. 11) with RK4, friction,
     force saturation, mutual pulling and magnetic attraction of adjacent movers, force
-    ripple (cogging) and encoder quantization (docs/disturbances.md)."""
+    ripple (cogging) and encoder quantization (docs/disturbances.md), and an optional flexible
+    mode of the platform in Z (docs/native-fmus.md)."""
 
     VARIABLES = PLANT_VARS
     description = ("Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): "
@@ -36,13 +39,17 @@ class TAPMP_Plant(TapmpSlave):
         self.publish_block(_OUTPUTS, self.model.outputs())
 
     def check_hidden_state(self, hidden):
-        if not (isinstance(hidden, list) and len(hidden) == 7 and all(is_number(v) for v in hidden)):
-            raise ModelInputError("plant state", hidden, "7 numbers (X, Z, B, dX, dZ, dB and the sample count)")
+        if not (isinstance(hidden, list) and len(hidden) == 9 and all(is_number(v) for v in hidden)):
+            raise ModelInputError("plant state", hidden, "9 numbers (X, Z, B, dX, dZ, dB, the sample count and the "
+                                  "flexible mode's z_f, dz_f)")
         values = [as_float(v) for v in hidden]
         require_state("tapmp_plant_state_check", values[:6], values[6], list(self.reals[_STATE_OUTPUTS]))
+        for name, v in zip(("plant state z_f", "plant state dz_f"), values[7:]):
+            if not math.isfinite(v):
+                raise ModelInputError(name, v, "a finite number")
 
     def hidden_state(self):
-        return None if self.model is None else [*self.model.state, self.model.sample]
+        return None if self.model is None else [*self.model.state, self.model.sample, *self.model.flex]
 
     def restore_hidden_state(self, hidden):
         if hidden is None:
@@ -51,6 +58,7 @@ class TAPMP_Plant(TapmpSlave):
         self.setup_model()
         self.model.state = [float(v) for v in hidden[:6]]
         self.model.sample = float(hidden[6])
+        self.model.flex = [float(v) for v in hidden[7:9]]
         self.publish()
 
 

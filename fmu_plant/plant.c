@@ -43,7 +43,7 @@ int model_initial_outputs(tapmp_instance *inst, char *msg, size_t size)
 
 int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg, size_t size)
 {
-    double F[3] = {R(F1), R(F2), R(F3)}, s[6];
+    double F[3] = {R(F1), R(F2), R(F3)}, s[TAPMP_PLANT_STATES];
     tapmp_plant *pl = &inst->m.plant;
     if (!tapmp_plant_step(pl, t, h, F, s)) {
         char value[6 * 40 + 16] = "(", v[40];
@@ -55,7 +55,7 @@ int model_step(tapmp_instance *inst, double t, double h, double out[], char *msg
         return tapmp_invalid_text(msg, size, "plant state (X, Z, B, dX, dZ, dB)", value,
                                   "finite values with |B| < pi/2 rad", 1, t + h);
     }
-    for (int i = 0; i < 6; i++) pl->s[i] = s[i];
+    for (int i = 0; i < TAPMP_PLANT_STATES; i++) pl->s[i] = s[i];
     pl->sample += 1.0;
     tapmp_plant_outputs(pl, out);
     return 1;
@@ -65,12 +65,16 @@ void model_get_hidden(const tapmp_instance *inst, double hidden[])
 {
     for (int i = 0; i < 6; i++) hidden[i] = inst->m.plant.s[i];
     hidden[6] = inst->m.plant.sample;
+    hidden[7] = inst->m.plant.s[6];  /* the flexible mode after the sample count: its index stays 6 */
+    hidden[8] = inst->m.plant.s[7];
 }
 
 void model_set_hidden(tapmp_instance *inst, const double hidden[])
 {
     for (int i = 0; i < 6; i++) inst->m.plant.s[i] = hidden[i];
     inst->m.plant.sample = hidden[6];
+    inst->m.plant.s[6] = hidden[7];
+    inst->m.plant.s[7] = hidden[8];
     publish(inst);
 }
 
@@ -179,10 +183,15 @@ double model_me_next_event_time(const tapmp_instance *inst)
 }
 
 /* Settings Model Exchange cannot honour: the measurement noise is drawn once per communication
- * step, which Model Exchange does not have. */
+ * step, which Model Exchange does not have; the flexible mode's two states are not among the six
+ * continuous states (kept six so that a rigid run's solver sees the same state vector). */
 int model_me_check(const tapmp_instance *inst, char *msg, size_t size)
 {
     char v[40];
+    if (inst->reals[VR_flex_frequency] != 0.0)
+        return tapmp_invalid_text(msg, size, "flex_frequency", tapmp_repr(inst->reals[VR_flex_frequency], v),
+                                  "0 in Model Exchange (the continuous states are the rigid X, Z, B, dX, dZ, dB; the "
+                                  "flexible mode runs in Co-Simulation)", 0, 0.0);
     if (inst->reals[VR_noise_rms] == 0.0) return 1;
     return tapmp_invalid_text(msg, size, "noise_rms", tapmp_repr(inst->reals[VR_noise_rms], v),
                               "0 in Model Exchange (the noise is drawn once per communication step; use "

@@ -7,7 +7,7 @@ typedef struct {
     tapmp_plant plant;
 } ModelData;
 
-#define MODEL_N_HIDDEN 7            /* the state X, Z, B, dX, dZ, dB and the sample count */
+#define MODEL_N_HIDDEN 9            /* the state X, Z, B, dX, dZ, dB, the sample count, z_f, dz_f */
 #define MODEL_N_OUT 15              /* q1..q3, q1_true..q3_true, dq1..dq3, X, Z, B, dX, dZ, dB */
 #define MODEL_OUT_FIRST VR_q1
 /* Model Exchange: the continuous states X, Z, B, dX, dZ, dB (fmi2_api.c, plant.c's model_me_* hooks) */

@@ -116,12 +116,12 @@ def run(plant: PlantModel, controller: ControllerModel, traj: TrajectoryParams,
     pl, tp = plant._pl, _c_trajectory(traj)
     k = 0
     while k < n_steps:
-        pl.s, pl.sample = plant.state, plant.sample
+        pl.s, pl.sample = plant.state + plant.flex, plant.sample
         n = min(len(buf), n_steps - k)
         done = lib.tapmp_loop_run(pl, controller._cp, controller._cg, controller.law, controller.velocity_source,
                                   controller.force_limit, st, controller._clock, tp, L1, t0, k, n, h,
                                   gauss_seidel, pt, rows, error)
-        plant.state, plant.sample = list(pl.s), pl.sample
+        plant.state, plant.flex, plant.sample = list(pl.s)[:6], list(pl.s)[6:], pl.sample
         controller.integral = list(st.integral)
         controller.q_prev = tuple(st.q_prev) if st.has_q_prev else None
         k += done

@@ -20,14 +20,16 @@ from .params import ModelParams
 Mat3 = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
 
 
-def mass_matrix(B: float, p: ModelParams) -> Mat3:
-    """Exact task-space mass matrix M(x) [kg, kg, kg m^2 blocks] (Eq. 12, general m_1, m_3)."""
+def mass_matrix(B: float, p: ModelParams, m_f: float = 0.0) -> Mat3:
+    """Exact task-space mass matrix M(x) [kg, kg, kg m^2 blocks] (Eq. 12, general m_1, m_3); with
+    the flexible mode's modal mass m_f [kg], the platform's rigid part m_p - m_f in M_22 (the part
+    on the mode moves with the platform in X and, a point at its reference point, adds no I_y)."""
     a1, a3 = rotation_column(B, p.L_1)
     m1, m2, m3 = p.m_1, p.m_2, p.m_3
     M11 = p.m_p + m1 + m2 + m3
     M12 = S3 * (m1 - m3)
     M13 = m1 * a1 + m3 * a3
-    M22 = p.m_p + (m1 + m3) / 3.0
+    M22 = (p.m_p - m_f) + (m1 + m3) / 3.0  # m_p - 0.0 is m_p: the rigid model's bits
     M23 = S3 * (m1 * a1 - m3 * a3)
     M33 = p.I_y + m1 * a1 * a1 + m3 * a3 * a3
     return ((M11, M12, M13), (M12, M22, M23), (M13, M23, M33))
@@ -76,13 +78,19 @@ def solve_sym3(M: Mat3, r1: float, r2: float, r3: float) -> tuple[float, float, 
 
 
 def task_acceleration(B: float, dB: float, uX: float, uZ: float, uB: float,
-                      p: ModelParams) -> tuple[float, float, float]:
+                      p: ModelParams, m_f: float = 0.0, f_f: float | None = None) -> tuple[float, float, float]:
     """Forward dynamics (Eq. 11): xdd [m/s^2, m/s^2, rad/s^2] for generalized force u = J^T F.
 
-    Only B and its rate dB [rad/s] enter: M depends on B alone and C has only a B column.
+    Only B and its rate dB [rad/s] enter: M depends on B alone and C has only a B column. With the
+    flexible mode on: its modal mass m_f [kg] leaves M_22 (mass_matrix) and its spring-damper
+    force f_f [N] acts on the platform in Z; the weight stays m_p g (the mode's spring carries
+    m_f g at its static equilibrium).
     """
     cx, cz, cb = coriolis_times(B, dB, dB, p)
-    return solve_sym3(mass_matrix(B, p), uX - cx, uZ - cz - p.m_p * p.g, uB - cb)
+    rZ = uZ - cz - p.m_p * p.g
+    if f_f is not None:
+        rZ += f_f
+    return solve_sym3(mass_matrix(B, p, m_f), uX - cx, rZ, uB - cb)
 
 
 def generalized_force(B: float, dB: float, ddX: float, ddZ: float, ddB: float,

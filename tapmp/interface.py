@@ -160,6 +160,13 @@ _PLANT_CFG_DOC = {
                        "before quantization; 0 = off"),
 }
 
+_FLEX_DOC = {
+    "flex_frequency": ("Hz", "natural frequency of the platform's flexible mode in Z (flex_mass on a spring-damper "
+                             "to the rest of the platform, the platform held still); 0 = off (rigid platform)"),
+    "flex_damping": ("1", "damping ratio of the platform's flexible mode"),
+    "flex_mass": ("kg", "modal mass of the platform's flexible mode: the part of m_p that moves on it (< m_p)"),
+}
+
 PLANT_VARS: tuple[Var, ...] = tuple(
     [Var(f"F{i}", "input", "N", f"force command of motor {i}") for i in (1, 2, 3)]
     + [Var(f"q{i}", "output", "m", f"measured (encoder-quantized) position of motor {i}") for i in (1, 2, 3)]
@@ -176,6 +183,7 @@ PLANT_VARS: tuple[Var, ...] = tuple(
            _CFG.substeps, type="Integer", variability="fixed"),
        Var("noise_seed", "parameter", "", "seed of the measurement noise (the same seed gives the same noise "
            "in every FMU family)", _CFG.noise_seed, type="Integer", variability="fixed")]
+    + [Var(n, "parameter", u, d, getattr(_CFG, n), variability="fixed") for n, (u, d) in _FLEX_DOC.items()]
 )
 
 # Gains act on the command u (command units, K_T F = u); "{i}" is the motor number (tapmp.settings).
@@ -265,6 +273,8 @@ RANGES: dict[str, tuple[float, float]] = {
     # one doStep runs substeps RK4 steps and cannot be interrupted: bounded so that it
     # stays below a millisecond of CPU per step or so
     "substeps": (1, 10000),
+    # the mode's frequency up to 100 kHz: RK4 stays stable for 2 pi f h / substeps < 2.8
+    "flex_frequency": (0.0, 1e5), "flex_damping": (0.0, 10.0), "flex_mass": (0.0, 1e6),
     **settings.ranges(),
     "law": laws.C_RANGE, "velocity_source": (0, 1), "T_s": (1e-9, 1e3),
     "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),

@@ -20,6 +20,9 @@ F1..F3 [N], held over a step. Non-idealities, each switched off by a zero:
 * an external force step on each mover, disturbance_force_i [N] from disturbance_time
   [s] on (held over a step like the command, added after the saturation: it does not go
   through the motor; 0 = off);
+* a flexible mode of the platform in Z (flex_frequency [Hz], 0 = off): a part flex_mass [kg]
+  of the platform's mass m_p on a spring-damper (ratio flex_damping) to the rest of it,
+  deflected by z_f [m] from its static equilibrium (docs/native-fmus.md, "The flexible mode");
 * measurement noise: white Gaussian noise of noise_rms [m] added to each measured
   position before quantization, seeded by noise_seed (the same seed gives the same
   sequence in every FMU family; 0 rms = off);
@@ -70,6 +73,10 @@ class PlantConfig(NamedTuple):
     noise_rms: float = 0.0            # measurement noise, rms per measured position [m], 0 = off
     substeps: int = 1                 # RK4 steps per communication step
     noise_seed: int = 0               # seed of the measurement noise
+    flex_frequency: float = 0.0       # the platform's flexible mode in Z: natural frequency [Hz], 0 = off (rigid)
+    # its damping ratio: 2 %, a lightly damped structural mode (bolted steel and aluminium: 1-5 %)
+    flex_damping: float = 0.02
+    flex_mass: float = 0.5            # its modal mass [kg]: the part of m_p that moves on the mode (< m_p)
 
     def validated(self) -> "PlantConfig":
         """Return self after checking the ranges of the settings table (ModelInputError names the
@@ -133,9 +140,10 @@ class PlantModel:
         self._pl.c = s.c
         self._lib.tapmp_plant_init(self._pl, s.x0.pose, s.x0.rate)
         # a plain list that callers may change in place; it goes into the C struct at each call
-        self.state = list(self._pl.s)  # [X, Z, B, dX, dZ, dB] [m, m, rad, m/s, m/s, rad/s]
+        self.state = list(self._pl.s)[:6]  # [X, Z, B, dX, dZ, dB] [m, m, rad, m/s, m/s, rad/s]
+        self.flex = [0.0, 0.0]  # the flexible mode's deflection z_f [m] and rate [m/s], at rest while it is off
         self.sample = 0.0  # completed steps: the index of the measurement noise
-        self._s_new = ffi.new("double[6]")
+        self._s_new = ffi.new("double[8]")
         self._out = ffi.new("double[15]")
 
     @property
@@ -190,17 +198,30 @@ class PlantModel:
             F3 += A * math.sin(TWO_PI * q[2] / pitch + c.cogging_phase3)
         return F1, F2, F3
 
+    def flex_acceleration(self, z_f: float, dz_f: float) -> float:
+        """The flexible mode's spring-damper force per modal mass a_f = w_f^2 z_f + 2 zeta_f w_f dz_f
+        [m/s^2] at its deflection z_f [m] and rate dz_f [m/s] (w_f = 2 pi flex_frequency)."""
+        w_f = TWO_PI * self.cfg.flex_frequency
+        return w_f * w_f * z_f + 2.0 * self.cfg.flex_damping * w_f * dz_f
+
     def derivatives(self, s, F1: float, F2: float, F3: float):
-        """Right-hand side d/dt (X, Z, B, dX, dZ, dB) for held forces F [N]."""
-        X, Z, B, dX, dZ, dB = s
+        """Right-hand side d/dt (X, Z, B, dX, dZ, dB) for held forces F [N]; for a state of 8 with the
+        flexible mode's z_f, dz_f, d/dt of all 8: the platform's part m_p - m_f in M_22 with the
+        mode's force m_f a_f on Z, and z_f'' = -Z'' - a_f (the mode at rest while it is off)."""
+        X, Z, B, dX, dZ, dB = s[:6]
+        on = self.cfg.flex_frequency > 0.0
+        m_f = self.cfg.flex_mass if on else 0.0
+        a_f = self.flex_acceleration(*s[6:]) if len(s) == 8 else 0.0
         L1 = self.p.L_1
         q = inverse(X, Z, B, L1)
         dq = joint_velocity(B, dX, dZ, dB, L1)
         f1, f2, f3 = self.joint_forces(F1, F2, F3, q, dq)
         a1, a3 = rotation_column(B, L1)
-        ddX, ddZ, ddB = task_acceleration(
-            B, dB, f1 + f2 + f3, S3 * (f1 - f3), a1 * f1 + a3 * f3, self.p)  # J^T F (Eq. 14)
-        return dX, dZ, dB, ddX, ddZ, ddB
+        ddX, ddZ, ddB = task_acceleration(B, dB, f1 + f2 + f3, S3 * (f1 - f3), a1 * f1 + a3 * f3, self.p,
+                                          m_f, m_f * a_f if on else None)  # J^T F (Eq. 14)
+        if len(s) == 6:
+            return dX, dZ, dB, ddX, ddZ, ddB
+        return dX, dZ, dB, ddX, ddZ, ddB, (s[7] if on else 0.0), (-ddZ - a_f if on else 0.0)
 
     def step(self, t: float, h: float, F1: float, F2: float, F3: float) -> None:
         """Advance the state from t to t + h [s] under forces F [N] held over the step
@@ -213,18 +234,19 @@ class PlantModel:
             for name, v in (("F1", F1), ("F2", F2), ("F3", F3)):
                 require_finite(name, v, t)
         s = self._s_new
-        self._pl.s = self.state
+        self._pl.s = self.state + self.flex
         if not self._lib.tapmp_plant_step(self._pl, t, h, (F1, F2, F3), s):
-            raise KinematicDomainError("plant state (X, Z, B, dX, dZ, dB)", tuple(s),
+            raise KinematicDomainError("plant state (X, Z, B, dX, dZ, dB)", tuple(s)[:6],
                                        "finite values with |B| < pi/2 rad", t + h)
-        self.state = list(s)
+        self.state = list(s[0:6])
+        self.flex = list(s[6:8])
         self.sample += 1.0
 
     def outputs(self) -> tuple[float, ...]:
         """The 15 outputs in the FMU's order: measured positions q1..q3 [m] (true + noise of this
         sample, quantized), true positions, motor velocities [m/s], then the state."""
         pl = self._pl
-        pl.s, pl.sample = self.state, self.sample
+        pl.s, pl.sample = self.state + self.flex, self.sample
         self._lib.tapmp_plant_outputs(pl, self._out)
         return tuple(self._out)
 

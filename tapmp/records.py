@@ -87,6 +87,11 @@ def _plant_equations() -> list[tuple[str, str]]:
             ("Saturation", f"|F_i| <= force_limit = {p('force_limit')} N"),
             ("Mutual pulling", f"k_pull = {p('k_pull')} N/m on the change of the gaps q2 - q1 and q3 - q2"),
             ("Encoder", f"q_i (measured) = r round(q_i / r), r = encoder_resolution = {p('encoder_resolution')} m"),
+            ("Flexible mode (extends Eq. 11, 12)",
+             "off while flex_frequency = 0; else a part m_f = flex_mass of the platform's mass m_p moves in Z on a "
+             "spring-damper: Eq. 11 with m_p - m_f in M_22 (Eq. 12), the weight m_p g in G and f_f = m_f a_f added "
+             "to the Z force, z_f'' = -Z'' - a_f, a_f = w_f^2 z_f + 2 zeta_f w_f z_f', w_f = 2 pi flex_frequency, "
+             "zeta_f = flex_damping; z_f [m] the deflection from the static equilibrium, at rest at the start"),
             ("Integration", "RK4, `substeps` = " + p("substeps") + " step(s) per communication step"),
     ]
 
@@ -147,6 +152,7 @@ register(ModelRecord(
 register(ModelRecord(
     name=PLANT, element="plant", variables=PLANT_VARS, dependencies=_plant_dependencies, sources=PLANT_SOURCES,
     source="fmu_plant/plant.c", header="fmu_plant/plant.h", settings_struct="tapmp_plant_settings",
+    settings_relations="plant_flex_check",
     description="Three-axis parallel motion platform (Zhou, Gao, Zhang, Actuators 2024, 13, 166): motor forces "
                 f"in, encoder positions and platform pose out {_NATIVE}",
     what=_plant_what, equations=_plant_equations, icon_label="plant", adapter="fmu_plant/TAPMP_Plant.py",

@@ -17,7 +17,9 @@ takes the loop state at a communication point t to the state at t + h [s]:
   right-rectangle sum of ControllerModel) [m s] and the previous
   encoder sample of the backward-difference velocity [m] (velocity_source = 0);
 * with the ``jacobi`` ordering, the command held from the previous sample [N]
-  (the extra step of delay); ``gauss-seidel`` has only the zero-order hold.
+  (the extra step of delay); ``gauss-seidel`` has only the zero-order hold;
+* with the plant's flexible mode on (flex_frequency > 0), its deflection z_f [m] and
+  rate dz_f [m/s], last.
 
 The Jacobian is taken at the start pose and velocity of the plant, with the
 reference of the start time, the integral at zero and the previous sample one
@@ -178,6 +180,10 @@ class OneStepMap:
         if self.jacobi:
             names += ["F1_held", "F2_held", "F3_held"]
             kinds += ["F_held"] * 3
+        self.flex = self.plant.cfg.flex_frequency > 0.0
+        if self.flex:
+            names += ["z_f", "dz_f"]
+            kinds += ["pose", "rate"]
         self.names = names
         self.scale = np.array([_DELTA[k] for k in kinds])
         self.ref = reference(self.t, self.traj)
@@ -198,6 +204,8 @@ class OneStepMap:
             x += [q[i] - self.h * dq[i] for i in range(3)]
         if self.jacobi:
             x += list(self.ctrl.sample(self.t, self.h, self.ref, q, dq, advance=False)[0])
+        if self.flex:
+            x += list(self.plant.flex)
         return np.array(x, dtype=float)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
@@ -224,6 +232,8 @@ class OneStepMap:
         else:
             ctrl.q_prev = None
         F_held = tuple(float(v) for v in x[k:k + 3]) if self.jacobi else None
+        if self.flex:
+            plant.flex = [float(v) for v in x[-2:]]
         q = plant.measured_positions()
         dq = plant.joint_velocities()
         F = ctrl.sample(self.t, self.h, self.ref, q, dq)[0]
@@ -234,6 +244,8 @@ class OneStepMap:
             out += list(ctrl.q_prev)
         if self.jacobi:
             out += list(F)
+        if self.flex:
+            out += list(plant.flex)
         return np.array(out, dtype=float), np.array(y, dtype=float)
 
     def jacobian(self, x0: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ long tapmp_loop_run(tapmp_plant *pl, const tapmp_params *p, const tapmp_gains *g
                     long k0, long n, double h, int gauss_seidel, tapmp_loop_point *pt,
                     double *rows, int *error)
 {
-    double out[12], plant_out[15], s_new[6], arg, kk, steps, missed;
+    double out[12], plant_out[15], s_new[TAPMP_PLANT_STATES], arg, kk, steps, missed;
     *error = TAPMP_LOOP_OK;
     for (long i = 0; i < n; i++) {
         long k = k0 + i;

@@ -196,6 +196,7 @@ void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0
         pl->s[i] = pose0[i];
         pl->s[3 + i] = rate0[i];
     }
+    pl->s[6] = pl->s[7] = 0.0;  /* the flexible mode starts at rest */
     tapmp_inverse(pose0[0], pose0[1], pose0[2], pl->p.L_1, q);
     pl->gap12_0 = q[1] - q[0];
     pl->gap23_0 = q[2] - q[1];
@@ -213,15 +214,17 @@ static void attraction(double force, double gap, double d12, double d23, double 
 }
 
 /* plant.PlantModel._make_rhs: the fused right-hand side (Eq. 2-4, 11-14 with friction
- * pulling, attraction and cogging), forces already saturated */
-void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6])
+ * pulling, attraction and cogging, and the flexible mode in Z), forces already saturated */
+void tapmp_plant_rhs(const tapmp_plant *pl, const double s[8], const double F[3], double ds[8])
 {
     const tapmp_params *p = &pl->p;
     const tapmp_plant_config *c = &pl->c;
     double L1 = p->L_1, m1 = p->m_1, m3 = p->m_3, mpg = p->m_p * p->g;
     double M11 = p->m_p + p->m_1 + p->m_2 + p->m_3;
     double M12 = S3 * (m1 - m3);
-    double M22 = p->m_p + (m1 + m3) / 3.0;
+    int flex = c->flex_frequency > 0.0;
+    double m_f = flex ? c->flex_mass : 0.0;               /* the part of m_p on the mode */
+    double M22 = (p->m_p - m_f) + (m1 + m3) / 3.0;        /* m_p - 0.0 is m_p: rigid bits unchanged */
     double X = s[0], Z = s[1], B = s[2], dX = s[3], dZ = s[4], dB = s[5];
     double F1 = F[0], F2 = F[1], F3 = F[2], vs = c->v_s;
     double cB = cos(B), sB = sin(B);
@@ -263,6 +266,12 @@ void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3]
     double w3 = m3 * d3 * dB * dB;
     double r1 = F1 + F2 + F3 - (w1 + w3);                 /* J^T F - C xd - G (Eq. 11, 14) */
     double r2 = S3 * (F1 - F3) - S3 * (w1 - w3) - mpg;
+    double a_f = 0.0;                                     /* the mode's spring-damper force / m_f */
+    if (flex) {
+        double w_f = TWO_PI * c->flex_frequency;
+        a_f = w_f * w_f * s[6] + 2.0 * c->flex_damping * w_f * s[7];
+        r2 += m_f * a_f;                                  /* its reaction on the platform in Z */
+    }
     double r3 = a1 * F1 + a3 * F3 - (a1 * w1 + a3 * w3);
     double M13 = m1 * a1 + m3 * a3;                       /* exact mass matrix (Eq. 12) */
     double M23 = S3 * (m1 * a1 - m3 * a3);
@@ -280,6 +289,8 @@ void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3]
     ds[3] = (A11 * r1 + A12 * r2 + A13 * r3) / det;
     ds[4] = (A12 * r1 + A22 * r2 + A23 * r3) / det;
     ds[5] = (A13 * r1 + A23 * r2 + A33 * r3) / det;
+    ds[6] = flex ? s[7] : 0.0;                            /* the mode: z_f'' = -Z'' - a_f */
+    ds[7] = flex ? -ds[4] - a_f : 0.0;
 }
 
 static double saturate(double F, double lim)
@@ -289,7 +300,7 @@ static double saturate(double F, double lim)
 }
 
 /* plant.PlantModel.step: classic RK4 with `substeps` steps */
-int tapmp_plant_step(const tapmp_plant *pl, double t0, double h, const double F_in[3], double s_new[6])
+int tapmp_plant_step(const tapmp_plant *pl, double t0, double h, const double F_in[3], double s_new[8])
 {
     double F[3] = {F_in[0], F_in[1], F_in[2]};
     double lim = pl->c.force_limit;
@@ -300,20 +311,21 @@ int tapmp_plant_step(const tapmp_plant *pl, double t0, double h, const double F_
         for (int i = 0; i < 3; i++) F[i] += d[i];  /* an external force: not limited by the motor */
     int n = pl->c.substeps;
     double dt = h / n, hdt = 0.5 * dt, dt6 = dt / 6.0;
-    double s[6], k1[6], k2[6], k3[6], k4[6], t[6];
-    for (int i = 0; i < 6; i++) s[i] = pl->s[i];
+    enum { N = TAPMP_PLANT_STATES };
+    double s[N], k1[N], k2[N], k3[N], k4[N], t[N];
+    for (int i = 0; i < N; i++) s[i] = pl->s[i];
     for (int step = 0; step < n; step++) {
         tapmp_plant_rhs(pl, s, F, k1);
-        for (int i = 0; i < 6; i++) t[i] = s[i] + hdt * k1[i];
+        for (int i = 0; i < N; i++) t[i] = s[i] + hdt * k1[i];
         tapmp_plant_rhs(pl, t, F, k2);
-        for (int i = 0; i < 6; i++) t[i] = s[i] + hdt * k2[i];
+        for (int i = 0; i < N; i++) t[i] = s[i] + hdt * k2[i];
         tapmp_plant_rhs(pl, t, F, k3);
-        for (int i = 0; i < 6; i++) t[i] = s[i] + dt * k3[i];
+        for (int i = 0; i < N; i++) t[i] = s[i] + dt * k3[i];
         tapmp_plant_rhs(pl, t, F, k4);
-        for (int i = 0; i < 6; i++) s[i] = s[i] + dt6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        for (int i = 0; i < N; i++) s[i] = s[i] + dt6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     }
-    for (int i = 0; i < 6; i++) s_new[i] = s[i];
-    return fabs(s[2]) < HALF_PI && isfinite(s[0] + s[1] + s[3] + s[4] + s[5]);
+    for (int i = 0; i < N; i++) s_new[i] = s[i];
+    return fabs(s[2]) < HALF_PI && isfinite(s[0] + s[1] + s[3] + s[4] + s[5] + s[6] + s[7]);
 }
 
 /* The right-hand side on the forces tapmp_plant_step integrates with: saturated, then the force
@@ -322,13 +334,15 @@ int tapmp_plant_step(const tapmp_plant *pl, double t0, double h, const double F_
 void tapmp_plant_derivatives(const tapmp_plant *pl, double t, const double s[6], const double F_in[3], double ds[6])
 {
     double F[3] = {F_in[0], F_in[1], F_in[2]};
+    double s8[TAPMP_PLANT_STATES] = {s[0], s[1], s[2], s[3], s[4], s[5], 0.0, 0.0}, ds8[TAPMP_PLANT_STATES];
     double lim = pl->c.force_limit;
     const double *d = pl->c.disturbance_force;
     if (lim > 0.0)
         for (int i = 0; i < 3; i++) F[i] = saturate(F[i], lim);
     if ((d[0] != 0.0 || d[1] != 0.0 || d[2] != 0.0) && t >= pl->c.disturbance_time)
         for (int i = 0; i < 3; i++) F[i] += d[i];
-    tapmp_plant_rhs(pl, s, F, ds);
+    tapmp_plant_rhs(pl, s8, F, ds8);
+    for (int i = 0; i < 6; i++) ds[i] = ds8[i];
 }
 
 /* plant.PlantModel.measured_positions, joint_positions, joint_velocities and the state */
@@ -727,6 +741,16 @@ static int trajectory_domain_check(const tapmp_trajectory_settings *s, const cha
     if (!(fabs(s->B_offset) + s->B_amplitude < HALF_PI))
         return offender("B_amplitude", s->B_amplitude, "|B_offset| + B_amplitude < pi/2 rad (kinematic domain)", 3,
                         name, value, allowed);
+    return 0;
+}
+
+/* The plant's one relation between settings: the flexible mode's modal mass is a part of the
+ * platform's mass (tapmp_settings.h calls it after the ranges). */
+static int plant_flex_check(const tapmp_plant_settings *s, const char **name, double *value, const char **allowed)
+{
+    if (s->c.flex_frequency > 0.0 && !(s->c.flex_mass < s->p.m_p))
+        return offender("flex_mass", s->c.flex_mass, "flex_mass < m_p (the modal mass is a part of the platform's "
+                        "mass) while flex_frequency > 0", 1, name, value, allowed);
     return 0;
 }
 

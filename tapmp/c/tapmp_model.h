@@ -53,14 +53,21 @@ typedef struct {
     double noise_rms;           /* measurement noise rms per measured position [m] */
     int substeps;               /* RK4 steps per communication step */
     int noise_seed;             /* seed of the measurement noise */
+    double flex_frequency;      /* the platform's flexible mode in Z: natural frequency [Hz], 0 = rigid */
+    double flex_damping;        /* its damping ratio [1] */
+    double flex_mass;           /* its modal mass [kg], the part of m_p that moves on the mode */
 } tapmp_plant_config;
 
-/* The plant: parameters, settings, reference gaps and the state (X, Z, B, dX, dZ, dB). */
+/* The plant's state: X, Z, B, dX, dZ, dB, then the flexible mode's deflection z_f [m] and rate
+ * dz_f [m/s] (at rest, 0, while flex_frequency = 0). */
+#define TAPMP_PLANT_STATES 8
+
+/* The plant: parameters, settings, reference gaps and the state (X, Z, B, dX, dZ, dB, z_f, dz_f). */
 typedef struct {
     tapmp_params p;
     tapmp_plant_config c;
     double gap12_0, gap23_0;
-    double s[6];
+    double s[8];                /* TAPMP_PLANT_STATES (cffi reads no macro here) */
     double sample;              /* completed steps: the index of the measurement noise */
 } tapmp_plant;
 
@@ -171,15 +178,17 @@ TAPMP_LINKAGE double tapmp_quantize(double q, double resolution);
 TAPMP_LINKAGE double tapmp_noise_sample(int seed, double sample, int motor);
 /* Set the initial state, the reference gaps of the pulling law and the sample count. */
 TAPMP_LINKAGE void tapmp_plant_init(tapmp_plant *pl, const double pose0[3], const double rate0[3]);
-/* Right-hand side d/dt (X, Z, B, dX, dZ, dB) for saturated, held forces F [N]. */
-TAPMP_LINKAGE void tapmp_plant_rhs(const tapmp_plant *pl, const double s[6], const double F[3], double ds[6]);
+/* Right-hand side d/dt (X, Z, B, dX, dZ, dB, z_f, dz_f) for saturated, held forces F [N]. */
+TAPMP_LINKAGE void tapmp_plant_rhs(const tapmp_plant *pl, const double s[8], const double F[3],
+                                   double ds[8]);
 /* Advance from t over h [s] with RK4 and `substeps`; F [N] is saturated here, then the force
- * step is added from disturbance_time on. The new state is written to s_new; returns 1 if it is
- * finite with |B| < pi/2, else 0 (state untouched). */
-TAPMP_LINKAGE int tapmp_plant_step(const tapmp_plant *pl, double t, double h, const double F[3], double s_new[6]);
-/* Model Exchange: d/dt (X, Z, B, dX, dZ, dB) at t [s] in the state s for the commanded forces F_in [N],
+ * step is added from disturbance_time on. The new state (8 values) is written to s_new; returns 1 if
+ * it is finite with |B| < pi/2, else 0 (state untouched). */
+TAPMP_LINKAGE int tapmp_plant_step(const tapmp_plant *pl, double t, double h, const double F[3],
+                                   double s_new[8]);
+/* Model Exchange: d/dt (X, Z, B, dX, dZ, dB) at t [s] in the rigid state s for the commanded forces F_in [N],
  * saturated and with the force step from disturbance_time on, as tapmp_plant_step applies them over
- * a step starting at t. */
+ * a step starting at t (the flexible mode at rest: Model Exchange refuses flex_frequency > 0). */
 TAPMP_LINKAGE void tapmp_plant_derivatives(const tapmp_plant *pl, double t, const double s[6], const double F_in[3],
                                            double ds[6]);
 /* Outputs in the FMU's order: q1..q3 (measured: true + noise of this sample, quantized), q_true,

@@ -73,7 +73,7 @@ def c_config(cfg: PlantConfig):
         cfg.force_limit, cfg.k_pull, cfg.attraction_force, cfg.attraction_gap, cfg.cogging_amplitude,
         cfg.cogging_pitch, (cfg.cogging_phase1, cfg.cogging_phase2, cfg.cogging_phase3),
         (cfg.disturbance_force1, cfg.disturbance_force2, cfg.disturbance_force3), cfg.disturbance_time,
-        cfg.noise_rms, cfg.substeps, cfg.noise_seed))
+        cfg.noise_rms, cfg.substeps, cfg.noise_seed, cfg.flex_frequency, cfg.flex_damping, cfg.flex_mass))
 
 
 def c_gains(g: Gains, m: ModalGains = ModalGains()):
@@ -151,13 +151,13 @@ class Native:
         return pl
 
     def plant_rhs(self, pl, s, F):
-        ds = FFI.new("double[6]")
+        ds = FFI.new("double[8]")
         self.lib.tapmp_plant_rhs(pl, s, F, ds)
         return tuple(ds)
 
     def plant_step(self, pl, h, F, t=0.0):
         """(ok, new state) of the step from t [s] over h [s]"""
-        s_new = FFI.new("double[6]")
+        s_new = FFI.new("double[8]")
         ok = self.lib.tapmp_plant_step(pl, t, h, F, s_new)
         return ok, tuple(s_new)
 
@@ -322,7 +322,7 @@ def random_trajectory(rng) -> TrajectoryParams:
 
 # Plant non-idealities: each switched on alone, all together, or none (paper values +-20 %;
 # attraction and cogging at random levels; "repulsion" is k_pull < 0, a negative stiffness).
-PLANT_VARIANTS = ("ideal", "friction", "pulling", "repulsion", "attraction", "cogging", "force_limit", "all")
+PLANT_VARIANTS = ("ideal", "friction", "pulling", "repulsion", "attraction", "cogging", "force_limit", "flex", "all")
 
 
 def random_config(rng, variant: str, substeps: int = 1) -> PlantConfig:
@@ -331,6 +331,7 @@ def random_config(rng, variant: str, substeps: int = 1) -> PlantConfig:
     limited = variant in ("force_limit", "all")
     attracting = variant in ("attraction", "all")
     cogging = variant in ("cogging", "all")
+    flex = variant in ("flex", "all")
     d = PlantConfig()
     k_pull = d.k_pull * u(rng, 0.8, 1.2) if pulling else (-u(rng, 100.0, 5000.0) if variant == "repulsion" else 0.0)
     return IDEAL._replace(
@@ -355,6 +356,9 @@ def random_config(rng, variant: str, substeps: int = 1) -> PlantConfig:
         disturbance_force3=u(rng, -20.0, 20.0) if variant == "all" else 0.0,
         noise_rms=u(rng, 1e-8, 1e-6) if variant == "all" else 0.0,
         noise_seed=int(rng.integers(0, 2**31)),
+        # the modal mass below 0.8 m_p of the paper: random_params scales m_p by at least 0.8
+        flex_frequency=u(rng, 50.0, 2000.0) if flex else 0.0, flex_damping=u(rng, 0.0, 0.3),
+        flex_mass=u(rng, 0.01, 0.8) * PAPER_MODEL.m_p,
         substeps=substeps)
 
 
@@ -378,14 +382,14 @@ def reference_step(plant: PlantModel, t: float, h: float, F):
     f = unsaturated.derivatives
     n = c.substeps
     dt = h / n
-    s = list(plant.state)
+    s = plant.state + plant.flex
     for _ in range(n):
         k1 = f(s, *F)
         k2 = f([x + 0.5 * dt * k for x, k in zip(s, k1)], *F)
         k3 = f([x + 0.5 * dt * k for x, k in zip(s, k2)], *F)
         k4 = f([x + dt * k for x, k in zip(s, k3)], *F)
         s = [x + dt / 6.0 * (a + 2.0 * b + 2.0 * cc + e) for x, a, b, cc, e in zip(s, k1, k2, k3, k4)]
-    return int(abs(s[2]) < 0.5 * math.pi and math.isfinite(s[0] + s[1] + s[3] + s[4] + s[5])), tuple(s)
+    return int(abs(s[2]) < 0.5 * math.pi and math.isfinite(s[0] + s[1] + s[3] + s[4] + s[5] + s[6] + s[7])), tuple(s)
 
 
 def reference_quantize(q: float, resolution: float) -> float:
@@ -629,20 +633,21 @@ def test_plant_init_sets_the_state_and_reference_gaps_like_python(native):
         p, cfg = random_params(rng), random_config(rng, "all")
         pose0, rate0 = random_pose(rng), random_rates(rng)
         pl, q = native.plant(p, cfg, pose0, rate0), kinematics.inverse(*pose0, p.L_1)
-        check.check((*pl.s, pl.gap12_0, pl.gap23_0), (*pose0, *rate0, q[1] - q[0], q[2] - q[1]),
+        check.check((*pl.s, pl.gap12_0, pl.gap23_0), (*pose0, *rate0, 0.0, 0.0, q[1] - q[0], q[2] - q[1]),
                     (p, cfg, pose0, rate0))
     check.done()
 
 
 def random_plant_case(rng, native, variant, substeps=1):
     """A Python plant and its C twin, both initialized at one random pose (the reference gaps)
-    and then put at another random state s, so pulling acts; returns (plant, pl, s)."""
+    and then put at another random state s (with the flexible mode's z_f, dz_f: 8 values), so pulling
+    acts; returns (plant, pl, s)."""
     p, cfg = random_params(rng), random_config(rng, variant, substeps)
     pose0, rate0 = random_pose(rng), random_rates(rng)
     plant, pl = PlantModel(p, cfg, pose0, rate0), native.plant(p, cfg, pose0, rate0)
-    s = (*random_pose(rng), *random_rates(rng))
-    plant.state = list(s)
-    pl.s[0:6] = s
+    s = (*random_pose(rng), *random_rates(rng), u(rng, -1e-5, 1e-5), u(rng, -1e-2, 1e-2))
+    plant.state, plant.flex = list(s[:6]), list(s[6:])
+    pl.s[0:8] = s
     return plant, pl, s
 
 
@@ -696,7 +701,7 @@ def test_plant_step_refuses_a_state_leaving_the_domain_like_python(native):
         if not ok:
             with pytest.raises(KinematicDomainError):  # PlantModel.step says so
                 plant.step(0.0, h, *F)
-            assert tuple(pl.s) == s and plant.state == list(s)
+            assert tuple(pl.s)[:6] == s and plant.state == list(s)
             refused += 1
         else:
             accepted.check(s_new, s_py, (p, cfg, s, h, F))
@@ -954,7 +959,7 @@ def c_closed_loop(native, scenario, n_steps):
         F = sample(t, ref, q, dq, True)
         ok, s_new = native.plant_step(pl, h, F if gauss_seidel else F_held)
         assert ok == 1, (t, s_new)
-        pl.s[0:6] = s_new
+        pl.s[0:8] = s_new
         ref = native.reference(t + h, tp)
         out = native.plant_outputs(pl)
         q, dq = out[0:3], out[6:9]

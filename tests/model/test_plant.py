@@ -61,21 +61,22 @@ def test_plant_refuses_to_leave_the_kinematic_domain():
        dZ=finite.filter(lambda v: abs(v) < 2.0), dB=finite.filter(lambda v: abs(v) < 50.0),
        F=st.tuples(*[finite.filter(lambda v: abs(v) < 2000.0)] * 3),
        k_pull=st.sampled_from([0.0, 200.0, -500.0]), attraction=st.sampled_from([0.0, 20.0]),
-       cogging=st.sampled_from([0.0, 3.0]))
+       cogging=st.sampled_from([0.0, 3.0]), flex=st.sampled_from([0.0, 400.0]),
+       z_f=finite.filter(lambda v: abs(v) < 1e-4), dz_f=finite.filter(lambda v: abs(v) < 1.0))
 def test_fused_right_hand_side_is_bit_identical_to_the_composed_one(X, Z, B, dX, dZ, dB, F, k_pull,
-                                                                     attraction, cogging):
+                                                                     attraction, cogging, flex, z_f, dz_f):
     """step() integrates with the C model's fused right-hand side (tapmp_plant_rhs); it must be
     the same arithmetic as derivatives(), which composes the documented kinematics, friction and
     dynamics."""
     cfg = PlantConfig(k_pull=k_pull, attraction_force=attraction, attraction_gap=0.2, cogging_amplitude=cogging,
-                      cogging_phase1=0.3, cogging_phase2=-1.0, cogging_phase3=2.0)
+                      cogging_phase1=0.3, cogging_phase2=-1.0, cogging_phase3=2.0, flex_frequency=flex)
     plant = PlantModel(PAPER_MODEL, cfg, (0.001, -0.002, 0.01))
     lim = plant.cfg.force_limit
     held = [min(max(f, -lim), lim) for f in F]  # step() saturates the held command once
     ffi, lib = cmodel.load()
-    ds = ffi.new("double[6]")
-    lib.tapmp_plant_rhs(plant._pl, [X, Z, B, dX, dZ, dB], held, ds)
-    assert tuple(ds) == tuple(plant.derivatives([X, Z, B, dX, dZ, dB], *F))
+    ds = ffi.new("double[8]")
+    lib.tapmp_plant_rhs(plant._pl, [X, Z, B, dX, dZ, dB, z_f, dz_f], held, ds)
+    assert tuple(ds) == tuple(plant.derivatives([X, Z, B, dX, dZ, dB, z_f, dz_f], *F))
 
 
 # --- disturbances: the force laws of docs/disturbances.md, against hand-derived values ---
