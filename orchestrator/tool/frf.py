@@ -59,16 +59,17 @@ class Excitation:
     seed: int
 
     def signals(self, n_steps: int) -> np.ndarray:
-        """(directions, n_steps): each direction's multisine at steps 0 .. n_steps - 1."""
+        """(directions, n_steps): each direction's multisine at steps 0 .. n_steps - 1, one period
+        computed and repeated (so every period is the same to the bit)."""
         rng = np.random.default_rng(self.seed)
-        k = np.arange(n_steps)
-        out = np.zeros((len(self.bins), n_steps))
+        k = np.arange(self.period_steps)
+        one = np.zeros((len(self.bins), self.period_steps))
         for m, bins in enumerate(self.bins):
             phases = rng.uniform(0.0, 2.0 * math.pi, len(bins))
             a = self.amplitude * math.sqrt(2.0 / len(bins))  # RMS of the sum: amplitude
             for b, p in zip(bins, phases):
-                out[m] += a * np.cos(2.0 * math.pi * b * k / self.period_steps + p)
-        return out
+                one[m] += a * np.cos(2.0 * math.pi * b * k / self.period_steps + p)
+        return np.tile(one, -(-n_steps // self.period_steps))[:, :n_steps]
 
 
 def excitation(h: float, period: float, f_min: float, f_max: float | None, points: int, directions: int,
