@@ -245,7 +245,7 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
         from tapmp.laws import MODE_LABELS
         bases["modes"] = (list(MODE_LABELS), basis("modes", 3))
     from .metrics import saturation_limit
-    result = {"ssp": str(ssp), "inputs": inputs, "h": h, "nyquist_hz": 0.5 / h, "seed": exc.seed,
+    result = {"ssp": _shown(ssp), "inputs": inputs, "h": h, "nyquist_hz": 0.5 / h, "seed": exc.seed,
               "excitation": {"kind": "periodic multisine, random phases, interleaved grids", "period_s": exc.period_steps * h,
                              "period_steps": exc.period_steps, "transient_periods": transient,
                              "measured_periods": periods, "rms_per_direction": exc.amplitude,
@@ -286,6 +286,16 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
                 x["S_error"] = float(np.max(np.abs(x["S"] - 1.0 / (1.0 + La))))
         result["runs"][name] = run
     return result
+
+
+def _shown(path) -> str:
+    """``path`` relative to the current directory if it is inside it (a result written into the repository
+    names no machine's folders), else as given."""
+    from pathlib import Path
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _tapmp_system(models) -> bool:
