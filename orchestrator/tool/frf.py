@@ -239,8 +239,7 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
             raise UsageError(f"{key} = {n!r} is invalid: allowed is an integer from {least} to 1000")
     h = first.step
     exc = excitation(h, period, 1.0 / period if f_min is None else f_min, f_max, points, len(inputs), amplitude, seed)
-    bases = {"inputs": ([f"input {i + 1}" if not analytic else f"motor {i + 1}" for i in range(len(inputs))],
-                        basis("inputs", len(inputs)))}
+    bases = {"inputs": ([f"motor {i + 1}" for i in range(len(inputs))], basis("inputs", len(inputs)))}
     if len(inputs) == 3:
         from tapmp.laws import MODE_LABELS
         bases["modes"] = (list(MODE_LABELS), basis("modes", 3))

@@ -21,6 +21,13 @@ def _phase(L):
     return ph - 360.0 * np.ceil(ph[0] / 360.0)
 
 
+def _wrapped(L):
+    """arg L [deg] of each measured point in (-360, 0]: scattered points are not unwrapped (one noisy
+    point would shift every later one by a turn)."""
+    ph = np.angle(L, deg=True)
+    return ph - 360.0 * np.ceil(ph / 360.0)
+
+
 def plot_run(run: str, r: dict, path: Path, analytic_L=None) -> Path:
     """One run's figure: |L| [dB], arg L [deg] over f [Hz] and L in the complex plane near -1, every
     break point in its own colour, the measured points as markers and the analytic curve as a line
@@ -37,7 +44,7 @@ def plot_run(run: str, r: dict, path: Path, analytic_L=None) -> Path:
             pha.semilogx(fa, _phase(La), color=c, lw=1.0)
             nyq.plot(La.real, La.imag, color=c, lw=1.0)
         mag.semilogx(f, 20.0 * np.log10(np.abs(L)), "o", color=c, ms=3.5, label=b)
-        pha.semilogx(f, _phase(L), "o", color=c, ms=3.5)
+        pha.semilogx(f, _wrapped(L), "o", color=c, ms=3.5)
         nyq.plot(L.real, L.imag, "o", color=c, ms=3.5)
     t = np.linspace(0.0, 2.0 * np.pi, 200)
     nyq.plot(np.cos(t), np.sin(t), color="0.6", lw=0.6)
