@@ -178,6 +178,8 @@ def add_frf(sub) -> None:
                     "the highest DFT bin below the Nyquist frequency 1/(2 step))")
     fr.add_argument("--points", type=int, default=frf.POINTS, help=f"excited frequencies per direction (default "
                     f"{frf.POINTS})")
+    fr.add_argument("--overwrite", action="store_true", help="replace frf.json and the figures of a former "
+                    "measurement in --out (without it they stop the command before it runs)")
     fr.set_defaults(func=cmd_frf)
 
 
@@ -197,6 +199,9 @@ def cmd_frf(args) -> int:
                 raise UsageError(f"--runs: {name!r} is not a run of compare: allowed are {', '.join(every)}")
             runs[name] = every[name]
     out = Path(args.out) if args.out else result_base(scenario) / "frf"
+    there = [p for p in frf.files_of(out, runs) if p.exists() or p.is_symlink()]
+    if there and not args.overwrite:
+        raise UsageError(f"{there[0]} exists: allowed is --overwrite to replace it (or another --out)")
     from ..engine.errors import CoSimulationError
     try:
         with heartbeat() as tell:

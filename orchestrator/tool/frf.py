@@ -344,6 +344,12 @@ def _plain(x):
     return x
 
 
+def files_of(out, runs) -> list:
+    """The files :func:`write` makes in ``out`` for the runs ``runs`` (names): frf.json and a figure per run."""
+    from pathlib import Path
+    return [Path(out) / "frf.json", *(Path(out) / f"frf_{run}.png" for run in runs)]
+
+
 def write(result: dict, out, figures: bool = True) -> list:
     """frf.json (margins, the measured points as magnitude and phase of L and S) and the figures into out."""
     from pathlib import Path
@@ -359,7 +365,8 @@ def write(result: dict, out, figures: bool = True) -> list:
     files = []
     if figures:
         from .frf_plots import plot_frf
-        files = [str(p) for p in plot_frf(result, out, {run: r.get("_analytic_L") for run, r in result["runs"].items()})]
+        files = [str(p) for p in plot_frf(result, files_of(out, result["runs"])[1:],
+                                          {run: r.get("_analytic_L") for run, r in result["runs"].items()})]
     data["files"] = files
     write_text(out / "frf.json", json.dumps(data, indent=1) + "\n")
     return [str(out / "frf.json"), *files]

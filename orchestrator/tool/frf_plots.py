@@ -70,7 +70,8 @@ def plot_run(run: str, r: dict, path: Path, analytic_L=None) -> Path:
     return path
 
 
-def plot_frf(result: dict, out: Path, analytic: dict | None = None) -> list[Path]:
-    """frf_<run>.png per run into ``out``; ``analytic``: {run: {break point: callable L(f)}}."""
+def plot_frf(result: dict, paths: list, analytic: dict | None = None) -> list[Path]:
+    """A figure per run of ``result`` at ``paths`` (one each, in the runs' order); ``analytic``:
+    {run: {break point: callable L(f)}}."""
     analytic = analytic or {}
-    return [plot_run(run, r, Path(out) / f"frf_{run}.png", analytic.get(run)) for run, r in result["runs"].items()]
+    return [plot_run(run, r, Path(path), analytic.get(run)) for (run, r), path in zip(result["runs"].items(), paths)]

@@ -122,3 +122,12 @@ def test_a_plant_input_not_in_the_ssp_is_one_line_naming_it_and_exit_2(ssp, caps
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error")]
     assert code == 2 and len(err) == 1
     assert err[0].startswith("error: --inputs: 'plant.Fx' is not an input of the system") and "plant.F1" in err[0]
+
+
+def test_a_former_measurement_stops_the_command_unless_overwrite_and_stays_as_it_was(capsys, tmp_path):
+    (tmp_path / "frf").mkdir()
+    mine = tmp_path / "frf" / "frf.json"
+    mine.write_text("mine")
+    assert main(["frf", PAPER, "--ssp", str(tmp_path / "none.ssp"), "--out", str(tmp_path / "frf")]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {mine} exists: allowed is --overwrite to replace it (or another --out)"
+    assert mine.read_text() == "mine"
