@@ -144,7 +144,7 @@ def _analyze_worst_case(args, scenario, out) -> int:
 
 def add_frf(sub) -> None:
     """`tapmp frf`."""
-    from ..tool import frf
+    from ..tool import frf_settings as frf
     fr = sub.add_parser("frf", help="margins measured from the co-simulation (any SSP)",
                         description="Inject a seeded periodic multisine (random phases, interleaved frequency grids) "
                         "at the plant's force inputs of the closed-loop co-simulation, identify the input sensitivity "

@@ -38,13 +38,7 @@ import numpy as np
 
 from ..engine.master import CoSimulation
 from ..errors import UsageError
-
-PERIOD = 0.2        # default period of the multisine [s]: its frequency resolution is 1 / PERIOD
-TRANSIENT = 2       # default periods run before the measurement (the loop settles into its periodic state)
-PERIODS = 4         # default periods measured and averaged
-POINTS = 40         # default excited frequencies per direction
-AMPLITUDE = 10.0    # default RMS of the injected force per direction [N]
-LINEAR_SHARE = 0.5  # the run stays linear if max |u| stays below this share of the force limit
+from .frf_settings import AMPLITUDE, LINEAR_SHARE, PERIOD, PERIODS, POINTS, TRANSIENT
 
 
 @dataclass(frozen=True)
