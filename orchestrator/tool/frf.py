@@ -292,9 +292,12 @@ def _shown(path) -> str:
 
 
 def _tapmp_system(models) -> bool:
-    """Whether every FMU of the SSP is a TAPMP model (then the linearized TAPMP loop is its analytic twin)."""
+    """Whether every FMU of the SSP is one of the TAPMP roles' models or a variant of one: the system the
+    linearized loop (orchestrator.tool.analysis) describes, its analytic twin."""
+    from tapmp.models import MODELS
     from .roles import ROLES
-    return bool(models) and set(models) <= set(ROLES.values()) | {"TAPMP_ControllerClocked"}
+    described = {r.name for r in MODELS if (r.variant_of or r.name) in ROLES.values()}  # the roles' models, variants too
+    return bool(models) and set(models) <= described
 
 
 MEASURES = (("Ms", "Ms", ".3f"), ("GM", "gm", ".3g"), ("PM [deg]", "pm_deg", ".1f"), ("disk", "disk_margin", ".3f"),

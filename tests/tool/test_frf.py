@@ -2,6 +2,8 @@
 against the analytic ones of the linearized loop, the seeded excitation, and its bad input."""
 
 import math
+import zipfile
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
@@ -131,3 +133,77 @@ def test_a_former_measurement_stops_the_command_unless_overwrite_and_stays_as_it
     assert main(["frf", PAPER, "--ssp", str(tmp_path / "none.ssp"), "--out", str(tmp_path / "frf")]) == 2
     assert capsys.readouterr().err.strip() == f"error: {mine} exists: allowed is --overwrite to replace it (or another --out)"
     assert mine.read_text() == "mine"
+
+
+PASS = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+
+
+class Pass3(Fmi2Slave):
+    """Three signals passed straight through: y_i = u_i (a user's FMU the analysis knows nothing of)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        for i in (1, 2, 3):
+            setattr(self, f"u{i}", 0.0)
+            setattr(self, f"y{i}", 0.0)
+            self.register_variable(Real(f"u{i}", causality=Fmi2Causality.input))
+            self.register_variable(Real(f"y{i}", causality=Fmi2Causality.output))
+
+    def exit_initialization_mode(self):
+        self.do_step(0.0, 0.0)
+
+    def do_step(self, current_time, step_size):
+        for i in (1, 2, 3):
+            setattr(self, f"y{i}", getattr(self, f"u{i}"))
+        return True
+'''
+
+
+def with_a_foreign_fmu(ssp, tmp_path):
+    """A copy of ``ssp`` with a pythonfmu FMU "amp" (Pass3) between the controller's forces and the plant."""
+    from pythonfmu import FmuBuilder
+    (tmp_path / "Pass3.py").write_text(PASS)
+    fmu = FmuBuilder.build_FMU(tmp_path / "Pass3.py", dest=tmp_path)
+    ns = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+          "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon"}
+    for prefix, uri in ns.items():
+        ET.register_namespace(prefix, uri)
+    with zipfile.ZipFile(ssp) as z:
+        members = {i.filename: z.read(i) for i in z.infolist()}
+    root = ET.fromstring(members["SystemStructure.ssd"])
+    system = root.find("ssd:System", ns)
+    comp = ET.SubElement(system.find("ssd:Elements", ns), f"{{{ns['ssd']}}}Component", name="amp",
+                         type="application/x-fmu-sharedlibrary", source="resources/Pass3.fmu")
+    connectors = ET.SubElement(comp, f"{{{ns['ssd']}}}Connectors")
+    for name, kind in [(f"u{i}", "input") for i in (1, 2, 3)] + [(f"y{i}", "output") for i in (1, 2, 3)]:
+        ET.SubElement(ET.SubElement(connectors, f"{{{ns['ssd']}}}Connector", name=name, kind=kind),
+                      f"{{{ns['ssc']}}}Real")
+    connections = system.find("ssd:Connections", ns)
+    for c in list(connections):  # controller.F_i -> amp.u_i, amp.y_i -> plant.F_i
+        if c.get("endElement") == "plant" and c.get("endConnector") in ("F1", "F2", "F3"):
+            i = c.get("endConnector")[1]
+            c.set("endElement", "amp")
+            c.set("endConnector", f"u{i}")
+            ET.SubElement(connections, f"{{{ns['ssd']}}}Connection", startElement="amp", startConnector=f"y{i}",
+                          endElement="plant", endConnector=f"F{i}")
+    members["SystemStructure.ssd"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    members["resources/Pass3.fmu"] = open(fmu, "rb").read()
+    out = tmp_path / "foreign.ssp"
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return out
+
+
+@pytest.mark.slow
+def test_a_system_with_a_foreign_fmu_is_measured_through_the_generic_master_with_no_analytic_claim(ssp, tmp_path):
+    """A pass-through FMU of the user's between controller and plant: the loop is the TAPMP loop, so the
+    measured points are the TAPMP system's to the bit, but the SSP is no longer the linearization's."""
+    scenario = load(PAPER, HOLD)
+    short = dict(points=6, transient=1, periods=2)
+    foreign = frf.measure({"sc-dc": scenario}, with_a_foreign_fmu(ssp, tmp_path), **short)["runs"]["sc-dc"]
+    plain = frf.measure({"sc-dc": scenario}, ssp, analytic=False, **short)["runs"]["sc-dc"]
+    assert foreign["analytic"] == "none: the SSP holds FMUs other than TAPMP's"
+    for name, x in foreign["loops"].items():
+        assert "analytic" not in x and np.array_equal(x["S"], plain["loops"][name]["S"]), name
