@@ -231,6 +231,10 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
     for key, n, least in (("--periods", periods, 1), ("--transient", transient, 0)):
         if not (isinstance(n, int) and least <= n <= 1000):
             raise UsageError(f"{key} = {n!r} is invalid: allowed is an integer from {least} to 1000")
+    for name, sc in runs.items():
+        if sc.event_mode:  # the engine's perturbation holds an input over the macro step (engine/perturbation.py)
+            raise UsageError(f"event_mode = true is invalid for a frequency response measurement (run {name}): "
+                             "allowed is false (an event inside a macro step would set the excited input again)")
     h = first.step
     exc = excitation(h, period, 1.0 / period if f_min is None else f_min, f_max, points, len(inputs), amplitude, seed)
     bases = {"inputs": ([f"motor {i + 1}" for i in range(len(inputs))], basis("inputs", len(inputs)))}

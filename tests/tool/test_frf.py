@@ -109,7 +109,9 @@ def test_margins_from_points_read_a_known_loop():
     (["--amplitude", "-3"], "--amplitude = -3.0 is invalid: allowed is an RMS force > 0"),
     (["--f-max", "6000"], "--f-max = 6000.0 is invalid: allowed is a frequency in [5, 5000) Hz"),
     (["--f-min", "5000"], "--f-min = 5000.0 is invalid: allowed is a frequency in [5, 5000) Hz"),
-], ids=["zero amplitude", "negative amplitude", "f-max above Nyquist", "f-min at Nyquist"])
+    (["--set", "event_mode=true"], "event_mode = true is invalid for a frequency response measurement (run sc-dc): "
+                                   "allowed is false"),
+], ids=["zero amplitude", "negative amplitude", "f-max above Nyquist", "f-min at Nyquist", "event mode"])
 def test_bad_options_are_one_line_naming_them_and_exit_2(option, words, capsys, tmp_path):
     assert main(["frf", PAPER, "--ssp", str(tmp_path / "none.ssp"), "--out", str(tmp_path / "frf"), *option]) == 2
     err = capsys.readouterr().err.strip().splitlines()
