@@ -295,12 +295,18 @@ def _shown(path) -> str:
         return str(path)
 
 
+# The roles whose models the linearized loop reproduces (tool/stability.OneStepMap: the trajectory, the
+# controller and the plant, one step each): an SSP with any other FMU has no analytic twin.
+LINEARIZED_ROLES = ("trajectory", "controller", "plant")
+
+
 def _tapmp_system(models) -> bool:
     """Whether every FMU of the SSP is one of the TAPMP roles' models or a variant of one: the system the
     linearized loop (orchestrator.tool.analysis) describes, its analytic twin."""
     from tapmp.models import MODELS
     from .roles import ROLES
-    described = {r.name for r in MODELS if (r.variant_of or r.name) in ROLES.values()}  # the roles' models, variants too
+    linearized = {ROLES[role] for role in LINEARIZED_ROLES}
+    described = {r.name for r in MODELS if (r.variant_of or r.name) in linearized}  # variants too (the clocked controller)
     return bool(models) and set(models) <= described
 
 
