@@ -266,9 +266,10 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
                                           "measured": margins_from_points(f, L)}
         run["force_limit"] = limit
         run["linear"] = bool(limit <= 0.0 or run["u_max"] < LINEAR_SHARE * limit)
-        tapmp_only = analytic and _tapmp_system(models)
+        foreign = _not_linearized(models)
+        tapmp_only = analytic and not foreign
         run["analytic"] = "the linearized TAPMP loop at the scenario's start" if tapmp_only else (
-            "none: the SSP holds FMUs other than TAPMP's" if analytic else "not asked")
+            f"none: the linearized loop does not model {', '.join(foreign)} of the SSP" if analytic else "not asked")
         if tapmp_only:
             say(f"frf: run {i}/{len(runs)} {name}: the analytic loop")
             run["_analytic_L"] = {}  # {break point: L(f)} for the figures, not written
@@ -300,14 +301,15 @@ def _shown(path) -> str:
 LINEARIZED_ROLES = ("trajectory", "controller", "plant")
 
 
-def _tapmp_system(models) -> bool:
-    """Whether every FMU of the SSP is one of the TAPMP roles' models or a variant of one: the system the
-    linearized loop (orchestrator.tool.analysis) describes, its analytic twin."""
+def _not_linearized(models) -> list:
+    """The modelNames of ``models`` that the linearized loop (orchestrator.tool.analysis) does not step: an SSP
+    with none of them has it as its analytic twin. The roles' models count with their variants (the clocked
+    controller)."""
     from tapmp.models import MODELS
     from .roles import ROLES
     linearized = {ROLES[role] for role in LINEARIZED_ROLES}
-    described = {r.name for r in MODELS if (r.variant_of or r.name) in linearized}  # variants too (the clocked controller)
-    return bool(models) and set(models) <= described
+    described = {r.name for r in MODELS if (r.variant_of or r.name) in linearized}
+    return sorted(set(models) - described)
 
 
 MEASURES = (("Ms", "Ms", ".3f"), ("GM", "gm", ".3g"), ("PM [deg]", "pm_deg", ".1f"), ("disk", "disk_margin", ".3f"),

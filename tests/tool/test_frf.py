@@ -206,6 +206,6 @@ def test_a_system_with_a_foreign_fmu_is_measured_through_the_generic_master_with
     short = dict(points=6, transient=1, periods=2)
     foreign = frf.measure({"sc-dc": scenario}, with_a_foreign_fmu(ssp, tmp_path), **short)["runs"]["sc-dc"]
     plain = frf.measure({"sc-dc": scenario}, ssp, analytic=False, **short)["runs"]["sc-dc"]
-    assert foreign["analytic"] == "none: the SSP holds FMUs other than TAPMP's"
+    assert foreign["analytic"] == "none: the linearized loop does not model Pass3 of the SSP"
     for name, x in foreign["loops"].items():
         assert "analytic" not in x and np.array_equal(x["S"], plain["loops"][name]["S"]), name
