@@ -175,8 +175,9 @@ def plant_inputs(scenario) -> list[str]:
     """The plant's force inputs of a TAPMP scenario, by role: "plant.<input>" for each input of the
     plant that the controller drives (tapmp.interface.PLANT_SOURCES)."""
     from tapmp.interface import PLANT_SOURCES
+    from tapmp.models import PLANT
     from .roles import ROLES
-    plant = next(role for role, model in ROLES.items() if model == "TAPMP_Plant")
+    plant = next(role for role, model in ROLES.items() if model == PLANT)
     return [f"{plant}.{name}" for name in PLANT_SOURCES]
 
 
@@ -213,8 +214,7 @@ def analytic_loops(scenario, bases: dict) -> dict:
             loop = result["loops"].get(name, {})
             out[name] = {"L": (lambda f, G=G: -analysis._response(G, np.asarray(f, dtype=float), split.h)),
                          "margins": {k: loop.get(k) for k in ("Ms", "disk_margin", "gm", "gm_lower", "pm_deg",
-                                                               "f_gc_hz", "f_pc_hz", "delay_margin_s")},
-                         "verdict": result["verdict"]}
+                                                               "f_gc_hz", "f_pc_hz", "delay_margin_s")}}
     return out
 
 
@@ -241,7 +241,6 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
     if len(inputs) == 3:
         from tapmp.laws import MODE_LABELS
         bases["modes"] = (list(MODE_LABELS), basis("modes", 3))
-    from .metrics import saturation_limit
     result = {"ssp": _shown(ssp), "inputs": inputs, "h": h, "nyquist_hz": 0.5 / h, "seed": exc.seed,
               "excitation": {"kind": "periodic multisine, random phases, interleaved grids", "period_s": exc.period_steps * h,
                              "period_steps": exc.period_steps, "transient_periods": transient,
@@ -251,39 +250,53 @@ def measure(runs: dict, ssp, inputs: list[str] | None = None, period: float = PE
                              "to_hz": float(max(b[-1] for b in exc.bins)) / (exc.period_steps * h)},
               "runs": {}}
     for i, (name, sc) in enumerate(runs.items(), 1):
-        run = {"law": sc.law, "loops": {}, "u_max": 0.0}
-        limit = saturation_limit(sc.parameters())
-        models = None
-        for basis_name, (names, V) in bases.items():
-            say(f"frf: run {i}/{len(runs)} {name}: the {basis_name} excited, "
-                f"{(transient + periods) * exc.period_steps} steps")
-            r = run_excited(sc, ssp, inputs, V, exc, transient, periods)
-            models = r["models"]
-            run["u_max"] = max(run["u_max"], float(np.max(np.abs(r["u"]))))
-            for m, (bins, S, L, spread) in identify(r["u"], r["d"], V, exc, periods).items():
-                f = bins / (exc.period_steps * h)
-                run["loops"][names[m]] = {"f_hz": f, "S": S, "L": L, "spread": spread,
-                                          "measured": margins_from_points(f, L)}
-        run["force_limit"] = limit
-        run["linear"] = bool(limit <= 0.0 or run["u_max"] < LINEAR_SHARE * limit)
-        foreign = _not_linearized(models)
-        tapmp_only = analytic and not foreign
-        run["analytic"] = "the linearized TAPMP loop at the scenario's start" if tapmp_only else (
-            f"none: the linearized loop does not model {', '.join(foreign)} of the SSP" if analytic else "not asked")
-        if tapmp_only:
-            say(f"frf: run {i}/{len(runs)} {name}: the analytic loop")
-            run["_analytic_L"] = {}  # {break point: L(f)} for the figures, not written
-            for b, a in analytic_loops(sc, bases).items():
-                run["_analytic_L"][b] = a["L"]
-                x = run["loops"][b]
-                La = a["L"](x["f_hz"])
-                x["analytic"] = a["margins"]
-                x["L_analytic"] = La
-                x["Ms_analytic_on_points"] = float(np.max(np.abs(1.0 / (1.0 + La))))
-                # the measurement's error on S: it bounds how far the measured Ms and disk margin can be off
-                x["S_error"] = float(np.max(np.abs(x["S"] - 1.0 / (1.0 + La))))
-        result["runs"][name] = run
+        tell = (lambda line, i=i, name=name: say(f"frf: run {i}/{len(runs)} {name}: {line}"))
+        result["runs"][name] = _measured_run(sc, ssp, inputs, bases, exc, transient, periods, analytic, tell)
     return result
+
+
+def _measured_run(sc, ssp, inputs, bases, exc, transient, periods, analytic, say) -> dict:
+    """One controller's measurement (``measure``): a run per basis, identified and reduced to margins, its
+    largest plant input against the force limit, and the analytic loop where the SSP has it as its twin."""
+    from .metrics import saturation_limit
+    h = sc.step
+    run = {"law": sc.law, "loops": {}, "u_max": 0.0, "force_limit": saturation_limit(sc.parameters())}
+    models = []
+    for basis_name, (names, V) in bases.items():
+        say(f"the {basis_name} excited, {(transient + periods) * exc.period_steps} steps")
+        r = run_excited(sc, ssp, inputs, V, exc, transient, periods)
+        models = r["models"]
+        run["u_max"] = max(run["u_max"], float(np.max(np.abs(r["u"]))))
+        for m, (bins, S, L, spread) in identify(r["u"], r["d"], V, exc, periods).items():
+            f = bins / (exc.period_steps * h)
+            run["loops"][names[m]] = {"f_hz": f, "S": S, "L": L, "spread": spread,
+                                      "measured": margins_from_points(f, L)}
+    run["linear"] = bool(run["force_limit"] <= 0.0 or run["u_max"] < LINEAR_SHARE * run["force_limit"])
+    foreign = _not_linearized(models)
+    if not analytic:
+        run["analytic"] = "not asked"
+    elif foreign:
+        run["analytic"] = f"none: the linearized loop does not model {', '.join(foreign)} of the SSP"
+    else:
+        say("the analytic loop")
+        run["analytic"] = "the linearized TAPMP loop at the scenario's start"
+        _add_analytic(run, analytic_loops(sc, bases))
+    return run
+
+
+def _add_analytic(run: dict, loops: dict) -> None:
+    """Each measured loop of ``run`` beside its analytic twin (``analytic_loops``): the analytic margins and L at
+    the measured points, the analytic Ms on those points, and the largest |S measured - S analytic| there."""
+    run["_analytic_L"] = {}  # {break point: L(f)} for the figures, not written
+    for b, a in loops.items():
+        run["_analytic_L"][b] = a["L"]
+        x = run["loops"][b]
+        La = a["L"](x["f_hz"])
+        x["analytic"] = a["margins"]
+        x["L_analytic"] = La
+        x["Ms_analytic_on_points"] = float(np.max(np.abs(1.0 / (1.0 + La))))
+        # the measurement's error on S: it bounds how far the measured Ms and disk margin can be off
+        x["S_error"] = float(np.max(np.abs(x["S"] - 1.0 / (1.0 + La))))
 
 
 def _shown(path) -> str:
