@@ -72,8 +72,8 @@ def excitation(h: float, period: float, f_min: float, f_max: float | None, point
     f_max [Hz] (default: the highest bin below the Nyquist frequency), dealt round robin. UsageError
     naming the option for a value out of range."""
     nyq = 0.5 / h
-    n = int(round(period / h))
-    if not (math.isfinite(period) and period > 0.0 and n >= 4 and abs(n * h - period) <= 1e-9 * period):
+    n = int(round(period / h)) if math.isfinite(period) else 0
+    if not (period > 0.0 and n >= 4 and abs(n * h - period) <= 1e-9 * period):
         raise UsageError(f"--period = {period!r} is invalid: allowed is a whole number (>= 4) of steps of "
                          f"{h:g} s")
     f_res = 1.0 / (n * h)
@@ -93,6 +93,8 @@ def excitation(h: float, period: float, f_min: float, f_max: float | None, point
                          f"at 1 / --period = {f_res:g} Hz, shared by {directions} directions)")
     if not (math.isfinite(amplitude) and amplitude > 0.0):
         raise UsageError(f"--amplitude = {amplitude!r} is invalid: allowed is an RMS force > 0 (finite)")
+    if not (isinstance(seed, int) and 0 <= seed < 2 ** 63):
+        raise UsageError(f"--seed = {seed!r} is invalid: allowed is an integer from 0 to {2 ** 63 - 1}")
     bins = _log_bins(lo, hi, points * directions)
     return Excitation(n, tuple(bins[m::directions] for m in range(directions)), float(amplitude), int(seed))
 

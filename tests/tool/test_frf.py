@@ -109,9 +109,12 @@ def test_margins_from_points_read_a_known_loop():
     (["--amplitude", "-3"], "--amplitude = -3.0 is invalid: allowed is an RMS force > 0"),
     (["--f-max", "6000"], "--f-max = 6000.0 is invalid: allowed is a frequency in [5, 5000) Hz"),
     (["--f-min", "5000"], "--f-min = 5000.0 is invalid: allowed is a frequency in [5, 5000) Hz"),
+    (["--seed", "-1"], "--seed = -1 is invalid: allowed is an integer from 0 to 9223372036854775807"),
+    (["--period", "nan"], "--period = nan is invalid: allowed is a whole number (>= 4) of steps of 0.0001 s"),
     (["--set", "event_mode=true"], "event_mode = true is invalid for a frequency response measurement (run sc-dc): "
                                    "allowed is false"),
-], ids=["zero amplitude", "negative amplitude", "f-max above Nyquist", "f-min at Nyquist", "event mode"])
+], ids=["zero amplitude", "negative amplitude", "f-max above Nyquist", "f-min at Nyquist", "negative seed", "period not a number",
+    "event mode"])
 def test_bad_options_are_one_line_naming_them_and_exit_2(option, words, capsys, tmp_path):
     assert main(["frf", PAPER, "--ssp", str(tmp_path / "none.ssp"), "--out", str(tmp_path / "frf"), *option]) == 2
     err = capsys.readouterr().err.strip().splitlines()
