@@ -27,7 +27,7 @@ from .signals import signals_interrupt
 USER_ERRORS = (UserError, OSError)
 
 # Every subcommand, in the order `tapmp --help` lists them; each is defined in its group's module.
-SUBCOMMANDS = (build.add_build, run.add_run, analysis.add_check, analysis.add_analyze, run.add_compare,
+SUBCOMMANDS = (build.add_build, run.add_run, analysis.add_check, analysis.add_analyze, analysis.add_frf, run.add_compare,
                paper.add_reproduce, study.add_study, build.add_export, run.add_plot, paper.add_paper_gains,
                paper.add_calibrate, paper.add_null_models, paper.add_theorem1, paper.add_modal)
 

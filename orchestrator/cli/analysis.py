@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import UsageError
 from .common import compare_runs, heartbeat, result_base, scenario_file, study_file
-from .options import PATHS_HELP, RELATIVE, scenario_arg
+from .options import PATHS_HELP, RELATIVE, fmu_args, scenario_arg
 
 
 def add_check(sub) -> None:
@@ -143,4 +143,91 @@ def _analyze_worst_case(args, scenario, out) -> int:
     with atomic_file(out / "worst_case.md") as f:
         f.write(f"{head}\n\n{table}\n")
     print(f"worst_case.json and worst_case.md in {out}")
+    return 0
+
+
+def add_frf(sub) -> None:
+    """`tapmp frf`."""
+    from ..tool import frf_settings as frf
+    fr = sub.add_parser("frf", help="margins measured from the co-simulation (any SSP)",
+                        description="Inject a seeded periodic multisine (random phases, interleaved frequency grids) "
+                        "at the plant's force inputs of the closed-loop co-simulation, identify the input sensitivity "
+                        "S = U/D and the loop gain L = -F_ctrl/U per input and per mode (common, diff. Z, diff. B) "
+                        "from the co-simulation's own signals, and report Ms, gain, phase, disk and delay margins "
+                        "from the measured points beside the analytic ones of the linearized loop (TAPMP's FMUs "
+                        "only); frf.json and a Bode/Nyquist figure per run. See docs/analysis.md.",
+                        epilog=PATHS_HELP)
+    scenario_arg(fr, "--set trajectory.f_xz=0")
+    fmu_args(fr)
+    fr.add_argument("--out", help=f"output folder (default: the scenario's 'output', else results/<name>, then /frf); "
+                    f"{RELATIVE}")
+    fr.add_argument("--runs", default=None, metavar="NAMES", help="comma-separated runs of `compare` to measure "
+                    "(default: the scenario's own law)")
+    fr.add_argument("--inputs", default=None, metavar="NAMES", help="comma-separated plant force inputs to excite, "
+                    "\"element.variable\" (an element by its SSP name or role; default: the TAPMP plant's F1,F2,F3 "
+                    "by role: plant.F1,plant.F2,plant.F3)")
+    fr.add_argument("--amplitude", type=float, default=frf.AMPLITUDE, metavar="N",
+                    help=f"RMS of the injected force per direction (default {frf.AMPLITUDE:g}, in the inputs' unit)")
+    fr.add_argument("--seed", type=int, default=0, help="seed of the multisine's random phases (default 0)")
+    fr.add_argument("--period", type=float, default=frf.PERIOD, metavar="SECONDS",
+                    help=f"period of the multisine, a whole number of steps (default {frf.PERIOD:g} s; the "
+                    "frequency resolution is its inverse)")
+    fr.add_argument("--periods", type=int, default=frf.PERIODS, help=f"periods measured and averaged (default "
+                    f"{frf.PERIODS})")
+    fr.add_argument("--transient", type=int, default=frf.TRANSIENT, help="periods run before the measurement "
+                    f"(default {frf.TRANSIENT})")
+    fr.add_argument("--f-min", type=float, default=None, metavar="HZ", help="lowest excited frequency (default "
+                    "1 / --period)")
+    fr.add_argument("--f-max", type=float, default=None, metavar="HZ", help="highest excited frequency (default: "
+                    "the highest DFT bin below the Nyquist frequency 1/(2 step))")
+    fr.add_argument("--points", type=int, default=frf.POINTS, help=f"excited frequencies per direction (default "
+                    f"{frf.POINTS})")
+    fr.add_argument("--overwrite", action="store_true", help="replace frf.json and the figures of a former "
+                    "measurement in --out (without it they stop the command before it runs)")
+    fr.set_defaults(func=cmd_frf)
+
+
+def cmd_frf(args) -> int:
+    """`tapmp frf`: the measured margins of the scenario's run (or --runs), printed and written."""
+    from ..tool import frf
+    from ..tool.scenario import load
+    from .common import names, ssp_of
+    scenario = load(scenario_file(args.scenario), args.set)
+    if args.runs is None:
+        runs = {scenario.law: scenario}
+    else:
+        every = compare_runs(scenario)
+        runs = {}
+        for name in names(args.runs):
+            if name not in every:
+                raise UsageError(f"--runs: {name!r} is not a run of compare: allowed are {', '.join(every)}")
+            runs[name] = every[name]
+    out = Path(args.out) if args.out else result_base(scenario) / "frf"
+    there = [p for p in frf.files_of(out, runs) if p.exists() or p.is_symlink()]
+    if there and not args.overwrite:
+        raise UsageError(f"{there[0]} exists: allowed is --overwrite to replace it (or another --out)")
+    from ..engine.errors import CoSimulationError
+    try:
+        with heartbeat() as tell:
+            result = frf.measure(runs, ssp_of(args, scenario), names(args.inputs), args.period, args.f_min,
+                                 args.f_max, args.points, args.amplitude, args.seed, args.transient, args.periods,
+                                 say=tell)
+    except CoSimulationError as err:  # the engine names its option; the user wrote --inputs
+        if str(err).startswith("perturb: "):
+            raise UsageError("--inputs: " + str(err).removeprefix("perturb: ")) from None
+        raise
+    e = result["excitation"]
+    print(f"{scenario.name}: the closed loop broken at the plant inputs {', '.join(result['inputs'])}, one direction "
+          f"at a time; multisine of {e['rms_per_direction']:g} RMS per direction, seed {result['seed']}, "
+          f"{e['points_per_direction']} frequencies per direction from {e['from_hz']:g} to {e['to_hz']:g} Hz, "
+          f"{e['measured_periods']} periods of {e['period_s']:g} s averaged after {e['transient_periods']}")
+    print(frf.table(result))
+    for name, r in result["runs"].items():
+        share = f"{r['u_max'] / r['force_limit'] * 100.0:.0f} % of the force limit {r['force_limit']:g}" \
+            if r["force_limit"] > 0 else "no force limit"
+        print(f"{name}: max |u| = {r['u_max']:.4g} ({share}): "
+              + ("linear" if r["linear"] else f"NOT linear (above {frf.LINEAR_SHARE:.0%}): lower --amplitude")
+              + f"; analytic: {r['analytic']}")
+    files = frf.write(result, out)
+    print(f"frf.json and figures in {out} ({len(files)} files)")
     return 0

@@ -69,6 +69,7 @@ class Unit:
         self.sources = []                      # (source unit, index in source.out) per input
         self.in_vrs = self.inp = None
         self.n_in = 0
+        self.offsets = None                    # perturbation.Offsets of its perturbed inputs, if any
         self.instantiated = False
         # FMI 3.0 Event Mode (hasEventMode): the master may instantiate with eventModeUsed
         self.has_event_mode = self.fmi3 and bool(getattr(self.md.coSimulation, "hasEventMode", False))
@@ -118,6 +119,7 @@ class Unit:
         self.in_vrs = self.inp = None
         self.n_in = 0
         self._copies = ()
+        self.offsets = None
         self.next_event = math.inf
         self.n_events = 0
         self.clock_t0 = self.clock_interval = math.nan
@@ -159,6 +161,8 @@ class Unit:
         inp = self.inp
         for j, src, i in self._copies:
             inp[j] = src[i]
+        if self.offsets is not None:  # an input perturbation (perturbation.py)
+            self.offsets.add(inp)
         if self.fmi3:
             return self._set_real(self.slave.component, self.in_vrs, self.n_in, inp, self.n_in)
         return self._set_real(self.slave.component, self.in_vrs, self.n_in, inp)

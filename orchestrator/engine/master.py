@@ -62,6 +62,7 @@ from pathlib import Path
 
 from fmpy.fmi1 import FMICallException
 
+from . import perturbation
 from . import stepper as stepper_core
 from .archive import ExtractBudget, ExtractLimitError
 from .clocks import Clock
@@ -152,6 +153,7 @@ class CoSimulation:
         self.k = 0
         self.guids = {}
         self.check = o.check or OutputCheck()
+        self._offsets = []       # perturbation.Offsets of the perturbed units (options.perturb)
 
     # --- setup ---------------------------------------------------------------------
     def _logger(self, env, instance, status, category, message):
@@ -201,6 +203,8 @@ class CoSimulation:
         self._connect(ssd.system.connections)
         for unit in self.units.values():
             unit.finish_connections()
+        self._offsets = perturbation.attach(self.units, self.options.perturb, self.roles, self.event_mode,
+                                            self.stepper, f"SSP file {self.ssp_path}")
         self._plan(ssd.system.connections)
         parameters = self._resolve_parameters()
         if self.event_mode and not any(u.has_event_mode for u in self.units.values()):
@@ -251,8 +255,8 @@ class CoSimulation:
                 envelope_units.append((unit, i, float(limit)))
         self._check_outputs(self.t0)
         self._event_units = [u for u in self._step_units if u.event_mode]
-        if any(isinstance(u, ModelExchangeUnit) for u in self._step_units):
-            pass  # the Python loop: the compiled core has no integrator
+        if any(isinstance(u, ModelExchangeUnit) for u in self._step_units) or self._offsets:
+            pass  # the Python loop: the compiled core has no integrator and no perturbation
         elif self.stepper == "compiled" or (self.stepper == "auto" and stepper_core.available()):
             try:
                 self._core = stepper_core.CompiledStepper(
@@ -371,6 +375,12 @@ class CoSimulation:
         """Current communication point t_k [s] (t0 + k h on the default clock)."""
         return self.clock.at(self.k)
 
+    @property
+    def perturbed_inputs(self) -> dict:
+        """{"element.variable": array of the values set at that perturbed input (options.perturb), one per
+        macro step taken: the connection's value plus the perturbation, as the FMU stepped with it}."""
+        return perturbation.applied(self._offsets)
+
     def row(self) -> list[float]:
         """Time and every FMU's outputs at the current communication point."""
         out = [self.time]
@@ -390,6 +400,8 @@ class CoSimulation:
         t, h = self.clock.at(self.k), self.clock.step(self.k)
         if self.event_mode:
             return self._step_events(t, h)
+        for offsets in self._offsets:  # the macro step the perturbed inputs add their value of
+            offsets.k, offsets.t = self.k, t
         self._substep(t, h)
         self.k += 1
         self._check_outputs(self.clock.at(self.k))

@@ -68,3 +68,6 @@ class RunOptions:
     between communication points (orchestrator.engine.model_exchange)."""
     me_tolerance: float = DEFAULT_ME_TOLERANCE
     """CVODE's relative tolerance [1] for the Model Exchange elements."""
+    perturb: Mapping[str, object] = field(default_factory=dict)
+    """{"element.variable": values}: added to what the connection delivers to that input at every macro step, a
+    sequence (one value per step) or a callable of t [s] (orchestrator.engine.perturbation); runs in the Python loop."""

@@ -81,7 +81,7 @@ def test_every_command_has_help(cmd):
 @pytest.mark.slow
 def test_the_help_lists_every_subcommand():
     res = subprocess.run([sys.executable, "-m", "orchestrator", "--help"], capture_output=True, text=True)
-    assert set(_subcommands()) == {"build", "run", "check", "analyze", "compare", "reproduce", "study", "export", "plot",
+    assert set(_subcommands()) == {"build", "run", "check", "analyze", "frf", "compare", "reproduce", "study", "export", "plot",
                                    "calibrate", "paper-gains", "null-models", "theorem1", "modal"}
     for c in _subcommands():
         assert c in res.stdout

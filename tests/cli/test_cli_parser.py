@@ -62,7 +62,7 @@ def test_the_help_lists_every_subcommand_and_the_shipped_names(tmp_path):
     (["compare", "x.toml", "--format", "cvs"],
      "error: tapmp compare: argument --format: format = 'cvs' is invalid: allowed are csv, mat; did you mean csv? "
      "(see tapmp compare --help)"),
-    (["rnu"], "error: tapmp: argument command: 'rnu' is invalid: allowed are build, run, check, analyze, compare, "
+    (["rnu"], "error: tapmp: argument command: 'rnu' is invalid: allowed are build, run, check, analyze, frf, compare, "
               "reproduce, study, export, plot, paper-gains, calibrate, null-models, theorem1, modal; did you mean run? "
               "(see tapmp --help)"),
     (["run", "x.toml", "--no-such-option"], "error: tapmp: unrecognized arguments: --no-such-option "
