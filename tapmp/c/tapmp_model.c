@@ -413,24 +413,35 @@ static double integral_gain(int law, const tapmp_gains *g, int i)
  * increment drives it further out, and recomputes u; back-calculation moves the integral of a motor
  * beyond lim so that its term takes back the fraction 1 - exp(-h/T_t) of the excess (the exact decay over
  * h of the continuous law dI_term/dt = (u_sat - u)/T_t, which stays below 1 for any h, where h/T_t would
- * overshoot the limit for h > T_t); the output of this sample is saturated either way. */
+ * overshoot the limit for h > T_t); the output of this sample is saturated either way.
+ * SC-DC's integral of c keeps the sum it starts with (c sums to zero, Eq. 21), and no c can change that
+ * sum: a common part left in it would never unwind. So SC-DC holds its three integrals together (all, if
+ * one motor is to be held) and takes the mean out of the back-calculation's corrections. */
 static void unwind(int mode, double lim, double T_t, int law, const tapmp_gains *g, double h, const double e[3],
                    const double de[3], const double c[3], const double before[3], const double u_d[3],
                    double integral[3], double u[3])
 {
     const double *x = law == TAPMP_SCDC ? c : e;
+    double dI[3] = {0.0, 0.0, 0.0};
     int held = 0;
     for (int i = 0; i < 3; i++) {
         double F = u[i] / g->K_T[i], k = integral_gain(law, g, i);
         if (!(fabs(F) > lim && k > 0.0)) continue;
-        if (mode == TAPMP_AW_CLAMP) {
-            if (x[i] * F > 0.0) {
-                integral[i] = before[i];
-                held = 1;
-            }
-        } else {
-            integral[i] += -expm1(-h / T_t) * (saturate(F, lim) - F) * g->K_T[i] / k;
+        if (mode == TAPMP_AW_CLAMP && x[i] * F > 0.0) {
+            integral[i] = before[i];
+            held = 1;
+        } else if (mode == TAPMP_AW_BACK) {
+            dI[i] = -expm1(-h / T_t) * (saturate(F, lim) - F) * g->K_T[i] / k;
         }
+    }
+    if (law == TAPMP_SCDC) {
+        double mean = (dI[0] + dI[1] + dI[2]) / 3.0;
+        for (int i = 0; i < 3; i++) {
+            if (held) integral[i] = before[i];
+            else integral[i] += dI[i] - mean;
+        }
+    } else {
+        for (int i = 0; i < 3; i++) integral[i] += dI[i];
     }
     if (held && law == TAPMP_SCDC) tapmp_scdc_command(e, de, c, integral, u_d, g, u);
     else if (held) tapmp_pid_command(e, de, integral, u_d, g, u);

@@ -445,18 +445,24 @@ class ReferenceController:
 
     def unwind(self, candidate, x, uu, h, command):
         """(integral, u) after the anti-windup: clamping keeps the old integral of a motor beyond the limit
-        whose increment h x drives it further out (u recomputed), back-calculation adds
-        (1 - exp(-h/T_t)) (F_sat - F) K_T / k_i to a motor beyond the limit (expm1: the C model's rounding)."""
+        whose increment h x drives it further out (SC-DC: of all three, u recomputed), back-calculation adds
+        (1 - exp(-h/T_t)) (F_sat - F) K_T / k_i to a motor beyond the limit (SC-DC: less the corrections'
+        mean, so the integrals' sum stays; expm1: the C model's rounding)."""
         lim, integral = self.force_limit, list(candidate)
+        held, dI = False, [0.0, 0.0, 0.0]
         for i in range(3):
             F, k = uu[i] / self.g.K_T[i], self.integral_gain(i)
             if abs(F) <= lim or k <= 0.0:
                 continue
             if self.anti_windup == AW_CLAMP and x[i] * F > 0.0:
-                integral[i] = self.integral[i]
+                integral[i], held = self.integral[i], True
             elif self.anti_windup == AW_BACK:
-                integral[i] += -math.expm1(-h / self.anti_windup_time) * (min(max(F, -lim), lim) - F) \
-                    * self.g.K_T[i] / k
+                dI[i] = -math.expm1(-h / self.anti_windup_time) * (min(max(F, -lim), lim) - F) * self.g.K_T[i] / k
+        if self.law == SCDC:
+            mean = (dI[0] + dI[1] + dI[2]) / 3.0
+            integral = list(self.integral) if held else [integral[i] + (dI[i] - mean) for i in range(3)]
+        else:
+            integral = [integral[i] + dI[i] for i in range(3)]
         if integral != list(candidate):
             self.unwound += 1
             if self.anti_windup == AW_CLAMP:
