@@ -451,10 +451,11 @@ def limit_cycle(time: np.ndarray, x: np.ndarray) -> dict:
     Of what remains: ``amplitude``, half its peak-to-peak, in x's unit; ``period_s``, the mean time
     between its rises from below mid - amplitude/2 to above mid + amplitude/2 (mid the centre of its
     range: a Schmitt trigger, so that a chatter smaller than half the cycle counts no cycle), None
-    with fewer than two such rises; ``cycles``, the number of rises."""
+    with fewer than two such rises; ``cycles``, the number of rises; ``mean``, the column's mean (its steady
+    offset)."""
     t = np.asarray(time, dtype=float)
     x = np.asarray(x, dtype=float).reshape(len(t), -1)
-    out = {"amplitude": [], "period_s": [], "cycles": []}
+    out = {"amplitude": [], "period_s": [], "cycles": [], "mean": []}
     for col in x.T:
         r = col - np.polyval(np.polyfit(t, col, 1), t) if len(t) > 1 else col - col.mean()
         hi, lo = float(r.max()), float(r.min())
@@ -470,6 +471,7 @@ def limit_cycle(time: np.ndarray, x: np.ndarray) -> dict:
         out["amplitude"].append(amplitude)
         out["period_s"].append(float(np.mean(np.diff(rises))) if len(rises) > 1 and amplitude > 0.0 else None)
         out["cycles"].append(len(rises) if amplitude > 0.0 else 0)
+        out["mean"].append(float(col.mean()))
     return out
 
 
