@@ -239,8 +239,8 @@ class ControllerModel:
             st.q_prev = self.q_prev
         st.has_q_prev = self.q_prev is not None
         if not self._lib.tapmp_controller_sample(self._cp, self._cg, self.law, self.velocity_source,
-                                                 self.force_limit, self.anti_windup, self.anti_windup_time, st, h, ref, q, dq_in, advance, out, st,
-                                                 self._arg):
+                                                 self.force_limit, self.anti_windup, self.anti_windup_time, st, h,
+                                                 ref, q, dq_in, advance, out, st, self._arg):
             raise KinematicDomainError(  # the text of kinematics.forward
                 "sqrt(3)/(2 L1)*(2 q2 - q1 - q3)", self._arg[0],
                 f"|value| < 1 (q = [{q[0]!r}, {q[1]!r}, {q[2]!r}] m, L1 = {self.p.L_1!r} m)")

@@ -450,8 +450,8 @@ static void unwind(int mode, double lim, double T_t, int law, const tapmp_gains 
 /* control.ControllerModel.sample */
 int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
                             int velocity_source, double force_limit, int anti_windup,
-                            double anti_windup_time, const tapmp_controller_state *st, double h, const double ref[9],
-                            const double q[3], const double dq_in[3], int advance,
+                            double anti_windup_time, const tapmp_controller_state *st, double h,
+                            const double ref[9], const double q[3], const double dq_in[3], int advance,
                             double out[12], tapmp_controller_state *next, double *arg)
 {
     double L1 = p->L_1, q_d[3], dq_d[3], dq[3], e[3], de[3], es[3], u_d[3], u[3];
