@@ -29,7 +29,7 @@ class TAPMP_Controller(TapmpSlave):
         gains = Gains(*(tuple(getattr(self, f"{n}{i}") for i in (1, 2, 3)) for n in GAIN_NAMES))
         modal = ModalGains(*(getattr(self, n) for n in ModalGains._fields))
         return ControllerModel(params, gains, self.law, self.velocity_source, self.force_limit, modal,
-                               self.T_s, self.time)
+                               self.T_s, self.time, self.anti_windup, self.anti_windup_time)
 
     def setup_model(self):
         self.model = self._build()

@@ -42,7 +42,8 @@ static int sample(tapmp_instance *inst, double t, double h, int advance, double 
     ModelData *m = &inst->m;
     double arg;
     const double *r = inst->reals;
-    if (tapmp_controller_sample(&m->s.p, &m->s.g, m->s.k.law, m->s.k.velocity_source, m->s.k.force_limit, &m->st, h,
+    if (tapmp_controller_sample(&m->s.p, &m->s.g, m->s.k.law, m->s.k.velocity_source, m->s.k.force_limit,
+                                m->s.k.anti_windup, m->s.k.anti_windup_time, &m->st, h,
                                 r + VR_X_d, r + VR_q1, r + VR_dq1, advance, out, &m->st, &arg))
         return 1;
     char a[40], q1[40], q2[40], q3[40], l1[40], allowed[256];

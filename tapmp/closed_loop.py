@@ -119,7 +119,8 @@ def run(plant: PlantModel, controller: ControllerModel, traj: TrajectoryParams,
         pl.s, pl.sample = plant.state + plant.flex, plant.sample
         n = min(len(buf), n_steps - k)
         done = lib.tapmp_loop_run(pl, controller._cp, controller._cg, controller.law, controller.velocity_source,
-                                  controller.force_limit, st, controller._clock, tp, L1, t0, k, n, h,
+                                  controller.force_limit, controller.anti_windup,
+                                  controller.anti_windup_time, st, controller._clock, tp, L1, t0, k, n, h,
                                   gauss_seidel, pt, rows, error)
         plant.state, plant.flex, plant.sample = list(pl.s)[:6], list(pl.s)[6:], pl.sample
         controller.integral = list(st.integral)

@@ -12,12 +12,14 @@ from collections import namedtuple
 from . import cmodel
 from .errors import KinematicDomainError, ModelInputError, require_finite
 from .laws import C_IDS
-from .params import DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, SERVO_STEP, ModelParams, scdc_modal_image
+from .params import (ANTI_WINDUP_TIME, DEFAULT_MODAL_GAINS, GAIN_NAMES, MODAL_GAIN_NAMES, SERVO_STEP, ModelParams,
+                     scdc_modal_image)
 
 # the ``law`` setting of each law (tapmp.laws): SC-DC (Eq. 25), APD-DC (Eq. 38), PID-DC (modal PID on e)
 SCDC, APDDC, PIDDC = (C_IDS[name] for name in ("sc-dc", "apd-dc", "pid-dc"))
 VELOCITY_DIFFERENCE = 0  # velocity_source: backward difference of measured positions
 VELOCITY_INPUT = 1       # velocity_source: the dq1..dq3 inputs
+AW_OFF, AW_CLAMP, AW_BACK = 0, 1, 2  # anti_windup: off, conditional integration, back-calculation (TAPMP_AW_*)
 # A communication point t is the sample instant t0 + k T_s if |t - t0 - k T_s| <= SAMPLE_TOLERANCE T_s
 # (the C model's TAPMP_SAMPLE_TOLERANCE, which says why this width).
 SAMPLE_TOLERANCE = cmodel.header_number("TAPMP_SAMPLE_TOLERANCE")
@@ -111,13 +113,18 @@ class ControllerModel:
 
     def __init__(self, params: ModelParams, gains: Gains, law: int = SCDC,
                  velocity_source: int = VELOCITY_DIFFERENCE, force_limit: float = 0.0,
-                 modal: ModalGains = ModalGains(), T_s: float = SERVO_STEP, t0: float = 0.0):
+                 modal: ModalGains = ModalGains(), T_s: float = SERVO_STEP, t0: float = 0.0,
+                 anti_windup: int = AW_OFF, anti_windup_time: float = ANTI_WINDUP_TIME):
+        """force_limit [N] (0 = none) clips the command and is where the anti-windup acts (anti_windup:
+        AW_OFF, AW_CLAMP or AW_BACK with the tracking time anti_windup_time [s]; tapmp_model.h)."""
         self._s = _settings({**params._asdict(), **gains.per_motor(), **modal._asdict(), "law": law,
-                             "velocity_source": velocity_source, "force_limit": force_limit, "T_s": T_s})
+                             "velocity_source": velocity_source, "force_limit": force_limit, "T_s": T_s,
+                             "anti_windup": anti_windup, "anti_windup_time": anti_windup_time})
         self.p, self.g, self.modal = params, gains, modal
         self.law = law
         self.velocity_source = velocity_source
         self.force_limit = force_limit
+        self.anti_windup, self.anti_windup_time = anti_windup, anti_windup_time
         ffi, self._lib = cmodel.load()
         self._ffi = ffi
         self._cp = ffi.addressof(self._s, "p")  # members of self._s, which keeps them alive
@@ -232,8 +239,8 @@ class ControllerModel:
             st.q_prev = self.q_prev
         st.has_q_prev = self.q_prev is not None
         if not self._lib.tapmp_controller_sample(self._cp, self._cg, self.law, self.velocity_source,
-                                                 self.force_limit, st, h, ref, q, dq_in, advance, out, st,
-                                                 self._arg):
+                                                 self.force_limit, self.anti_windup, self.anti_windup_time, st, h,
+                                                 ref, q, dq_in, advance, out, st, self._arg):
             raise KinematicDomainError(  # the text of kinematics.forward
                 "sqrt(3)/(2 L1)*(2 q2 - q1 - q3)", self._arg[0],
                 f"|value| < 1 (q = [{q[0]!r}, {q[1]!r}, {q[2]!r}] m, L1 = {self.p.L_1!r} m)")

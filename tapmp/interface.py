@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 from .models import CONTROLLER, DRIVE, PLANT, TRAJECTORY, names, record, system_models
 from .settings_c import allowed_text, settings_check_source, settings_read_macro  # noqa: F401 (the table's API)
-from .params import (DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
+from .params import (ANTI_WINDUP_TIME, DEFAULT_MODAL_GAINS, GAIN_NAMES, GAIN_PRESETS, MODAL_GAIN_NAMES, PAPER_MODEL,
                      SERVO_STEP, START_TIME, STOP_TIME)
 from . import laws, settings
 from .plant import PlantConfig
@@ -217,7 +217,15 @@ CONTROLLER_VARS: tuple[Var, ...] = tuple(
            "its grid t0 + k T_s (within 1e-4 T_s; t0 = start time) and holds its outputs in between; the "
            "velocity estimate and the integral use the time between samples, (k - k_prev) T_s, never the "
            "host's step; a host whose steps skip sample instants gets one logged warning", SERVO_STEP,
-           variability="fixed")]
+           variability="fixed"),
+       Var("anti_windup", "parameter", "", "anti-windup of the integral (SC-DC's of c, PID-DC's of e) at this "
+           "controller's force_limit (it cannot read the plant's: set it, e.g. to the plant's 600 N): 0 = off, 1 = "
+           "conditional integration (a motor beyond the limit does not integrate an error that drives it further "
+           "out), 2 = back-calculation (its integral term is pulled back toward the limit with the time constant "
+           "anti_windup_time)", 0, type="Integer", variability="tunable"),
+       Var("anti_windup_time", "parameter", "s", "tracking time constant T_t of the back-calculation "
+           "(anti_windup = 2): each sample takes back the fraction 1 - exp(-(k - k_prev) T_s / T_t) of the command "
+           "beyond force_limit from the integral term", ANTI_WINDUP_TIME, variability="tunable")]
 )
 
 _TP = TrajectoryParams()
@@ -277,6 +285,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "flex_frequency": (0.0, 1e5), "flex_damping": (0.0, 10.0), "flex_mass": (0.0, 1e6),
     **settings.ranges(),
     "law": laws.C_RANGE, "velocity_source": (0, 1), "T_s": (1e-9, 1e3),
+    "anti_windup": (0, 2), "anti_windup_time": (1e-9, 1e3),
     "X_c": (-1.0, 1.0), "Z_c": (-1.0, 1.0), "radius": (0.0, 1.0), "f_xz": (0.0, 1e4),
     "phase_xz": (-1e6, 1e6), "B_amplitude": (0.0, 1.5), "f_B": (0.0, 1e4), "phase_B": (-1e6, 1e6),
     "B_offset": (-1.5, 1.5),
@@ -298,6 +307,7 @@ _ARRAYS = ("c_v", "F_c", "cogging_phase", "disturbance_force", *GAIN_NAMES)  # p
 _INITIAL = ("X0", "Z0", "B0", "dX0", "dZ0", "dB0")
 _CHOICES = {"law": laws.choices_text(),
             "velocity_source": "0 (backward difference of q) or 1 (dq inputs)",
+            "anti_windup": "0 (off), 1 (conditional integration) or 2 (back-calculation)",
             "profile": "0 (circle and sinusoid), 1 (step), 2 (ramp) or 3 (S-curve)"}
 
 
@@ -317,7 +327,8 @@ def _field(model: str, name: str) -> str:
         return f"p.{member}"
     if model == PLANT:
         return f"x0.{member}" if name in _INITIAL else f"c.{member}"
-    return f"k.{member}" if name in ("law", "velocity_source", "force_limit", "T_s") else f"g.{member}"
+    return f"k.{member}" if name in ("law", "velocity_source", "force_limit", "T_s", "anti_windup",
+                                     "anti_windup_time") else f"g.{member}"
 
 
 def _ranged(model: str, table: tuple[Var, ...]) -> tuple[Var, ...]:

@@ -83,6 +83,7 @@ def _no_integral(g, mg) -> tuple[list[int], list[Vec3]]:
 
 def _scdc_integral(g, mg) -> tuple[list[int], list[Vec3]]:
     # the integral of c (Eq. 22) enters only through b; c sums to zero, so the sum of the integrals never changes
+    # (the anti-windup keeps it: tapmp_model.c's unwind holds and corrects the three together)
     motors = [i for i in range(3) if g.b[i] != 0.0]
     return motors, (_COMMON if len(motors) == 3 else [])
 

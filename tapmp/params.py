@@ -39,6 +39,10 @@ PAPER_MODEL = ModelParams()
 SERVO_STEP = 1e-4
 START_TIME = 0.0
 STOP_TIME = 2.5
+# The controller's back-calculation anti-windup, its default tracking time T_t [s]: about sqrt(Ti Td) (Astrom and
+# Hagglund's rule) of the default gains, 2.7 ms on SC-DC's differential modes (Ti = kp_d/ki_d = 26 ms,
+# Td = kv_d/kp_d = 0.28 ms) and on pid-dc-full's common mode (ki_c = ki_d: Ti = 6.7 ms, Td = 1.1 ms).
+ANTI_WINDUP_TIME = 0.003
 
 # Gains per motor, (motor 1, motor 2, motor 3). For APD-DC (law 1) the same
 # parameters are read as k_p = Lambda_p, k_v = Lambda_v, K_T1 = K_T (Eq. 41).

@@ -138,7 +138,8 @@ register(ModelRecord(
     name=CONTROLLER, element="controller", variables=CONTROLLER_VARS, dependencies=_controller_dependencies,
     sources=CONTROLLER_SOURCES,
     source="fmu_controller/controller.c", header="fmu_controller/controller.h",
-    settings_struct="tapmp_controller_settings", description=_CONTROLLER_DESCRIPTION,
+    settings_struct="tapmp_controller_settings", settings_relations="controller_anti_windup_check",
+    description=_CONTROLLER_DESCRIPTION,
     what=_controller_what, equations=_controller_equations, icon_label="SC-DC",
     adapter="fmu_controller/TAPMP_Controller.py", diagram_note="SC-DC (Eq. 15-26)"))
 # The drive: optional (outside TAPMP.ssp), between controller and plant in its own system TAPMP_Drive.ssp.
@@ -161,7 +162,8 @@ register(ModelRecord(
 register(ModelRecord(
     name=CLOCKED, element="controller", variables=CONTROLLER_VARS, dependencies=_controller_dependencies,
     source="fmu_controller/controller.c", header="fmu_controller/controller.h",
-    settings_struct="tapmp_controller_settings", icon_label="SC-DC", fmi_versions=("fmi3",), variant_of=CONTROLLER,
+    settings_struct="tapmp_controller_settings", settings_relations="controller_anti_windup_check",
+    icon_label="SC-DC", fmi_versions=("fmi3",), variant_of=CONTROLLER,
     description=(_CONTROLLER_DESCRIPTION + "; samples at every tick of its periodic input clock "
                  f"{CLOCK_NAME} (interval T_s, activated by the host in Event Mode) and holds its outputs "
                  "between ticks"),

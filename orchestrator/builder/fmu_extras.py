@@ -123,7 +123,8 @@ def closed_loop_stimulus(steps: int = REFERENCE_STEPS, h: float = SERVO_STEP) ->
     gains = Gains.from_preset({n: tuple(ctrl[f"{n}{i}"] for i in (1, 2, 3)) for n in Gains._fields})
     controller = ControllerModel(ModelParams(**{n: ctrl[n] for n in ModelParams._fields}), gains,
                                  int(ctrl["law"]), int(ctrl["velocity_source"]), ctrl["force_limit"],
-                                 ModalGains(**{n: ctrl[n] for n in ModalGains._fields}), ctrl["T_s"], 0.0)
+                                 ModalGains(**{n: ctrl[n] for n in ModalGains._fields}), ctrl["T_s"], 0.0,
+                                 int(ctrl["anti_windup"]), ctrl["anti_windup_time"])
     assert gains == Gains.from_preset(GAIN_PRESETS["default"])
     traj = TrajectoryParams(**{n: start[TRAJECTORY][n] for n in TrajectoryParams._fields})
     ref = reference(0.0, traj)

@@ -440,3 +440,47 @@ class MoveMetrics:
                           "peak_error_moving": "um (B: urad)", "cruise_error_max": "um (B: urad)",
                           "cruise_error_mean": "um (B: urad)", "bands": "m (B: rad)",
                           "settling_time_s": "s after the end of the reference move"}}
+
+
+# --- limit cycles (hunting) while holding still ------------------------------------------------
+
+def limit_cycle(time: np.ndarray, x: np.ndarray) -> dict:
+    """The limit cycle of each column of ``x`` (samples at ``time`` [s], e.g. one window of a hold).
+
+    The straight line fitted to a column is taken out first (a slow drift toward rest is no cycle).
+    Of what remains: ``amplitude``, half its peak-to-peak, in x's unit; ``period_s``, the mean time
+    between its rises from below mid - amplitude/2 to above mid + amplitude/2 (mid the centre of its
+    range: a Schmitt trigger, so that a chatter smaller than half the cycle counts no cycle), None
+    with fewer than two such rises; ``cycles``, the number of rises; ``mean``, the column's mean (its steady
+    offset)."""
+    t = np.asarray(time, dtype=float)
+    x = np.asarray(x, dtype=float).reshape(len(t), -1)
+    out = {"amplitude": [], "period_s": [], "cycles": [], "mean": []}
+    for col in x.T:
+        r = col - np.polyval(np.polyfit(t, col, 1), t) if len(t) > 1 else col - col.mean()
+        hi, lo = float(r.max()), float(r.min())
+        amplitude, mid = (hi - lo) / 2.0, (hi + lo) / 2.0
+        state, rises = 0, []  # state: -1 below the low level, 1 above the high one
+        for tk, v in zip(t, r):
+            if v <= mid - amplitude / 2.0:
+                state = -1
+            elif v >= mid + amplitude / 2.0:
+                if state == -1:
+                    rises.append(float(tk))
+                state = 1
+        out["amplitude"].append(amplitude)
+        out["period_s"].append(float(np.mean(np.diff(rises))) if len(rises) > 1 and amplitude > 0.0 else None)
+        out["cycles"].append(len(rises) if amplitude > 0.0 else 0)
+        out["mean"].append(float(col.mean()))
+    return out
+
+
+def hold_cycles(columns: list[str], data: np.ndarray, t_from: float) -> dict:
+    """Hunting in a results table from t_from [s] on (e.g. the last half of a hold): the limit cycle
+    (limit_cycle) of each motor's true tracking error q_d - q_true [um] and force command F [N]."""
+    col = {name: i for i, name in enumerate(columns)}
+    rows = data[data[:, col["time"]] >= t_from]
+    e = np.stack([rows[:, col[f"trajectory.q{i}_d"]] - rows[:, col[f"plant.q{i}_true"]] for i in (1, 2, 3)], axis=1)
+    F = rows[:, [col[c] for c in _FORCES]]
+    t = rows[:, col["time"]]
+    return {"t_from_s": float(t_from), "tracking_um": limit_cycle(t, e * 1e6), "force_n": limit_cycle(t, F)}

@@ -46,7 +46,7 @@ from tapmp.interface import (CONTROLLER, DRIVE_VARS, ELEMENT, ORDERINGS, PLANT, 
                              step_order)
 from tapmp.models import DRIVE
 from tapmp.laws import C_IDS
-from tapmp.params import GAIN_NAMES, GAIN_PRESETS, ModelParams
+from tapmp.params import ANTI_WINDUP_TIME, GAIN_NAMES, GAIN_PRESETS, ModelParams
 from tapmp.plant import PlantConfig
 from tapmp.trajectory import PROFILES, TrajectoryParams, move_duration, reference
 
@@ -377,7 +377,8 @@ class Scenario:
                            tuple(pl[k] for k in ("dX0", "dZ0", "dB0")))
         ctrl = ControllerModel(model_tuple(ModelParams, ct), self.gain_values(), ct["law"],
                                ct.get("velocity_source", 0), ct.get("force_limit", 0.0),
-                               model_tuple(ModalGains, ct), ct["T_s"], self.start_time)
+                               model_tuple(ModalGains, ct), ct["T_s"], self.start_time,
+                               ct.get("anti_windup", 0), ct.get("anti_windup_time", ANTI_WINDUP_TIME))
         return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
     def mismatched_params(self) -> dict:

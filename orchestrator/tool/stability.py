@@ -58,7 +58,7 @@ from scipy import linalg
 
 from tapmp.control import VELOCITY_DIFFERENCE, ControllerModel, ModalGains
 from tapmp.laws import BY_ID
-from tapmp.params import ModelParams
+from tapmp.params import ANTI_WINDUP_TIME, ModelParams
 from tapmp.plant import PlantConfig, PlantModel
 from tapmp.trajectory import TrajectoryParams, reference
 
@@ -141,16 +141,17 @@ def loop_models(scenario: Scenario, linear: bool = False):
     par = scenario.parameters()
     pl, ct, tr = par["plant"], par["controller"], par["trajectory"]
     config = model_tuple(PlantConfig, pl)._replace(noise_rms=0.0)
-    force_limit = ct.get("force_limit", 0.0)
-    if linear:
+    force_limit, anti_windup = ct.get("force_limit", 0.0), ct.get("anti_windup", 0)
+    if linear:  # no limit: nothing for the anti-windup to act at
         config = config._replace(encoder_resolution=0.0, F_c1=0.0, F_c2=0.0, F_c3=0.0, force_limit=0.0)
-        force_limit = 0.0
+        force_limit, anti_windup = 0.0, 0
     plant = PlantModel(model_tuple(ModelParams, pl), config,
                        tuple(pl.get(k, 0.0) for k in ("X0", "Z0", "B0")),
                        tuple(pl.get(k, 0.0) for k in ("dX0", "dZ0", "dB0")))
     ctrl = ControllerModel(model_tuple(ModelParams, ct), scenario.gain_values(), ct["law"],
                            ct.get("velocity_source", VELOCITY_DIFFERENCE), force_limit,
-                           model_tuple(ModalGains, ct), ct["T_s"], scenario.start_time)
+                           model_tuple(ModalGains, ct), ct["T_s"], scenario.start_time, anti_windup,
+                           ct.get("anti_windup_time", ANTI_WINDUP_TIME))
     return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
 

@@ -8,7 +8,8 @@
 #include "tapmp_loop.h"
 
 long tapmp_loop_run(tapmp_plant *pl, const tapmp_params *p, const tapmp_gains *g, int law,
-                    int velocity_source, double force_limit, tapmp_controller_state *st,
+                    int velocity_source, double force_limit, int anti_windup, double anti_windup_time,
+                    tapmp_controller_state *st,
                     tapmp_clock *clock, const tapmp_trajectory *tp, double L1_ref, double t0,
                     long k0, long n, double h, int gauss_seidel, tapmp_loop_point *pt,
                     double *rows, int *error)
@@ -34,8 +35,8 @@ long tapmp_loop_run(tapmp_plant *pl, const tapmp_params *p, const tapmp_gains *g
                 return i;
             }
             tapmp_controller_state next;
-            if (!tapmp_controller_sample(p, g, law, velocity_source, force_limit, st, steps * clock->T_s,
-                                         pt->ref, pt->q, pt->dq, 1, out, &next, &arg)) {
+            if (!tapmp_controller_sample(p, g, law, velocity_source, force_limit, anti_windup, anti_windup_time,
+                                         st, steps * clock->T_s, pt->ref, pt->q, pt->dq, 1, out, &next, &arg)) {
                 *error = TAPMP_LOOP_CONTROLLER_DOMAIN;
                 *clock = clock_before;
                 return i;

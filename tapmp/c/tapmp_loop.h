@@ -37,7 +37,8 @@ typedef struct {
  * steps completed; if fewer than n, *error says why and everything is as it was before the
  * failing step (so the caller can replay that step and report it). */
 TAPMP_LINKAGE long tapmp_loop_run(tapmp_plant *pl, const tapmp_params *p, const tapmp_gains *g, int law,
-                                  int velocity_source, double force_limit, tapmp_controller_state *st,
+                                  int velocity_source, double force_limit, int anti_windup,
+                                  double anti_windup_time, tapmp_controller_state *st,
                                   tapmp_clock *clock, const tapmp_trajectory *tp, double L1_ref, double t0,
                                   long k0, long n, double h, int gauss_seidel, tapmp_loop_point *pt,
                                   double *rows, int *error);

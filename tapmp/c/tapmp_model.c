@@ -413,11 +413,59 @@ void tapmp_pid_command(const double e[3], const double de[3], const double integ
                + modal(g->ki_c, g->ki_d, integral_e, i, mi);
 }
 
+/* The gain of motor i's own integral state in its command, u_i = ... + k_i I_i [command units / (m s)]:
+ * Lambda_v D b (SC-DC, Eq. 22-25) or the diagonal of ki_c Pi_c + ki_d Pi_d (PID-DC). PID-DC's integral
+ * couples the motors unless ki_c = ki_d; the anti-windup acts on the diagonal, motor by motor. */
+static double integral_gain(int law, const tapmp_gains *g, int i)
+{
+    return law == TAPMP_SCDC ? g->Lambda_v[i] * g->D[i] * g->b[i] : (g->ki_c + 2.0 * g->ki_d) / 3.0;
+}
+
+/* The anti-windup of one sample (tapmp_model.h, TAPMP_AW_*) for SC-DC and PID-DC at the force limit
+ * lim > 0 [N]: `integral` holds this sample's candidate (before[] plus h x, x the integrated c or e) and
+ * u its command. Clamping puts back before[i] for a motor whose force u_i/K_T is beyond lim while its
+ * increment drives it further out, and recomputes u; back-calculation moves the integral of a motor
+ * beyond lim so that its term takes back the fraction 1 - exp(-h/T_t) of the excess (the exact decay over
+ * h of the continuous law dI_term/dt = (u_sat - u)/T_t, which stays below 1 for any h, where h/T_t would
+ * overshoot the limit for h > T_t); the output of this sample is saturated either way.
+ * SC-DC's integral of c keeps the sum it starts with (c sums to zero, Eq. 21), and no c can change that
+ * sum: a common part left in it would never unwind. So SC-DC holds its three integrals together (all, if
+ * one motor is to be held) and takes the mean out of the back-calculation's corrections. */
+static void unwind(int mode, double lim, double T_t, int law, const tapmp_gains *g, double h, const double e[3],
+                   const double de[3], const double c[3], const double before[3], const double u_d[3],
+                   double integral[3], double u[3])
+{
+    const double *x = law == TAPMP_SCDC ? c : e;
+    double dI[3] = {0.0, 0.0, 0.0};
+    int held = 0;
+    for (int i = 0; i < 3; i++) {
+        double F = u[i] / g->K_T[i], k = integral_gain(law, g, i);
+        if (!(fabs(F) > lim && k > 0.0)) continue;
+        if (mode == TAPMP_AW_CLAMP && x[i] * F > 0.0) {
+            integral[i] = before[i];
+            held = 1;
+        } else if (mode == TAPMP_AW_BACK) {
+            dI[i] = -expm1(-h / T_t) * (saturate(F, lim) - F) * g->K_T[i] / k;
+        }
+    }
+    if (law == TAPMP_SCDC) {
+        double mean = (dI[0] + dI[1] + dI[2]) / 3.0;
+        for (int i = 0; i < 3; i++) {
+            if (held) integral[i] = before[i];
+            else integral[i] += dI[i] - mean;
+        }
+    } else {
+        for (int i = 0; i < 3; i++) integral[i] += dI[i];
+    }
+    if (held && law == TAPMP_SCDC) tapmp_scdc_command(e, de, c, integral, u_d, g, u);
+    else if (held) tapmp_pid_command(e, de, integral, u_d, g, u);
+}
+
 /* control.ControllerModel.sample */
 int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
-                            int velocity_source, double force_limit,
-                            const tapmp_controller_state *st, double h, const double ref[9],
-                            const double q[3], const double dq_in[3], int advance,
+                            int velocity_source, double force_limit, int anti_windup,
+                            double anti_windup_time, const tapmp_controller_state *st, double h,
+                            const double ref[9], const double q[3], const double dq_in[3], int advance,
                             double out[12], tapmp_controller_state *next, double *arg)
 {
     double L1 = p->L_1, q_d[3], dq_d[3], dq[3], e[3], de[3], es[3], u_d[3], u[3];
@@ -435,8 +483,8 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
     es[1] = e[1] - e[2];
     es[2] = e[2] - e[0];
     if (!tapmp_feedforward(q, dq, ref + 3, ref + 6, p, u_d, arg)) return 0;  /* Eq. 26 */
+    double c[3] = {es[0] - es[2], es[1] - es[0], es[2] - es[1]};  /* Eq. 21 */
     if (law == TAPMP_SCDC) {
-        double c[3] = {es[0] - es[2], es[1] - es[0], es[2] - es[1]};  /* Eq. 21 */
         if (advance)
             for (int i = 0; i < 3; i++) integral[i] = integral[i] + h * c[i];
         tapmp_scdc_command(e, de, c, integral, u_d, g, u);
@@ -447,6 +495,8 @@ int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law
     } else {
         tapmp_apd_command(e, de, u_d, g, u);
     }
+    if (advance && anti_windup != TAPMP_AW_OFF && force_limit > 0.0 && (law == TAPMP_SCDC || law == TAPMP_PIDDC))
+        unwind(anti_windup, force_limit, anti_windup_time, law, g, h, e, de, c, st->integral, u_d, integral, u);
     for (int i = 0; i < 3; i++) {
         double F = u[i] / g->K_T[i];
         out[i] = force_limit > 0.0 ? saturate(F, force_limit) : F;
@@ -751,6 +801,18 @@ static int plant_flex_check(const tapmp_plant_settings *s, const char **name, do
     if (s->c.flex_frequency > 0.0 && !(s->c.flex_mass < s->p.m_p))
         return offender("flex_mass", s->c.flex_mass, "flex_mass < m_p (the modal mass is a part of the platform's "
                         "mass) while flex_frequency > 0", 1, name, value, allowed);
+    return 0;
+}
+
+/* The controller's one relation between settings (tapmp_settings.h calls it after the ranges): the
+ * anti-windup acts at the controller's own force_limit (it cannot read the plant's), so it needs one. */
+static int controller_anti_windup_check(const tapmp_controller_settings *s, const char **name, double *value,
+                                        const char **allowed)
+{
+    if (s->k.anti_windup != TAPMP_AW_OFF && !(s->k.force_limit > 0.0))
+        return offender("anti_windup", s->k.anti_windup, "0 (off) while force_limit = 0: the anti-windup acts at the "
+                        "controller's own force_limit, which must be > 0 (e.g. the plant's force_limit)", 2, name,
+                        value, allowed);
     return 0;
 }
 

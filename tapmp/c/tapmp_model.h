@@ -101,10 +101,14 @@ typedef struct {
 } tapmp_initial_state;
 
 /* The controller's law (TAPMP_SCDC, TAPMP_APDDC, TAPMP_PIDDC), velocity source (0 backward
- * difference of q, 1 the dq inputs), force command limit [N] (0 = none) and sample period [s]. */
+ * difference of q, 1 the dq inputs), force command limit [N] (0 = none), sample period [s], and
+ * its anti-windup (TAPMP_AW_OFF, TAPMP_AW_CLAMP, TAPMP_AW_BACK) with the back-calculation's
+ * tracking time constant [s]. */
 typedef struct {
     int law, velocity_source;
     double force_limit, T_s;
+    int anti_windup;
+    double anti_windup_time;
 } tapmp_controller_config;
 
 /* Every setting of each model: one member per parameter of its FMU, named by the column `field`
@@ -213,6 +217,12 @@ TAPMP_LINKAGE void tapmp_pid_command(const double e[3], const double de[3], cons
                        const double u_d[3], const tapmp_gains *g, double u[3]);
 
 
+/* The integrals' anti-windup at the controller's force_limit (the setting anti_windup): none; conditional
+ * integration (a motor whose command is beyond the limit does not integrate a sample that drives it further
+ * out); back-calculation (each sample the integral term of a motor beyond the limit is pulled toward the
+ * limit by the fraction 1 - exp(-h / anti_windup_time) of the excess). */
+enum { TAPMP_AW_OFF = 0, TAPMP_AW_CLAMP = 1, TAPMP_AW_BACK = 2 };
+
 /* The discrete controller's state between samples. */
 typedef struct {
     double integral[3];  /* running integral of c (SC-DC) or e (PID-DC) [m s] */
@@ -222,10 +232,12 @@ typedef struct {
 
 /* One sample of tapmp.control.ControllerModel.sample: ref (9 values), q, dq_in -> F, u, e,
  * e_s (12 outputs, in that order). `advance` = 0 leaves the state untouched (initialization).
+ * anti_windup (TAPMP_AW_*) acts on the integral at force_limit [N] (none without a limit), the
+ * back-calculation with the time constant anti_windup_time [s].
  * The new state goes to *next (may equal *st). Returns 0 (and *arg) on a domain error. */
 TAPMP_LINKAGE int tapmp_controller_sample(const tapmp_params *p, const tapmp_gains *g, int law,
-                            int velocity_source, double force_limit,
-                            const tapmp_controller_state *st, double h, const double ref[9],
+                            int velocity_source, double force_limit, int anti_windup,
+                            double anti_windup_time, const tapmp_controller_state *st, double h, const double ref[9],
                             const double q[3], const double dq_in[3], int advance,
                             double out[12], tapmp_controller_state *next, double *arg);
 

@@ -87,3 +87,13 @@ def test_a_b_sinusoid_beyond_the_kinematic_domain_is_refused_alike(families, fam
         TrajectoryParams(B_offset=1.0, B_amplitude=0.6).validated()
     errors = fmu_errors(families[family][TRAJECTORY], {"B_offset": 1.0, "B_amplitude": 0.6})
     assert any(m.startswith(str(err.value)) for m in errors), errors
+
+
+@pytest.mark.parametrize("family", ["python", "fmi2", "fmi3"])
+def test_an_anti_windup_without_a_controller_force_limit_is_refused_alike(families, family):
+    from tapmp.interface import CONTROLLER
+    with pytest.raises(ModelInputError) as err:
+        cmodel.check_settings(CONTROLLER, {"anti_windup": 2, "force_limit": 0.0})
+    assert str(err.value).startswith("anti_windup = 2 is invalid: allowed is 0 (off) while force_limit = 0")
+    errors = fmu_errors(families[family][CONTROLLER], {"anti_windup": 2, "force_limit": 0.0})
+    assert any(m.startswith(str(err.value)) for m in errors), errors

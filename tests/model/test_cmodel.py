@@ -27,12 +27,12 @@ import pytest
 from orchestrator.tool.scenario import load
 from tapmp import cmodel, dynamics, kinematics
 from tapmp.closed_loop import simulate
-from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, Gains
+from tapmp.control import APDDC, AW_BACK, AW_CLAMP, AW_OFF, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, Gains
 from tapmp.control import ModalGains, sync_deviation
 from tests.support.control_reference import apd_command, feedforward, pid_command, scdc_command
 from tests.support.control_reference import sync_errors
 from tapmp.errors import KinematicDomainError
-from tapmp.params import GAIN_NAMES, PAPER_MODEL, ModelParams
+from tapmp.params import ANTI_WINDUP_TIME, GAIN_NAMES, PAPER_MODEL, ModelParams
 from tapmp.plant import IDEAL, PlantConfig, PlantModel
 from ctoolchain import CFLAGS, compile_c
 from tapmp.trajectory import TrajectoryParams, _c_trajectory, circle_reference, move_plan, move_reference
@@ -188,10 +188,11 @@ class Native:
         return tuple(u)
 
     def controller_sample(self, p, g, law, velocity_source, force_limit, st, h, ref, q, dq_in,
-                          advance, next_st):
+                          advance, next_st, anti_windup=AW_OFF, anti_windup_time=ANTI_WINDUP_TIME):
         """(ok, (F, u, e, e_s) as 12 values, arg); the new state goes to next_st."""
         out, arg = FFI.new("double[12]"), FFI.new("double *")
-        ok = self.lib.tapmp_controller_sample(p, g, law, velocity_source, force_limit, st, h, tuple(ref),
+        ok = self.lib.tapmp_controller_sample(p, g, law, velocity_source, force_limit, anti_windup,
+                                              anti_windup_time, st, h, tuple(ref),
                                               tuple(q), tuple(dq_in), int(advance), out, next_st, arg)
         return ok, tuple(out), arg[0]
 
@@ -428,13 +429,49 @@ def reference_outputs(plant: PlantModel):
 
 
 class ReferenceController:
-    """ControllerModel.sample composed from control.py's laws (Eq. 15-26, 38), with its state."""
+    """ControllerModel.sample composed from control.py's laws (Eq. 15-26, 38), with its state, and the
+    anti-windup written out from its definition (tapmp_model.h, TAPMP_AW_*)."""
 
-    def __init__(self, p, g, law, velocity_source, force_limit=0.0, modal=ModalGains()):
+    def __init__(self, p, g, law, velocity_source, force_limit=0.0, modal=ModalGains(), anti_windup=AW_OFF,
+                 anti_windup_time=ANTI_WINDUP_TIME):
         self.p, self.g, self.law, self.velocity_source, self.force_limit, self.modal = (
             p, g, law, velocity_source, force_limit, modal)
+        self.anti_windup, self.anti_windup_time = anti_windup, anti_windup_time
         self.integral = [0.0, 0.0, 0.0]
         self.q_prev = None
+        self.unwound = 0  # samples on which the anti-windup changed the integral
+
+    def integral_gain(self, i):
+        """Motor i's own integral gain: Lambda_v D b (SC-DC); the diagonal of ki_c Pi_c + ki_d Pi_d (PID-DC),
+        Pi_c = 1 1^T / 3, Pi_d = I - Pi_c."""
+        g, m = self.g, self.modal
+        return g.Lambda_v[i] * g.D[i] * g.b[i] if self.law == SCDC else m.ki_c / 3.0 + m.ki_d * 2.0 / 3.0
+
+    def unwind(self, candidate, x, uu, h, command):
+        """(integral, u) after the anti-windup: clamping keeps the old integral of a motor beyond the limit
+        whose increment h x drives it further out (SC-DC: of all three, u recomputed), back-calculation adds
+        (1 - exp(-h/T_t)) (F_sat - F) K_T / k_i to a motor beyond the limit (SC-DC: less the corrections'
+        mean, so the integrals' sum stays; expm1: the C model's rounding)."""
+        lim, integral = self.force_limit, list(candidate)
+        held, dI = False, [0.0, 0.0, 0.0]
+        for i in range(3):
+            F, k = uu[i] / self.g.K_T[i], self.integral_gain(i)
+            if abs(F) <= lim or k <= 0.0:
+                continue
+            if self.anti_windup == AW_CLAMP and x[i] * F > 0.0:
+                integral[i], held = self.integral[i], True
+            elif self.anti_windup == AW_BACK:
+                dI[i] = -math.expm1(-h / self.anti_windup_time) * (min(max(F, -lim), lim) - F) * self.g.K_T[i] / k
+        if self.law == SCDC:
+            mean = (dI[0] + dI[1] + dI[2]) / 3.0
+            integral = list(self.integral) if held else [integral[i] + (dI[i] - mean) for i in range(3)]
+        else:
+            integral = [integral[i] + dI[i] for i in range(3)]
+        if integral != list(candidate):
+            self.unwound += 1
+            if self.anti_windup == AW_CLAMP:
+                uu = command(integral)
+        return integral, uu
 
     def sample(self, t, h, ref, q, dq_in, advance=True):
         L1 = self.p.L_1
@@ -450,16 +487,20 @@ class ReferenceController:
         u_d = feedforward(q, dq, ref[3:6], ref[6:9], self.p)
         integral = self.integral
         if self.law == SCDC:
-            c = sync_deviation(*e_s)
+            c = x = sync_deviation(*e_s)
             if advance:
                 integral = [integral[i] + h * c[i] for i in range(3)]
-            uu = scdc_command(e, de, c, integral, u_d, self.g)
+            command = lambda integral: scdc_command(e, de, c, integral, u_d, self.g)  # noqa: E731
         elif self.law == PIDDC:
+            x = e
             if advance:
                 integral = [integral[i] + h * e[i] for i in range(3)]
-            uu = pid_command(e, de, integral, u_d, self.modal, self.g.K_T)
+            command = lambda integral: pid_command(e, de, integral, u_d, self.modal, self.g.K_T)  # noqa: E731
         else:
-            uu = apd_command(e, de, u_d, self.g)
+            command = lambda integral: apd_command(e, de, u_d, self.g)  # noqa: E731
+        uu = command(integral)
+        if advance and self.anti_windup != AW_OFF and self.force_limit > 0.0 and self.law != APDDC:
+            integral, uu = self.unwind(integral, x, uu, h, command)
         if advance:
             self.integral, self.q_prev = integral, tuple(q)
         F = saturated([uu[i] / self.g.K_T[i] for i in range(3)], self.force_limit)
@@ -814,24 +855,29 @@ def assert_same_controller_state(st, ctrl: ReferenceController, check: Agreement
 SEQUENCE = 5  # samples per random controller
 
 
+@pytest.mark.parametrize("anti_windup", (AW_OFF, AW_CLAMP, AW_BACK), ids=("no_anti_windup", "clamping",
+                                                                       "back_calculation"))
 @pytest.mark.parametrize("velocity_source", (VELOCITY_DIFFERENCE, VELOCITY_INPUT),
                          ids=("backward_difference", "dq_inputs"))
 @pytest.mark.parametrize("law", (SCDC, APDDC, PIDDC), ids=("scdc", "apddc", "piddc"))
-def test_controller_sample_sequences_match_python(native, law, velocity_source):
+def test_controller_sample_sequences_match_python(native, law, velocity_source, anti_windup):
     """Random controllers, each sampled SEQUENCE times along a moving platform; the first sample
     is an initialization (advance False) half of the time, later ones advance 80 % of the time,
     so the integral and q_prev are carried, held and updated as in ControllerModel.sample.
-    The C state is updated in place (next = st) or into a second struct, alternately."""
-    rng = np.random.default_rng(411 + 2 * law + velocity_source)
+    The C state is updated in place (next = st) or into a second struct, alternately. With an
+    anti-windup, the laws with an integral have it act on some samples (their forces exceed the limit)."""
+    rng = np.random.default_rng(411 + 2 * law + velocity_source + 10 * anti_windup)
     check, state_check = Agreement("tapmp_controller_sample"), Agreement("tapmp_controller_sample (state)")
     advances = {True: 0, False: 0}
+    unwound = 0
     for k in range(N_STATES // SEQUENCE):
         p, g = random_params(rng), random_gains(rng)
         lim = u(rng, 50.0, 600.0) if rng.random() < 0.5 else 0.0
         h = 1e-4 * u(rng, 0.5, 2.0)
         resolution = 1e-7 if rng.random() < 0.5 else 0.0
         m = random_modal_gains(rng)
-        ctrl = ReferenceController(p, g, law, velocity_source, lim, m)
+        aw_time = 10.0 ** u(rng, -5.0, -1.0) if anti_windup != AW_OFF else ANTI_WINDUP_TIME
+        ctrl = ReferenceController(p, g, law, velocity_source, lim, m, anti_windup, aw_time)
         cp, cg, st = c_params(p), c_gains(g, m), c_controller_state()
         pose, rate = random_pose(rng), random_rates(rng)
         for i in range(SEQUENCE):
@@ -844,15 +890,17 @@ def test_controller_sample_sequences_match_python(native, law, velocity_source):
             next_st = st if k % 2 else c_controller_state()
             inputs = (law, velocity_source, p, g, lim, h, k, i, ref, q, dq_in, advance)
             ok, out, _ = native.controller_sample(cp, cg, law, velocity_source, lim, st, h, ref, q, dq_in,
-                                                  advance, next_st)
+                                                  advance, next_st, anti_windup, aw_time)
             F, uu, e, e_s = ctrl.sample(i * h, h, ref, q, dq_in, advance)
             assert ok == 1, inputs
             check.check(out, (*F, *uu, *e, *e_s), inputs)
             st = next_st
             assert_same_controller_state(st, ctrl, state_check, inputs)
+        unwound += ctrl.unwound
     check.done()
     state_check.done()
     assert advances[True] > N_STATES // 2 and advances[False] > N_STATES // 20
+    assert (unwound > N_STATES // 50) == (anti_windup != AW_OFF and law != APDDC), unwound
 
 
 def test_controller_sample_refuses_positions_outside_the_domain_like_python_keeping_its_state(native):

@@ -8,7 +8,7 @@ import pytest
 
 from orchestrator.paper.paper_gains import paper_scenario
 from tapmp.closed_loop import COLUMNS, run, simulate
-from tapmp.control import APDDC, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, ControllerModel, Gains
+from tapmp.control import APDDC, AW_BACK, AW_CLAMP, PIDDC, SCDC, VELOCITY_DIFFERENCE, VELOCITY_INPUT, ControllerModel, Gains
 from tapmp.errors import KinematicDomainError, ModelInputError
 from tapmp.params import GAIN_PRESETS, PAPER_MODEL
 from tapmp.plant import PlantConfig, PlantModel
@@ -80,6 +80,18 @@ def test_compiled_loop_equals_python_loop_bit_for_bit_on_every_law_and_ordering(
     two RK4 substeps and a command limit: 500 steps, the same doubles at every point."""
     assert_same(lambda: models(law, velocity_source, force_limit=300.0, config=NOISY), 0.0, 500, H, ordering,
                 block=64)
+
+
+@pytest.mark.parametrize("anti_windup", [AW_CLAMP, AW_BACK])
+@pytest.mark.parametrize("law", ["sc-dc", "pid-dc"])
+def test_compiled_loop_equals_python_loop_with_the_anti_windup_at_the_force_limit(law, anti_windup):
+    """The step of scenarios/windup_step.toml (at the 600 N limit for tens of ms, PID-DC with ki_c = ki_d):
+    1,000 steps, the same doubles at every point."""
+    from orchestrator.tool.scenario import load
+    from tests.support.shared import ROOT
+    sc = load(ROOT / "scenarios" / "windup_step.toml", [f'law="{law}"', f"controller.anti_windup={anti_windup}",
+                                                        "controller.ki_c=48600.0"])
+    assert_same(sc.plain_models, sc.start_time, 1000, sc.step, sc.ordering, block=64)
 
 
 @pytest.mark.parametrize("T_s, h, t0", [(3 * H, H, 0.0),     # holds between samples

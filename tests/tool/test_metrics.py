@@ -42,3 +42,18 @@ def test_a_system_without_the_tapmp_plant_gets_metrics_that_name_the_missing_col
     assert "plant.q1_true" in result["not_computed"] and "trajectory.B_d" in result["not_computed"]
     assert "trajectory.q1_d" not in result["not_computed"]
     assert "tracking_mae_um" not in result
+
+
+def test_limit_cycle_finds_the_amplitude_and_period_of_a_cycle_on_a_drift_and_ignores_chatter():
+    """A 2 ms cycle of amplitude 3 on a linear drift, with a 0.5 chatter every sample: the drift is taken
+    out, the chatter (under half the cycle) counts no cycle; a pure drift has no cycle."""
+    from orchestrator.tool.metrics import limit_cycle
+    t = np.arange(0.0, 0.1, 1e-5)
+    cycle = 3.0 * np.sin(2.0 * np.pi * t / 2e-3)
+    chatter = 0.5 * (-1.0) ** np.arange(len(t))
+    m = limit_cycle(t, np.column_stack([cycle + 40.0 * t + chatter, 7.0 + 40.0 * t]))
+    assert m["amplitude"][0] == pytest.approx(3.5, abs=0.1)  # the fitted line takes a little of the sine
+    assert m["period_s"][0] == pytest.approx(2e-3, rel=1e-3)
+    assert m["cycles"][0] == 49  # 50 periods: the first rise from below comes in the second
+    assert m["mean"][0] == pytest.approx(2.0, abs=0.01)
+    assert m["amplitude"][1] == pytest.approx(0.0, abs=1e-9) and m["period_s"][1] is None and m["cycles"][1] == 0
