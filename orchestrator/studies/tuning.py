@@ -297,7 +297,7 @@ def _comparison_md(path: Path, study, short, results, compare, spec, command, re
              + ("those robustness bounds" if spec.get("delay_margin_min") is not None else "that robustness bound")
              + (f", evaluated on the loop with the drive ({_drive_text(short.drive)}) in it" if short.drive is not None
                 else "") + ".", "",
-             "| law | evaluations | rejected (not stable or Ms beyond the bound) | failed / diverged | objective, start gains [um] | "
+             "| law | evaluations | rejected (not stable, Ms beyond the bound or delay margin below it) | failed / diverged | objective, start gains [um] | "
              "objective, tuned [um] | tuned gains (all motors) | preset file |",
              "|---|---|---|---|---|---|---|---|"]
     for law, r in results.items():
