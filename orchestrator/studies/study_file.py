@@ -310,7 +310,7 @@ def _bounds(bounds, info) -> dict:
 class _Tune(BaseModel):
     """The [tune] table: the gains of each law searched by differential evolution (tuning.py)."""
 
-    laws: Annotated[list, BeforeValidator(_laws)] = list(_TUNABLE)  # the laws tuned on Gains (not PID-DC's)
+    laws: Annotated[list, BeforeValidator(_laws)] = [law for law in _TUNABLE if law != FULL_PID]  # on Gains
     bounds: Annotated[dict, BeforeValidator(_bounds)] = Field(default_factory=dict, validate_default=True)
     population: Annotated[int, rule(lambda v: is_int(v, 2), "an integer >= 2", "tune.")] = 6
     generations: Annotated[int, rule(lambda v: is_int(v, 1), "an integer >= 1", "tune.")] = 5
