@@ -34,9 +34,6 @@ def cmd_check(args) -> int:
     scenario = load(scenario_file(args.scenario), args.set)
     report = check(scenario)
     print(f"{scenario.name}: {report.summary()}")
-    if scenario.drive is not None:  # the FMI-free model has no drive: say so beside the verdict
-        print("note: the check's loop has no drive: the delay and current loop of drive = true are not in it "
-              "(docs/analysis.md, \"With a drive in the loop\")", file=sys.stderr)
     if args.eigenvalues:
         for z in report.eigenvalues:
             print(f"  {z.real:+.6f} {z.imag:+.6f}j   |z| = {abs(z):.6f}")

@@ -129,7 +129,7 @@ def base_value(scenario: Scenario, key: str):
 
 
 STUDY_KEYS = ("law", "ordering", "step", "stop_time", "start_time", "gains", "gains_file", "start_on_trajectory",
-              "baseline")
+              "baseline", "drive")
 BASELINE_KEY = "baseline"  # a grid key naming compare runs (orchestrator.tool.baselines), not a scenario field
 
 
@@ -261,8 +261,14 @@ class _MonteCarlo(BaseModel):
         return data
 
 
-_TUNABLE = {law.name: law.tunable for law in LAWS if law.tunable}  # the laws tuned on Gains (tapmp.laws)
-_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time", "ms_bound")
+# pid-dc-full: the PID-DC law with one integral gain ki on every mode (ki_c = ki_d = ki, compare's baseline of
+# that name), tuned on its modal gains [u/m, u s/m, u/(m s)] in the controller table rather than on Gains
+FULL_PID = "pid-dc-full"
+FULL_PID_GAINS = ("kp_c", "kp_d", "kv_c", "kv_d", "ki")
+_TUNABLE = {**{law.name: law.tunable for law in LAWS if law.tunable},  # the laws tuned on Gains (tapmp.laws)
+            FULL_PID: FULL_PID_GAINS}
+_KEYS = ("laws", "bounds", "population", "generations", "seed", "write_to", "compare_stop_time", "ms_bound",
+         "delay_margin_min")
 MS_BOUND = 2.0  # default tune.ms_bound: the usual guideline Ms < 2 (6 dB; Skogestad and Postlethwaite, Sec. 2.4.3)
 
 
@@ -304,7 +310,7 @@ def _bounds(bounds, info) -> dict:
 class _Tune(BaseModel):
     """The [tune] table: the gains of each law searched by differential evolution (tuning.py)."""
 
-    laws: Annotated[list, BeforeValidator(_laws)] = list(_TUNABLE)  # the laws tuned on Gains (not PID-DC's)
+    laws: Annotated[list, BeforeValidator(_laws)] = [law for law in _TUNABLE if law != FULL_PID]  # on Gains
     bounds: Annotated[dict, BeforeValidator(_bounds)] = Field(default_factory=dict, validate_default=True)
     population: Annotated[int, rule(lambda v: is_int(v, 2), "an integer >= 2", "tune.")] = 6
     generations: Annotated[int, rule(lambda v: is_int(v, 1), "an integer >= 1", "tune.")] = 5
@@ -315,6 +321,11 @@ class _Tune(BaseModel):
     ms_bound: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v) and v >= 1.0,
                                     "a finite number >= 1 (the largest peak sensitivity Ms on any mode)",
                                     "tune.")] = MS_BOUND
+    # the smallest delay margin [s] with every motor delayed at once (analysis.delay_margin) a candidate must
+    # have, on the loop the check linearizes (with the drive's own delay if the base has the drive); None: no bound
+    delay_margin_min: Annotated[float, rule(lambda v: is_number(v) and math.isfinite(v) and v > 0.0,
+                                            "a finite number > 0 [s] (the smallest delay margin, all motors)",
+                                            "tune.")] = None
 
     @model_validator(mode="before")
     @classmethod

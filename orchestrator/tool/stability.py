@@ -18,6 +18,12 @@ takes the loop state at a communication point t to the state at t + h [s]:
   encoder sample of the backward-difference velocity [m] (velocity_source = 0);
 * with the ``jacobi`` ordering, the command held from the previous sample [N]
   (the extra step of delay); ``gauss-seidel`` has only the zero-order hold;
+* with the drive in the loop (a scenario's ``drive``, TAPMP_Drive, fmu_plant/drive.c), per motor
+  the commands of its computation delay (delay_samples of them) [N] and its current loop's force y
+  and rate y' / w_n [N] (when current_bandwidth > 0), stepped as the FMU steps them (exact
+  discretization, the mean of y over the step times 1 + force_constant_error to the plant), its
+  current limit left out like the other saturations; with ``jacobi`` also the drive's force held
+  from the previous step [N];
 * with the plant's flexible mode on (flex_frequency > 0), its deflection z_f [m] and
   rate dz_f [m/s], last.
 
@@ -57,6 +63,7 @@ import numpy as np
 from scipy import linalg
 
 from tapmp.control import VELOCITY_DIFFERENCE, ControllerModel, ModalGains
+from tapmp.interface import DRIVE_DEFAULTS
 from tapmp.laws import BY_ID
 from tapmp.params import ANTI_WINDUP_TIME, ModelParams
 from tapmp.plant import PlantConfig, PlantModel
@@ -155,6 +162,54 @@ def loop_models(scenario: Scenario, linear: bool = False):
     return plant, ctrl, model_tuple(TrajectoryParams, tr)
 
 
+class DriveModel:
+    """TAPMP_Drive's equations (fmu_plant/drive.c, docs/native-fmus.md) on the loop state, per motor:
+    the computation delay of ``delay`` communication steps, the second-order current loop discretized
+    exactly over the step h [s] (its force y and y' / w_n [N]) and the force-constant error. The limit
+    is applied only if ``limit`` (the check's linear loop leaves it out)."""
+
+    def __init__(self, settings: dict, h: float, limit: bool = False):
+        s = {**DRIVE_DEFAULTS, **settings}
+        self.delay = int(s["delay_samples"])
+        self.wn = 2.0 * math.pi * s["current_bandwidth"]
+        self.gain = np.array([1.0 + s[f"force_constant_error{i}"] for i in (1, 2, 3)])
+        self.limit = s["force_limit"] if limit else 0.0
+        a, z = self.wn * h, s["current_damping"]
+        # z = (y, y'/wn, s, mean of y over the step): the FMU's exp(M h), here by scipy's expm
+        self.phi = linalg.expm(np.array([[0.0, a, 0.0, 0.0], [-a, -2.0 * z * a, a, 0.0], [0.0] * 4,
+                                         [1.0, 0.0, 0.0, 0.0]]))
+
+    @property
+    def size(self) -> int:
+        """States per motor: the delayed commands, then the loop's two (if it is not ideal)."""
+        return self.delay + (2 if self.wn > 0.0 else 0)
+
+    def rest(self, u) -> np.ndarray:
+        """The state at rest on the commands u [N] (the FMU's start), as 3 x size."""
+        u = np.asarray(u, dtype=float)
+        cols = [u] * self.delay + ([self._limited(u), np.zeros(3)] if self.wn > 0.0 else [])
+        return np.array(cols).T.reshape(3, self.size)
+
+    def _limited(self, c):
+        return np.clip(c, -self.limit, self.limit) if self.limit > 0.0 else c
+
+    def step(self, state: np.ndarray, u) -> tuple:
+        """(state after the step, force to the plant [N]) from the state (3 x size) and the commands u [N]."""
+        u = np.asarray(u, dtype=float)
+        d = self.delay
+        c = state[:, d - 1] if d else u
+        s = self._limited(c)
+        new = np.empty_like(state)
+        if d:
+            new[:, 0], new[:, 1:d] = u, state[:, :d - 1]
+        mean = s
+        if self.wn > 0.0:
+            z = np.stack([state[:, d], state[:, d + 1], s, np.zeros(3)])
+            nz = self.phi @ z
+            new[:, d], new[:, d + 1], mean = nz[0], nz[1], nz[3]
+        return new, self.gain * mean
+
+
 class OneStepMap:
     """The closed loop's map from the state at t to the state at t + h, on a state vector.
 
@@ -181,6 +236,14 @@ class OneStepMap:
         if self.jacobi:
             names += ["F1_held", "F2_held", "F3_held"]
             kinds += ["F_held"] * 3
+        self.drive = DriveModel(scenario.drive, self.h, not linear) if scenario.drive is not None else None
+        if self.drive is not None:
+            names += [f"drive{i + 1}_{k}" for i in range(3) for k in
+                      [f"command_{j + 1}" for j in range(self.drive.delay)] + (["y", "dy"] if self.drive.wn > 0 else [])]
+            kinds += ["F_held"] * 3 * self.drive.size
+            if self.jacobi:
+                names += ["D1_held", "D2_held", "D3_held"]
+                kinds += ["F_held"] * 3
         self.flex = self.plant.cfg.flex_frequency > 0.0
         if self.flex:
             names += ["z_f", "dz_f"]
@@ -203,8 +266,13 @@ class OneStepMap:
         dq = self.plant.joint_velocities()
         if self.difference:
             x += [q[i] - self.h * dq[i] for i in range(3)]
+        u0 = self.ctrl.sample(self.t, self.h, self.ref, q, dq, advance=False)[0]
         if self.jacobi:
-            x += list(self.ctrl.sample(self.t, self.h, self.ref, q, dq, advance=False)[0])
+            x += list(u0)
+        if self.drive is not None:
+            x += list(self.drive.rest(u0).ravel())
+            if self.jacobi:  # the force at rest on the first command
+                x += list(self.drive.step(self.drive.rest(u0), u0)[1])
         if self.flex:
             x += list(self.plant.flex)
         return np.array(x, dtype=float)
@@ -217,7 +285,7 @@ class OneStepMap:
         """(loop state at t + h, controller force y [N]) from the state x at the map's time t.
 
         y is the force the loop hands the plant (the command of this sample, or with Jacobi the
-        one held from the previous sample); the plant steps under ``w`` [N] if given (the loop
+        one held from the previous sample; with the drive, the drive's force); the plant steps under ``w`` [N] if given (the loop
         opened at the plant input, orchestrator.tool.analysis), else under y."""
         plant, ctrl = self.plant, self.ctrl
         plant.state = [float(v) for v in x[:6]]
@@ -233,18 +301,30 @@ class OneStepMap:
         else:
             ctrl.q_prev = None
         F_held = tuple(float(v) for v in x[k:k + 3]) if self.jacobi else None
+        k += 3 if self.jacobi else 0
+        if self.drive is not None:
+            n = 3 * self.drive.size
+            drive_state = np.asarray(x[k:k + n], dtype=float).reshape(3, self.drive.size)
+            D_held = tuple(float(v) for v in x[k + n:k + n + 3]) if self.jacobi else None
         if self.flex:
             plant.flex = [float(v) for v in x[-2:]]
         q = plant.measured_positions()
         dq = plant.joint_velocities()
         F = ctrl.sample(self.t, self.h, self.ref, q, dq)[0]
         y = F_held if self.jacobi else F
+        if self.drive is not None:  # the drive steps after the controller (on the command held with jacobi)
+            drive_state, D = self.drive.step(drive_state, y)
+            y = D_held if self.jacobi else tuple(float(v) for v in D)
         plant.step(self.t, self.h, *(y if w is None else (float(v) for v in w)))
         out = list(plant.state) + [ctrl.integral[i] for i in self.integrals]
         if self.difference:
             out += list(ctrl.q_prev)
         if self.jacobi:
             out += list(F)
+        if self.drive is not None:
+            out += list(drive_state.ravel())
+            if self.jacobi:
+                out += list(D)
         if self.flex:
             out += list(plant.flex)
         return np.array(out, dtype=float), np.array(y, dtype=float)

@@ -64,7 +64,9 @@ def test_compare_with_the_drive_runs_every_law_with_it(fmus_dir, tmp_path):
 
 @pytest.mark.parametrize("args", [["--fmus", "python"], ["--set", 'fmus="python"']], ids=["option", "scenario"])
 def test_the_drive_with_the_pythonfmu_family_is_refused_with_one_line_and_exit_2(tmp_path, capsys, args):
-    assert main(["run", PAPER, "--set", "drive=true", *args, "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+    # APD-DC: stable with the drive, so no stability warning precedes the refusal
+    assert main(["run", PAPER, "--set", "drive=true", "--set", 'law="apd-dc"', *args, "--out", str(tmp_path / "x"),
+                 "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert "drive = true is invalid with fmus = 'python': allowed is fmus = \"native\" or \"fmi3\"" in err
@@ -99,7 +101,10 @@ def test_a_study_whose_base_scenario_has_the_drive_runs_every_case_with_it(fmus_
         assert "drive.F1" in columns(path.parent / "results.csv")
 
 
-def test_check_says_its_loop_has_no_drive(capsys):
-    assert main(["check", PAPER, "--set", "drive=true"]) == 0  # the loop without the drive is stable
+def test_check_with_the_drive_finds_sc_dc_unstable_and_apd_dc_stable(capsys):
+    # without the drive both are stable; the default drive's delay and current loop make SC-DC unstable
+    assert main(["check", PAPER]) == 0
+    assert main(["check", PAPER, "--set", "drive=true"]) == 1
+    assert main(["check", PAPER, "--set", "drive=true", "--set", 'law="apd-dc"']) == 0
     out, err = capsys.readouterr()
-    assert "stable: spectral radius" in out and "note: the check's loop has no drive" in err
+    assert "unstable: spectral radius" in out and "no drive" not in err

@@ -104,7 +104,7 @@ STUDIES = {
     "section parameter": ("[study]\nbase = 'base.toml'\n[grid]\n'plant.k_pul' = [0.0]\n",
                           ["plant.k_pul is unknown", "did you mean k_pull"]),
     "tuned law": ("[study]\nbase = 'base.toml'\n[tune]\nlaws = ['scdc']\n",
-                  ["tune.laws = ['scdc'] is invalid: allowed is a list of sc-dc, apd-dc; did you mean sc-dc"]),
+                  ["tune.laws = ['scdc'] is invalid: allowed is a list of sc-dc, apd-dc, pid-dc-full; did you mean sc-dc"]),
     "distribution": ("[study]\nbase = 'base.toml'\n[monte_carlo]\nsamples = 2\nseed = 1\n"
                      "[monte_carlo.vary.m]\ntargets = ['plant.k_pull']\ndistribution = 'unifrom'\nlow = 0.0\n"
                      "high = 1.0\n",

@@ -38,7 +38,9 @@ def test_the_tool_reads_the_laws_from_their_records():
 
     assert scenario.LAWS == {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}
     assert [plots.label("x", law.name) for law in laws.LAWS] == ["SC-DC (proposed)", "APD-DC", "PID-DC"]
-    assert _TUNABLE == {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v")}
+    # the laws' records give the Gains-tuned laws; pid-dc-full (PID-DC, one integral gain) is tuned on its modal gains
+    assert _TUNABLE == {"sc-dc": ("Lambda_p", "Lambda_v", "b", "D"), "apd-dc": ("Lambda_p", "Lambda_v"),
+                        "pid-dc-full": ("kp_c", "kp_d", "kv_c", "kv_d", "ki")}
     assert modal.LAWS == ("sc-dc", "apd-dc")  # the laws written as PID matrices of the per-motor gains
     with pytest.raises(ValueError, match="law = 'pid-dc' is invalid: allowed are sc-dc, apd-dc"):
         modal.law_matrices(Gains.from_preset(GAIN_PRESETS["default"]), "pid-dc")
