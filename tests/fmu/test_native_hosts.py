@@ -211,7 +211,7 @@ def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_
     compatibility.record(
         request, tool="wine", version=wine.stdout.split()[0].removeprefix("wine-"), fmi=f"{family[3]}.0",
         interface="CS", platform="x86_64-windows (wine on x86_64-linux)",
-        command=compatibility.pytest_command(request),  # the hosts are compiled and run by this test
+        command=compatibility.node_command(request),  # the hosts are compiled and run by this test
         difference=compatibility.difference(max(compatibility.relative(w, lx) for lx, w in results.values()),
                                             "relative", "the x86_64-linux binaries, after 2,000 steps"))
     # measured: identical bit for bit (0.0); first wine start ~10 s, then < 1 s per run

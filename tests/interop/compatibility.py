@@ -225,7 +225,7 @@ def python_c(code: str) -> str:
     return f'{PY} -c "{code}"'
 
 
-def pytest_command(request) -> str:
+def node_command(request) -> str:
     """The row of a run only a test makes (hosts it compiles for another platform): the test itself,
     in the .venv of `bash tests/run.sh` (pytest is in the test extra)."""
     return f".venv/bin/python -m pytest -q -p no:cacheprovider '{request.node.nodeid}'"
