@@ -97,7 +97,7 @@ def test_aarch64_linux_binaries_under_qemu_step_2000_times_like_the_x86_64_binar
     compatibility.record(
         request, tool="qemu-user", version=qemu[2], fmi=f"{family[3]}.0", interface="CS",
         platform="aarch64-linux (qemu-aarch64 on x86_64-linux)",
-        command=f"qemu-aarch64 -L SYSROOT {family}_host FMU_FOLDER MODEL 2000 0.0001 ... (tests/fmu/c_host/{family}_host.c)",
+        command=compatibility.node_command(request),  # the hosts are compiled and run by this test
         difference=compatibility.difference(max(compatibility.relative(a, x) for x, a in results.values()),
                                             "relative", "the x86_64-linux binaries, after 2,000 steps"))
     # measured: bit for bit (maximum relative difference 0.0)

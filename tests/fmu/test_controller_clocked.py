@@ -301,8 +301,9 @@ def test_fmpy_simulate_fmu_does_not_tick_input_clocks(fmus, request):
     assert sum("did not tick" in m for m in messages) == 1
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="3.0", interface="CS, input clock",
-        command="simulate_fmu(native/fmi3/TAPMP_ControllerClocked.fmu, use_event_mode=True, "
-                "early_return_allowed=True)",
+        command=compatibility.python_c("from fmpy import simulate_fmu; r = simulate_fmu('build/native/fmi3/"
+                                        "TAPMP_ControllerClocked.fmu', stop_time=0.001, output_interval=1e-4, "
+                                        "use_event_mode=True, early_return_allowed=True, output=['F1']); print(r)"),
         result="runs, but never ticks the input clock: the command of initialization holds (one warning); without "
                "use_event_mode the FMU refuses to instantiate",
         difference="not comparable: the controller never samples")
@@ -327,8 +328,8 @@ def test_fmusim_in_event_mode_does_not_tick_input_clocks(fmus, tmp_path, request
     assert rows.shape == (11, 2) and len(set(rows[:, 1])) == 1  # the command of t = 0 (initialization) holds
     compatibility.record(
         request, tool="fmusim", version=compatibility.fmusim_version(FMUSIM), fmi="3.0", interface="CS, input clock",
-        command="fmusim --interface-type cs --event-mode-used --early-return-allowed "
-                "native/fmi3/TAPMP_ControllerClocked.fmu",
+        command=f"{compatibility.FMUSIM} --interface-type cs --event-mode-used --early-return-allowed "
+                "build/native/fmi3/TAPMP_ControllerClocked.fmu",
         result="runs, but never ticks the input clock: the command of initialization holds (one warning)",
         difference="not comparable: the controller never samples")
 
@@ -364,7 +365,7 @@ def test_fmil_parses_the_clocked_controller_with_only_its_known_gaps_on_the_term
     assert "outputs 12, initial unknowns 0" in proc.stdout and "hasEventMode 1" in proc.stdout
     compatibility.record(
         request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi="3.0", interface="CS, input clock",
-        command="fmil_check parse native/fmi3/TAPMP_ControllerClocked.fmu",
+        command=f'{compatibility.FMIL_CHECK} parse build/native/fmi3/TAPMP_ControllerClocked.fmu || echo "exit code $?"',
         difference="none (reads the FMU's XML only): errors and warnings only on the valid terminalsAndIcons.xml, "
                    "whose elements FMIL does not know")
 

@@ -211,7 +211,7 @@ def test_windows_dlls_under_wine_step_2000_times_like_the_linux_binaries(native_
     compatibility.record(
         request, tool="wine", version=wine.stdout.split()[0].removeprefix("wine-"), fmi=f"{family[3]}.0",
         interface="CS", platform="x86_64-windows (wine on x86_64-linux)",
-        command=f"wine {family}_host.exe FMU_FOLDER MODEL 2000 0.0001 ... (tests/fmu/c_host/{family}_host.c)",
+        command=compatibility.node_command(request),  # the hosts are compiled and run by this test
         difference=compatibility.difference(max(compatibility.relative(w, lx) for lx, w in results.values()),
                                             "relative", "the x86_64-linux binaries, after 2,000 steps"))
     # measured: identical bit for bit (0.0); first wine start ~10 s, then < 1 s per run
@@ -336,6 +336,6 @@ def test_fmu_compliance_checker_passes_the_fmi2_fmu_without_warnings_or_errors(
     fmpy_rows = np.array([ours[n] for n in outputs(model)]).T
     compatibility.record(
         request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0", interface="CS",
-        command=f"fmuCheck.linux64 -k cs -h 1e-4 -s 0.01 {'native/fmi2/' if kind == 'native' else 'build/'}{model}.fmu",
+        command=f"{compatibility.FMUCHECK} -k cs -h 1e-4 -s 0.01 {'build/native/fmi2/' if kind == 'native' else 'build/'}{model}.fmu",
         difference=compatibility.difference(compatibility.relative(data[:, 1:], fmpy_rows), "relative",
                                             "FMPy simulate_fmu (fmuCheck accumulates t += h)"))

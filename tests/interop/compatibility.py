@@ -122,16 +122,13 @@ def render(rows: list[dict]) -> str:
         "only for a run whose test passed, and each test checks that its row still equals the one",
         "committed here: a new tool version, a failure or a changed difference fails that test.",
         "",
-        "* **command**: what the test runs, as a user types it or calls it, shortened: `build/` is the",
-        "  pythonfmu family, `native/fmi2/` and `native/fmi3/` the native families in it",
-        "  (`build/native/fmi2/`, `build/native/fmi3/`), `paper.ssp` what `tapmp export` writes from the",
-        "  family named; the tools are under `../shared/tools/` (`fmusim` is",
-        "  `../shared/tools/fmusim/bin/fmusim`, `OMSimulator` `../shared/tools/OMSimulator/bin/OMSimulator`,",
-        "  `fmil_check` `../shared/tools/fmil/fmil_check`, `fmuCheck.linux64`",
-        "  `../shared/tools/fmuCheck/fmuCheck.linux64`); `start_values={F1, F2, F3}` are the forces of the",
-        "  fmusim rows (20, 10, 60 N). Each tool's commands in full, runnable as typed from the repository",
-        "  root after the quick start, are in [other-tools.md](other-tools.md) (`tests/interop/test_docs_commands.py`",
-        "  runs them).",
+        "* **command**: what the test runs, as typed in a shell at the repository root after the",
+        "  [quick start](../README.md#quick-start) (`build/` its FMUs, the tools called by their path under",
+        "  `../shared/tools/`); `tests/interop/test_docs_commands.py` runs every one of them so. A row whose",
+        "  run needs more than one line names its script in `tests/interop/rows/`; a row that starts",
+        "  `.venv/bin/python -m pytest` (a host compiled for another platform) or names",
+        "  `tests/interop/rows/fmpy_wired_by_hand.py` needs pytest, in the `.venv` that `bash tests/run.sh` sets",
+        "  up (the `test` extra). Each tool's commands explained are in [other-tools.md](other-tools.md).",
         "* **difference from tapmp**: the largest absolute difference over the run, rounded up to a",
         "  power of ten, against `tapmp run` (the orchestrator) on the tool's conventions (ordering,",
         "  clock, connection start, as [other-tools.md](other-tools.md) explains), or against FMPy's",
@@ -202,9 +199,42 @@ def relative(got, expected) -> float:
     return float((np.abs(got - expected) / scale).max())
 
 
+def tool(relative: str) -> str:
+    """How the commands call a tool of ../shared (``relative``: its path there, tools/fmusim/bin/fmusim)."""
+    return f"../shared/{relative}"
+
+
+PY = ".venv/bin/python"
+FMUSIM = tool("tools/fmusim/bin/fmusim")
+OMSIMULATOR = tool("tools/OMSimulator/bin/OMSimulator")
+FMIL_CHECK = tool("tools/fmil/fmil_check")
+FMUCHECK = tool("tools/fmuCheck/fmuCheck.linux64")
+FASTER = ("trajectory.f_xz=0.8", "trajectory.f_B=0.8")  # the exported rows' reference, twice the paper's frequency
+
+
+def export(ssp: str, out: str) -> str:
+    """The `tapmp export` command the exported-SSP rows start with: the paper scenario shortened to
+    0.2 s with the FASTER reference, from the built ``ssp`` into ``out`` (as the tests export it)."""
+    sets = " ".join(f"--set {kv}" for kv in ("stop_time=0.2", *FASTER))
+    return f".venv/bin/tapmp export scenarios/paper_simulation.toml --ssp {ssp} --out {out} {sets} --overwrite"
+
+
+def python_c(code: str) -> str:
+    """A one-line Python row: ``code`` (single quotes only) run by the quick start's interpreter."""
+    assert '"' not in code, code
+    return f'{PY} -c "{code}"'
+
+
+def node_command(request) -> str:
+    """The row of a run only a test makes (hosts it compiles for another platform): the test itself,
+    in the .venv of `bash tests/run.sh` (pytest is in the test extra)."""
+    return f".venv/bin/python -m pytest -q -p no:cacheprovider '{request.node.nodeid}'"
+
+
 def family_path(version: str, model: str | None = None) -> str:
-    """How the commands name an FMU of a family: native/fmi2/MODEL.fmu, build/MODEL.fmu."""
-    folder = {"fmi2": "native/fmi2/", "fmi3": "native/fmi3/", "python": "build/"}[version]
+    """How the commands name an FMU of a family from the repository root after the quick start:
+    build/native/fmi2/MODEL.fmu, build/MODEL.fmu."""
+    folder = {"fmi2": "build/native/fmi2/", "fmi3": "build/native/fmi3/", "python": "build/"}[version]
     return folder + (f"{model}.fmu" if model else "")
 
 

@@ -111,8 +111,8 @@ def test_fmpys_results_in_the_cross_check_layout_pass_its_validator(tree, reques
     assert largest == 0.0  # FMPy replays the reference experiment bit for bit
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="CS",
-        command="fmpy.cross_check on cross-check/fmus (tapmp build --cross-check), results validated by "
-                "fmpy.cross_check.validate_vendor_repo",
+        command=".venv/bin/tapmp build --cross-check --out results/cross-check-fmpy && .venv/bin/python "
+                "tests/interop/rows/fmpy_cross_check.py results/cross-check-fmpy",
         difference=compatibility.difference(largest, "relative", "the FMUs' reference experiments (_ref.csv)"))
 
 

@@ -28,9 +28,16 @@ def blocks(page: str) -> list[tuple[int, str]]:
 CELL = re.compile(r"`((?:\.venv/bin/|\.\./shared/tools/)[^`]*)`")
 
 
+COMMAND_COLUMN = re.compile(r"^(?:\|[^|]*){5}\| `((?:[^`\\]|\\.)*)` \|")  # compatibility.md's sixth column
+
+
 def table_commands(page: str) -> list[tuple[int, str]]:
-    """(line, command) of every command in a table row of ``page``, in order."""
+    """(line, command) of every command in a table row of ``page``, in order: on compatibility.md the
+    command column of every row (its ``\\|`` unescaped), elsewhere every code span that starts a command."""
     lines = (ROOT / page).read_text().splitlines()
+    if page == "docs/compatibility.md":
+        rows = [(n, COMMAND_COLUMN.match(line)) for n, line in enumerate(lines, 1) if line.startswith("| ")]
+        return [(n, m.group(1).replace("\\|", "|")) for n, m in rows if m]
     return [(n, m) for n, line in enumerate(lines, 1) if line.startswith("|") for m in CELL.findall(line)]
 
 

@@ -62,7 +62,7 @@ def test_ecos_is_bit_identical_with_the_orchestrator_jacobi_ordering_on_its_cloc
     assert np.abs(ec[-1, :3]).min() > 1e-3  # the platform has moved (mm), so this compares something
     compatibility.record(
         request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="EcosSimulation(ssp_path='build/TAPMP.ssp', step_size=1e-4)",
+        command=compatibility.python_c("from ecospy import EcosSimulation; s = EcosSimulation(ssp_path='build/TAPMP.ssp', step_size=1e-4); s.init(0.0); s.step(2000); print(s.get_real('plant::q1_true')); s.terminate(); s.free()"),
         difference=compatibility.difference(compatibility.largest(ec, ours), "",
                                             "tapmp run, ordering=jacobi, clock=accumulated"))
 

@@ -185,7 +185,7 @@ def test_libcosim_runs_the_exported_ssp_alone_bit_identical_on_its_nanosecond_cl
     assert_initial_state_matters(rows, without_initial_state, first=1)
     compatibility.record(
         request, tool="libcosim", version=compatibility.python_version("libcosimpy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="CosimExecution.from_ssp_file('paper.ssp') (tapmp export --fmus python)",
+        command=compatibility.export('build/TAPMP.ssp', 'results/export/paper.ssp') + ' && ' + compatibility.python_c("from libcosimpy.CosimExecution import CosimExecution; e = CosimExecution.from_ssp_file('results/export/paper.ssp'); print(e.step(2000))"),
         difference=compatibility.difference(compatibility.largest(rows, ours), "", "tapmp run, ordering=jacobi, clock=nanoseconds"))
 
 
@@ -220,7 +220,7 @@ def test_ecos_runs_the_exported_ssp_with_its_named_parameter_set_bit_identical(b
     assert_initial_state_matters(rows, without_initial_state)
     compatibility.record(
         request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="EcosSimulation(ssp_path='paper.ssp', step_size=1e-4).init(0.0, parameter_set='paper_simulation') (tapmp export --fmus python)",
+        command=compatibility.export('build/TAPMP.ssp', 'results/export/paper.ssp') + ' && ' + compatibility.python_c("from ecospy import EcosSimulation; s = EcosSimulation(ssp_path='results/export/paper.ssp', step_size=1e-4); s.init(0.0, parameter_set='paper_simulation'); s.step(2000); print(s.get_real('plant::q1_true')); s.terminate(); s.free()"),
         difference=compatibility.difference(compatibility.largest(rows, ours), "", "tapmp run, ordering=jacobi, clock=accumulated"))
 
 
@@ -281,8 +281,9 @@ def test_the_ecos_executable_runs_the_exported_ssp_writing_where_it_is_started(b
     assert np.abs(got - rest).max() > 1.0  # N: without the initial state the commands differ
     compatibility.record(
         request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="ecos simulate --path paper.ssp --stepSize 0.0001 --stopTime 0.2 --parameterSet paper_simulation "
-                "(tapmp export --fmus python)",
+        command=compatibility.export("build/TAPMP.ssp", "results/export/paper.ssp") + " && .venv/bin/python "
+                "tests/interop/rows/ecos_simulate.py results/export/paper.ssp --stop-time 0.2 --parameter-set "
+                "paper_simulation --out results/export/ecos",
         difference=compatibility.difference(compatibility.largest(got, ours), "N",
                                             "tapmp run, ordering=jacobi, clock=accumulated (6-decimal CSV)"))
 
@@ -320,7 +321,8 @@ def test_fmpy_simulate_ssp_with_the_bound_parameter_set_is_bit_identical(built, 
     assert_initial_state_matters(rows, without_initial_state, first=1)
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="fmpy.ssp.simulate_ssp('paper.ssp', stop_time=0.2, step_size=1e-4, parameter_set=<its bindings>) (tapmp export --fmus python)",
+        command=compatibility.export("build/TAPMP.ssp", "results/export/paper.ssp") + " && .venv/bin/python "
+                "tests/interop/rows/fmpy_simulate_ssp.py results/export/paper.ssp --stop-time 0.2",
         difference=compatibility.difference(compatibility.largest(rows, ours[1:]), "", "tapmp run, ordering=jacobi, clock=accumulated, connection_start=zero"))
 
 
@@ -363,7 +365,9 @@ def test_fmpy_simulate_on_the_container_with_the_exported_start_values_is_bit_id
     assert_initial_state_matters(rows, without_initial_state)
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="CS (container FMU)",
-        command="fmpy simulate build/TAPMP_ClosedLoop.fmu --stop-time 0.2 --output-interval 0.0001 --start-values $(cat paper.start-values.txt)",
+        command=compatibility.export("build/TAPMP.ssp", "results/export/paper.ssp") + " && .venv/bin/fmpy simulate "
+                "build/TAPMP_ClosedLoop.fmu --stop-time 0.2 --output-interval 0.0001 --start-values "
+                "$(cat results/export/paper.start-values.txt)",
         difference=compatibility.difference(compatibility.largest(rows, ours), "", "tapmp run, ordering=jacobi"))
 
 

@@ -55,7 +55,8 @@ def test_fmpy_ssp_is_bit_identical_with_the_orchestrator_on_its_conventions(buil
     assert np.abs(fm[-1, :3]).min() > 1e-3  # the platform has moved (mm), so this compares something
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="fmpy.ssp.simulate_ssp('build/TAPMP.ssp', stop_time=0.2, step_size=1e-4, parameter_set=...)",
+        command=".venv/bin/python tests/interop/rows/fmpy_simulate_ssp.py build/TAPMP.ssp --stop-time 0.2 "
+                "--scenario scenarios/paper_simulation.toml",
         difference=compatibility.difference(compatibility.largest(fm, ours[1:]), "",
                                             "tapmp run, ordering=jacobi, clock=accumulated, connection_start=zero"))
 

@@ -155,8 +155,9 @@ def test_the_fmi2_container_is_the_fmus_wired_by_hand_on_its_conventions_bit_for
     assert np.all(diff[:3] <= 5e-6) and diff[3:].max() > 100.0, diff  # m, N; measured 2.9 um, 321 N
     compatibility.record(
         request, tool="FMU Manipulation Toolbox", version=FMT_VERSION, fmi="2.0", interface="CS (container FMU)",
-        command="fmucontainer -container TAPMP.ssp:0.0001 (native/fmi2/TAPMP.ssp), then "
-                "fmpy simulate TAPMP.fmu --stop-time 0.2 --output-interval 0.0001",
+        command="rm -rf results/fmt2 && mkdir -p results/fmt2 && cp build/native/fmi2/TAPMP.ssp results/fmt2/ && "
+                "(cd results/fmt2 && ../../.venv/bin/fmucontainer -container TAPMP.ssp:0.0001) && "
+                ".venv/bin/fmpy simulate results/fmt2/TAPMP.fmu --stop-time 0.2 --output-interval 0.0001",
         difference=compatibility.difference(
             compatibility.largest(got[:, 3:], tapmp_run[:, 3:]), "N",
             "tapmp run, ordering=jacobi: its first command is computed with the plant's outputs at 0 "
@@ -183,8 +184,9 @@ def test_the_fmi3_container_is_tapmp_run_gauss_seidel_with_each_command_at_its_s
     assert 1.0 < float(np.abs(fmi3 - tapmp_run).max()) < 100.0  # the Jacobi run has one more sample of delay
     compatibility.record(
         request, tool="FMU Manipulation Toolbox", version=FMT_VERSION, fmi="3.0", interface="CS (container FMU)",
-        command="fmucontainer -container TAPMP.ssp:0.0001 -fmi 3 (native/fmi3/TAPMP.ssp), then "
-                "fmpy simulate TAPMP.fmu --stop-time 0.2 --output-interval 0.0001",
+        command="rm -rf results/fmt3 && mkdir -p results/fmt3 && cp build/native/fmi3/TAPMP.ssp results/fmt3/ && "
+                "(cd results/fmt3 && ../../.venv/bin/fmucontainer -container TAPMP.ssp:0.0001 -fmi 3) && "
+                ".venv/bin/fmpy simulate results/fmt3/TAPMP.fmu --stop-time 0.2 --output-interval 0.0001",
         difference=compatibility.difference(0.0, "", "tapmp run, ordering=gauss-seidel: positions at every row; "
                                             "each command shown at its sample instant t_k, which tapmp records at "
                                             "t_{k+1}"))
@@ -198,7 +200,6 @@ def test_the_fmus_wired_by_hand_with_their_defaults_are_tapmp_run_of_the_paper_s
     assert np.abs(hand[-1, :3]).min() > 1e-3  # the platform has moved (mm): this compares something
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi="2.0", interface="CS",
-        command="FMU2Slave x 3 (native/fmi2/), connected as TAPMP.ssp says, defaults, outputs propagated in "
-                "Initialization Mode, Jacobi steps of 0.0001 s",
+        command=".venv/bin/python tests/interop/rows/fmpy_wired_by_hand.py build/native/fmi2/TAPMP.ssp",
         difference=compatibility.difference(compatibility.largest(hand, tapmp_run), "",
                                             "tapmp run scenarios/paper_simulation.toml, ordering=jacobi"))

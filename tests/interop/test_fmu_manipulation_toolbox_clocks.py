@@ -67,8 +67,9 @@ def test_fmpy_runs_the_container_with_the_clock_never_ticking_and_no_forces(cont
     compatibility.record(
         request, tool="FMU Manipulation Toolbox", version=FMT_VERSION, fmi="3.0",
         interface="CS (container FMU), input clock",
-        command="fmucontainer -container TAPMP_Clocked.ssp:0.0001 -fmi 3 (native/fmi3/TAPMP_Clocked.ssp), then "
-                "fmpy simulate TAPMP_Clocked.fmu --stop-time 0.01 --output-interval 0.0001",
+        command="rm -rf results/fmt3_clocked && mkdir -p results/fmt3_clocked && cp build/native/fmi3/TAPMP_Clocked.ssp results/fmt3_clocked/ && "
+                "(cd results/fmt3_clocked && ../../.venv/bin/fmucontainer -container TAPMP_Clocked.ssp:0.0001 -fmi 3) && "
+                ".venv/bin/fmpy simulate results/fmt3_clocked/TAPMP_Clocked.fmu --stop-time 0.01 --output-interval 0.0001",
         result="builds and runs, but never ticks the periodic input clock and cannot pass on the clocked forces "
                "(builder: 'Cannot expose clocked output')",
         difference="not comparable: forces 0 throughout, the controller never samples")

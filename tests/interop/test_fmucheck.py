@@ -31,5 +31,5 @@ def test_fmu_compliance_checker_passes_the_container_fmu_with_fmpys_results(buil
         assert np.array_equal(data[:, i], ours[name]), name
     assert np.abs(ours["controller.F1"]).max() > 1.0
     compatibility.record(request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0",
-                         interface="CS", command=f"fmuCheck.linux64 -k cs -h 1e-4 -s 0.01 build/{CONTAINER}.fmu",
+                         interface="CS", command=f"{compatibility.FMUCHECK} -k cs -h 1e-4 -s 0.01 build/{CONTAINER}.fmu",
                          difference=compatibility.difference(0.0, "", "FMPy simulate_fmu"))  # array_equal above

@@ -53,7 +53,7 @@ def test_fmusim_runs_each_native_fmu_with_no_warning_as_fmpy_does(native_built, 
     starts = "".join(f" --start-value {n} {v!r}" for n, v in start.items())
     compatibility.record(
         request, tool="fmusim", version=compatibility.fmusim_version(shared(FMUSIM)), fmi=version[3] + ".0",
-        interface="CS", command=f"fmusim --interface-type cs --stop-time 0.2 --output-interval 1e-4{starts} "
+        interface="CS", command=f"{compatibility.FMUSIM} --interface-type cs --stop-time 0.2 --output-interval 1e-4{starts} "
                                 f"{compatibility.family_path(version, model)}",
         difference=compatibility.difference(compatibility.relative(got, expected), "relative",
                                             "FMPy simulate_fmu (16 printed digits)"))

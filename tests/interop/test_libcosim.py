@@ -85,7 +85,7 @@ def test_libcosim_is_bit_identical_with_its_nanosecond_clock(built, libcosim_run
     assert 0.0 < np.abs(lc[:, 6:] - exact).max() < 1e-9  # N (measured 7e-11 N of ~20 N)
     compatibility.record(
         request, tool="libcosim", version=compatibility.python_version("libcosimpy"), fmi="2.0",
-        interface="SSP 1.0, CS", command="CosimExecution.from_ssp_file('build/TAPMP.ssp', step_size=100000)",
+        interface="SSP 1.0, CS", command=compatibility.python_c("from libcosimpy.CosimExecution import CosimExecution; e = CosimExecution.from_ssp_file('build/TAPMP.ssp', step_size=100000); print(e.step(2000))"),
         difference=compatibility.difference(compatibility.largest(lc, ours), "",
                                             "tapmp run, ordering=jacobi, clock=nanoseconds"))
 

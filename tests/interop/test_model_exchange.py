@@ -94,8 +94,10 @@ def test_fmpy_cvode_on_the_model_exchange_plant_agrees_with_rk4(family, plant, r
     assert diff.max() > 0.0  # another integrator: not the same doubles
     compatibility.record(
         request, tool="FMPy", version=compatibility.python_version("fmpy"), fmi=FMI[family], interface="ME",
-        command=f"fmpy.simulate_fmu('native/{family}/TAPMP_Plant.fmu', fmi_type='ModelExchange', solver='CVode', "
-                "relative_tolerance=1e-10, stop_time=0.2, output_interval=1e-4, start_values={F1, F2, F3})",
+        command=compatibility.python_c(
+            f"from fmpy import simulate_fmu; r = simulate_fmu('build/native/{family}/TAPMP_Plant.fmu', "
+            "fmi_type='ModelExchange', solver='CVode', relative_tolerance=1e-10, stop_time=0.2, output_interval=1e-4, "
+            f"start_values={FORCES!r}); print(r[-1])"),
         difference=compatibility.difference(compatibility.relative(me, cs), "relative",
                                             "the Co-Simulation plant (RK4 at 0.1 ms)"))
 
@@ -116,8 +118,9 @@ def test_fmusim_cvode_on_the_model_exchange_plant_agrees_with_rk4(family, plant,
     assert_agrees(me, cs, error, RTOL)
     compatibility.record(
         request, tool="fmusim", version=compatibility.fmusim_version(shared(FMUSIM)), fmi=FMI[family], interface="ME",
-        command="fmusim --interface-type me --solver cvode --tolerance 1e-10 --stop-time 0.2 --output-interval "
-                f"1e-4 --start-value F1 20.0 --start-value F2 10.0 --start-value F3 60.0 native/{family}/TAPMP_Plant.fmu",
+        command=f"{compatibility.FMUSIM} --interface-type me --solver cvode --tolerance 1e-10 --stop-time 0.2 "
+                "--output-interval 1e-4 " + "".join(f"--start-value {n} {v!r} " for n, v in FORCES.items())
+                + f"build/native/{family}/TAPMP_Plant.fmu",
         difference=compatibility.difference(compatibility.relative(me, cs), "relative",
                                             "the Co-Simulation plant (RK4 at 0.1 ms)"))
 
@@ -149,8 +152,8 @@ def test_omsimulator_picks_model_exchange_by_default_and_agrees_with_rk4(omsimul
     assert "NumRhsEvals" not in cs_log  # --mode=cs: the FMU's own RK4
     compatibility.record(
         request, tool="OMSimulator", version=compatibility.omsimulator_version(program), fmi="2.0", interface="ME",
-        command="OMSimulator --stopTime=0.2 --stepSize=0.0001 --tolerance=1e-10 native/fmi2/TAPMP_Plant.fmu "
-                "(Model Exchange: its default when an FMU offers both)",
+        command=f"{compatibility.OMSIMULATOR} --stopTime=0.2 --stepSize=0.0001 --tolerance=1e-10 "
+                "build/native/fmi2/TAPMP_Plant.fmu",  # Model Exchange: its default when an FMU offers both
         difference=compatibility.difference(compatibility.relative(me[on_grid], cs[on_grid]), "relative",
                                             "the Co-Simulation plant (RK4 at 0.1 ms)"))
 
@@ -215,7 +218,7 @@ def test_fmu_compliance_checker_passes_the_model_exchange_interface(native_built
     assert np.all(np.isfinite(data["B"])) and data["B"][-1] != 0.0  # the plant falls
     compatibility.record(
         request, tool="fmuCheck", version=compatibility.readme_version("fmuCheck"), fmi="2.0", interface="ME",
-        command="fmuCheck.linux64 -k me -h 1e-4 -s 0.01 native/fmi2/TAPMP_Plant.fmu",
+        command=f"{compatibility.FMUCHECK} -k me -h 1e-4 -s 0.01 build/native/fmi2/TAPMP_Plant.fmu",
         difference="none checked (its explicit Euler at 0.1 ms): 0 warnings, 0 errors")
 
 
@@ -242,7 +245,8 @@ def test_fmil_reads_both_interfaces_under_one_model_identifier(family, plant, tm
                       "gaps on the terminals")
     compatibility.record(
         request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi=FMI[family], interface="ME",
-        command=f"fmil_check parse native/{family}/TAPMP_Plant.fmu", difference=difference)
+        command=f"{compatibility.FMIL_CHECK} parse build/native/{family}/TAPMP_Plant.fmu"
+        + ('' if family == "fmi2" else ' || echo "exit code $?"'), difference=difference)
 
 
 @pytest.mark.needs_shared(FMIL_LIB)
@@ -274,7 +278,6 @@ def test_an_fmil_host_runs_the_fmi3_model_exchange_interface_as_the_co_simulatio
     assert np.all(np.abs(me[:, 1:] - cs).max(axis=0) <= 1e-13 * scale)
     compatibility.record(
         request, tool="FMIL", version=compatibility.readme_version("fmil"), fmi="3.0", interface="ME",
-        command="fmil_me3 native/fmi3/TAPMP_Plant.fmu DIR me.csv 0.2 0.0001 (tests/interop/fmil_me3.c: FMIL loads "
-                "it for Model Exchange, the host's RK4 at 0.1 ms)",
+        command="bash tests/interop/rows/fmil_me3.sh build/native/fmi3/TAPMP_Plant.fmu results/fmil_me3",
         difference=compatibility.difference(compatibility.relative(me[:, 1:], cs), "relative",
                                             "the Co-Simulation plant (RK4 at 0.1 ms)"))

@@ -34,7 +34,7 @@ def test_libcosim_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_n
     assert np.all(diff[:6] <= 1e-12) and np.all(diff[3:6] == 0.0), dict(zip(NAMES, diff))
     compatibility.record(
         request, tool="libcosim", version=compatibility.python_version("libcosimpy"), fmi="2.0",
-        interface="SSP 1.0, CS", command="CosimExecution.from_ssp_file('native/fmi2/TAPMP.ssp', step_size=100000)",
+        interface="SSP 1.0, CS", command=compatibility.python_c("from libcosimpy.CosimExecution import CosimExecution; e = CosimExecution.from_ssp_file('build/native/fmi2/TAPMP.ssp', step_size=100000); print(e.step(2000))"),
         difference=compatibility.difference(compatibility.largest(lc, ours), "",
                                             "tapmp run, ordering=jacobi, clock=nanoseconds"))
 
@@ -50,7 +50,7 @@ def test_ecos_runs_the_native_ssp_bit_identical_to_the_orchestrator_on_its_accum
     assert np.abs(ec[-1, :3]).min() > 1e-3
     compatibility.record(
         request, tool="Ecos", version=compatibility.python_version("ecospy"), fmi="2.0", interface="SSP 1.0, CS",
-        command="EcosSimulation(ssp_path='native/fmi2/TAPMP.ssp', step_size=1e-4)",
+        command=compatibility.python_c("from ecospy import EcosSimulation; s = EcosSimulation(ssp_path='build/native/fmi2/TAPMP.ssp', step_size=1e-4); s.init(0.0); s.step(2000); print(s.get_real('plant::q1_true')); s.terminate(); s.free()"),
         difference=compatibility.difference(compatibility.largest(ec, ours), "",
                                             "tapmp run, ordering=jacobi, clock=accumulated"))
 

@@ -152,7 +152,7 @@ def test_omsimulator_runs_each_native_fmu_alone_as_fmpy_does(omsimulator, native
         assert np.allclose(final, rows[-1], rtol=1e-12, atol=1e-15)
     compatibility.record(
         request, tool="OMSimulator", version=compatibility.omsimulator_version(omsimulator), fmi=version[3] + ".0",
-        interface="CS", command=f"OMSimulator --mode=cs --stopTime=0.2 --stepSize=0.0001 "
+        interface="CS", command=f"{compatibility.OMSIMULATOR} --mode=cs --stopTime=0.2 --stepSize=0.0001 "
                                 f"{compatibility.family_path(version, model)}",
         difference=compatibility.difference(compatibility.relative(rows, expected), "relative",
                                             "FMPy simulate_fmu (OMSimulator's accumulated clock)"))
@@ -188,7 +188,7 @@ def test_omsimulator_runs_the_built_ssp_as_shipped_writing_the_result_file_it_na
     compatibility.record(
         request, tool="OMSimulator", version=compatibility.omsimulator_version(omsimulator),
         fmi="3.0" if family == "fmi3" else "2.0", interface="SSP 1.0, CS",
-        command=f"OMSimulator {' '.join(extra + [''])}--stopTime=0.2 {compatibility.family_path(family)}TAPMP.ssp",
+        command=f"{compatibility.OMSIMULATOR} {' '.join(extra + [''])}--stopTime=0.2 {compatibility.family_path(family)}TAPMP.ssp",
         difference=compatibility.difference(compatibility.relative(rows, ours), "relative",
                                             "tapmp run, ordering=jacobi, clock=accumulated (12-digit CSV)"))
 
@@ -243,8 +243,9 @@ def test_omsimulator_applies_the_exported_parameter_sets_and_matches_the_orchest
     compatibility.record(
         request, tool="OMSimulator", version=compatibility.omsimulator_version(omsimulator),
         fmi="3.0" if family == "fmi3" else "2.0", interface="SSP 1.0, CS",
-        command=f"OMSimulator {' '.join(extra + [''])}--stopTime=0.2 --resultFile=paper.mat paper.ssp "
-                f"(tapmp export --fmus {'native' if family == 'fmi2' else family})",
+        command=compatibility.export(f"{compatibility.family_path(family)}TAPMP.ssp", f"results/export/paper_{family}.ssp")
+                + f" && {compatibility.OMSIMULATOR} {' '.join(extra + [''])}--stopTime=0.2 "
+                f"--resultFile=results/export/paper_{family}.mat results/export/paper_{family}.ssp",
         difference=compatibility.difference(compatibility.largest(rows[:, :3], ours[:, :3]), "m",
                                             "tapmp run, ordering=jacobi, clock=accumulated (encoder and "
                                             "commands bit for bit)"))
