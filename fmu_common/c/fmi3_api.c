@@ -17,6 +17,7 @@
 
 #include "runtime.h"
 #include "fmi3Functions.h"
+#include "fmi3_events.h"
 
 typedef struct {
     fmi3InstanceEnvironment env;
@@ -317,13 +318,9 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
     int changed = 0, defined = 0;
     double next = 0.0;
     int status = tapmp_update_discrete_states(inst, &changed, &defined, &next);
-    /* one update settles the event: the model's discrete states depend on nothing it changes */
-    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
-    if (terminateSimulation) *terminateSimulation = fmi3False;
-    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
-    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
-    if (nextEventTimeDefined) *nextEventTimeDefined = defined ? fmi3True : fmi3False;
-    if (nextEventTime) *nextEventTime = next;
+    tapmp_fmi3_report_update(defined, next, discreteStatesNeedUpdate, terminateSimulation,
+                             nominalsOfContinuousStatesChanged, valuesOfContinuousStatesChanged, nextEventTimeDefined,
+                             nextEventTime);
     return (fmi3Status)status;
 }
 #endif

@@ -7,6 +7,7 @@
 
 #include "runtime.h"
 #include "fmi3Functions.h"
+#include "fmi3_events.h"
 
 #ifdef MODEL_N_STATES
 #ifdef MODEL_HAS_EVENTS
@@ -38,13 +39,9 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
     double next = 0.0;
     int status = tapmp_me_update(inst, &defined, &next);
     if (status != ST_OK) return (fmi3Status)status;
-    /* no discrete state: the time event changes the forces only */
-    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
-    if (terminateSimulation) *terminateSimulation = fmi3False;
-    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
-    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
-    if (nextEventTimeDefined) *nextEventTimeDefined = defined ? fmi3True : fmi3False;
-    if (nextEventTime) *nextEventTime = next;
+    tapmp_fmi3_report_update(defined, next, discreteStatesNeedUpdate, terminateSimulation,
+                             nominalsOfContinuousStatesChanged, valuesOfContinuousStatesChanged, nextEventTimeDefined,
+                             nextEventTime);
     return fmi3OK;
 }
 
