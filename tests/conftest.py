@@ -118,14 +118,15 @@ def _paths(tree):
     return {key: _paths(value) if isinstance(value, dict) else Path(value) for key, value in tree.items()}
 
 
-def built_once(tmp_path_factory, name: str, build):
+def built_once(request, tmp_path_factory, name: str, build):
     """``build(folder)`` (returning {name: path or {name: path}}) run once for the whole test run:
     alone, into a folder of this session; on pytest-xdist workers (tests/run.sh runs two), by the
     first worker that asks, under a file lock, into a folder every worker of the run shares, and
     read back by the others from its result file."""
     from filelock import FileLock
 
-    if not os.environ.get("PYTEST_XDIST_WORKER"):
+    # a worker by its config, not by PYTEST_XDIST_WORKER: a pytest a test starts inherits that variable
+    if not hasattr(request.config, "workerinput"):
         return build(tmp_path_factory.mktemp(name))
     run = tmp_path_factory.getbasetemp().parent  # this run's base folder: the workers' folders are in it
     folder, result = run / name, run / f"{name}.json"
@@ -138,25 +139,25 @@ def built_once(tmp_path_factory, name: str, build):
 
 
 @pytest.fixture(scope="session")
-def built(tmp_path_factory):
+def built(request, tmp_path_factory):
     """Paths of the three FMUs and TAPMP.ssp, built into a temporary folder."""
-    return built_once(tmp_path_factory, "fmus", lambda folder: build_all(folder, log=lambda *_: None))
+    return built_once(request, tmp_path_factory, "fmus", lambda folder: build_all(folder, log=lambda *_: None))
 
 
 @pytest.fixture(scope="session")
-def faulty_ssps(built, tmp_path_factory):
+def faulty_ssps(request, built, tmp_path_factory):
     """{fault: SSP path}: the real controller and trajectory with a plant FMU that misbehaves
     from t = 0.5 ms on, one per fault of tests/support/faults.py's FAULTY ("status", "error_log", "info_log")."""
     from tests.support.faults import faulty_ssps as build
-    return built_once(tmp_path_factory, "faulty", lambda folder: build(built, folder))
+    return built_once(request, tmp_path_factory, "faulty", lambda folder: build(built, folder))
 
 
 @pytest.fixture(scope="session")
-def native_built(tmp_path_factory):
+def native_built(request, tmp_path_factory):
     """The native FMUs: {"fmi2" | "fmi3": {model name or "ssp": path}}, built for real for every
     platform (zig cc) into a temporary folder laid out as build/native/."""
     from orchestrator.builder.build_native import build_native
-    return built_once(tmp_path_factory, "native",
+    return built_once(request, tmp_path_factory, "native",
                       lambda folder: build_native(folder, log=lambda *_: None, windows=True))
 
 
