@@ -135,9 +135,12 @@ def test_the_inputs_the_fuzzer_found_defects_with_stay():
     kept = {t: sorted(p.name for p in (REGRESSIONS / t).iterdir()) for t in TARGETS if (REGRESSIONS / t).is_dir()}
     # fmi3GetFloat64 with nValues < number of value references wrote past the caller's array
     # (AddressSanitizer heap-buffer-overflow in tapmp_get_real); FMU states still held at
-    # fmi2FreeInstance leaked (LeakSanitizer, tapmp_get_state).
+    # fmi2FreeInstance leaked (LeakSanitizer, tapmp_get_state). The clocked controller's input was a
+    # false finding of the harness: a tick set, then taken back by an accepted inactive fmi3SetClock,
+    # then fmi3EnterStepMode (OK, rightly: no tick pending); the harness now follows the take-back.
     assert kept == {"fmi3_TAPMP_Controller": ["crash-e4ff7d668f7516260c709298473a47147a9464ae"],
-                    "fmi2_TAPMP_Plant": ["leak-347968940283ea423515505c4354a4a97b8e0a2c"]}
+                    "fmi2_TAPMP_Plant": ["leak-347968940283ea423515505c4354a4a97b8e0a2c"],
+                    "fmi3_TAPMP_ControllerClocked": ["crash-90e85a6d67cb56705ed7b8d47bcf12cb9c2d2bdd"]}
 
 
 @pytest.mark.parametrize("target", TARGETS)
