@@ -704,8 +704,13 @@ def test_plant_rhs_matches_the_composed_python_derivatives(native, variant):
     check.done()
 
 
-@pytest.mark.parametrize("substeps", (1, 3))
-@pytest.mark.parametrize("variant", PLANT_VARIANTS)
+# every variant and substep count in the full suite; the fast subset keeps two (about 2 s each)
+FAST_PLANT_STEPS = (("ideal", 1), ("all", 3))
+
+
+@pytest.mark.parametrize("variant,substeps", [
+    pytest.param(v, n, marks=() if (v, n) in FAST_PLANT_STEPS else pytest.mark.slow)
+    for n in (1, 3) for v in PLANT_VARIANTS])
 def test_plant_step_matches_python_rk4(native, variant, substeps):
     """One communication step from a random state; the forces are saturated inside the step."""
     seed = 323 + 10 * substeps + PLANT_VARIANTS.index(variant)

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 BIG = 200 * 2**20  # [bytes] over the limit of 100 MiB; written as sparse files (no disk used)
 
@@ -58,6 +60,7 @@ def test_another_process_files_in_the_temporary_folder_do_not_count(tmp_path):
     assert [p.name[:8] for p in system.iterdir()] == ["foreign-"]
 
 
+@pytest.mark.slow  # seconds: runs tapmp or pytest in a fresh Python process
 def test_what_the_suite_leaves_in_its_temporary_folder_counts(tmp_path):
     res, system = mini_suite(tmp_path, OWN)
     assert res.returncode == 1, res.stdout[-3000:]

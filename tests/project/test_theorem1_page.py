@@ -6,9 +6,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # seconds: runs tapmp or pytest in a fresh Python process
 def test_the_theorem1_page_shows_the_lines_its_checks_print(tmp_path):
     page = (ROOT / "docs" / "theorem1.md").read_text()
     make = re.search(r"^mkdir -p results && (printf .*)$", page, re.M).group(1)

@@ -43,6 +43,7 @@ def test_three_3000_value_grid_keys_are_refused_naming_the_count_and_never_a_cap
     assert MEMORY.fullmatch(err.split("; ", 1)[1]), err
 
 
+@pytest.mark.slow  # seconds: runs tapmp or pytest in a fresh Python process
 def test_a_grid_that_does_not_fit_in_memory_is_refused_before_it_is_listed(tmp_path):
     """With the case cap raised to the count, the memory check refuses: exit 2, one line naming the
     estimate and the free memory, and the command's peak memory stays that of starting it."""

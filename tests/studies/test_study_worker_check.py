@@ -29,6 +29,7 @@ def check_in_a_new_process(cache: Path, **env) -> str:
     return res.stdout.strip()
 
 
+@pytest.mark.slow  # seconds: runs tapmp or pytest in a fresh Python process
 def test_a_worker_with_an_empty_cache_and_no_compiler_fails_the_check_naming_it(tmp_path):
     line = check_in_a_new_process(tmp_path / "cache", CC=str(tmp_path / "no-such-cc"))
     assert line.startswith(f"Dask worker tcp://w:1 ({os.uname().nodename}) cannot run the cases: "), line
@@ -44,6 +45,7 @@ def test_a_worker_whose_cache_others_may_write_fails_the_check_naming_it(tmp_pat
                            f"cache: {cache} is writable by its group and others (mode 0777)"), line
 
 
+@pytest.mark.slow  # seconds: runs tapmp or pytest in a fresh Python process
 def test_a_worker_with_its_own_cache_passes_the_check(tmp_path):
     assert check_in_a_new_process(tmp_path / "cache") == "None"
 
@@ -77,6 +79,7 @@ def test_the_ssp_cache_is_written_private(tmp_path, monkeypatch):
     assert path.read_bytes() == data and path.parent.stat().st_mode & 0o777 == 0o700
 
 
+@pytest.mark.slow  # seconds: runs tapmp or pytest in a fresh Python process
 def test_case_files_above_the_cap_are_refused_without_inflating_them_or_writing_anything(tmp_path):
     """1 GB of zeros travels as 1 MB: refused at the cap (inflating no more than the cap), nothing written."""
     squeeze = zlib.compressobj()
