@@ -210,11 +210,9 @@ def test_bench_controller_time_writes_ordered_positive_statistics_for_every_vari
 
 @pytest.mark.interop
 @pytest.mark.needs_shared("tools/OMSimulator/bin/OMSimulator")
-def test_bench_real_time_peers_measures_every_tool_with_one_probe_stamp_per_dostep(tmp_path):
+def test_bench_real_time_peers_measures_every_tool_with_one_probe_stamp_per_dostep(native_built, tmp_path):
     from tests.support.shared import shared
-    from orchestrator.builder.build_native import build_native
-    ssp = build_native(tmp_path / "native", families=("fmi2",), log=lambda *_: None, windows=False)["fmi2"]["ssp"]
-    out = bench("bench_real_time_peers.py", "--ssp", ssp, "--stop-time", "0.02", "--oms-stop-time", "0.005",
+    out = bench("bench_real_time_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02", "--oms-stop-time", "0.005",
                 "--factors", "1", "--records", tmp_path / "records", "--json", tmp_path / "p.json",
                 "--oms", shared("tools/OMSimulator/bin/OMSimulator"), tmp_path=tmp_path)
     report = json.loads((tmp_path / "p.json").read_text())
