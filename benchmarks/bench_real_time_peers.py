@@ -12,7 +12,8 @@ t0_wall + (t - t0) / factor (t0_wall = the first doStep; negative = early), the 
 step h / factor late). Beside it, what the tool itself reports, where it reports something: Ecos's last
 "actual RTF", libcosim's execution status (real_time_factor), tapmp's run.json "real_time". A tool that
 does not offer a factor (OMSimulator: real time or not) or an option (`tapmp run` without --real-time)
-gets a row saying so. OMSimulator runs --oms-stop-time (default 0.02 s) instead of --stop-time: its
+gets a row saying so. With --free, each tool also runs unpaced first: the factor it reaches at most,
+beside which a target factor it misses reads plainly. OMSimulator runs --oms-stop-time (default 0.02 s) instead of --stop-time: its
 experimental real-time mode takes longer for each step than the one before (see docs/performance.md).
 Writes the rows as JSON (default benchmarks/results/real_time_peers.json) and prints a table.
 """
@@ -46,13 +47,14 @@ class NotAvailable(Exception):
 
 
 def run_omsimulator(ssp: Path, stop: float, factor: float, work: Path, oms: Path) -> dict:
-    """OMSimulator --realTime=true (real time only: it has no factor)."""
-    if factor != 1:
+    """OMSimulator --realTime=true (real time only: it has no factor); without it if ``factor`` is None."""
+    if factor not in (None, 1):
         raise NotAvailable("OMSimulator's --realTime has no factor (real time or as fast as it can)")
     if not oms.is_file():
         raise NotAvailable(f"no OMSimulator at {oms}")
     done = subprocess.run([str(oms), f"--tempDir={work}", f"--resultFile={work / 'r.csv'}", "--mode=cs",
-                           f"--stopTime={stop}", f"--stepSize={STEP}", "--realTime=true", str(ssp)],
+                           f"--stopTime={stop}", f"--stepSize={STEP}", *(["--realTime=true"] if factor else []),
+                           str(ssp)],
                           cwd=work, capture_output=True, text=True, timeout=900)
     if done.returncode != 0 or re.search(r"^error:", done.stdout, re.M):
         raise RuntimeError(f"OMSimulator failed: {(done.stdout + done.stderr).strip().splitlines()[-1:]}")
@@ -71,9 +73,9 @@ def ecos_program(work: Path) -> Path:
 
 
 def run_ecos(ssp: Path, stop: float, factor: float, work: Path) -> dict:
-    """ecos simulate --rtf FACTOR; its own last "actual RTF" line."""
+    """ecos simulate --rtf FACTOR (-1, no pacing, if ``factor`` is None); its own last "actual RTF" line."""
     done = subprocess.run([str(ecos_program(work)), "simulate", "--path", str(ssp), "--stopTime", repr(stop),
-                           "--stepSize", repr(STEP), "--rtf", repr(factor), "--noCsv"],
+                           "--stepSize", repr(STEP), "--rtf", repr(factor or -1.0), "--noCsv"],
                           cwd=work, capture_output=True, text=True, timeout=900)
     if done.returncode != 0:
         raise RuntimeError(f"Ecos failed: {(done.stdout + done.stderr).strip().splitlines()[-1:]}")
@@ -83,12 +85,13 @@ def run_ecos(ssp: Path, stop: float, factor: float, work: Path) -> dict:
 
 
 def run_libcosim(ssp: Path, stop: float, factor: float, work: Path) -> dict:
-    """libcosimpy: real_time_simulation_enabled(True), real_time_factor_target(factor), simulate_until(stop)."""
+    """libcosimpy: real_time_simulation_enabled(True), real_time_factor_target(factor), simulate_until(stop) (no
+    real-time setting if ``factor`` is None)."""
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     log_output_level(CosimLogLevel.WARNING)
     execution = CosimExecution.from_ssp_file(str(ssp), step_size=round(STEP * 1e9))
-    if not (execution.real_time_simulation_enabled(True) and execution.real_time_factor_target(factor)):
+    if factor and not (execution.real_time_simulation_enabled(True) and execution.real_time_factor_target(factor)):
         raise RuntimeError("libcosim refused the real-time setting")
     if not execution.simulate_until(round(stop * 1e9)):
         raise RuntimeError("libcosim: simulate_until failed")
@@ -101,16 +104,19 @@ def run_libcosim(ssp: Path, stop: float, factor: float, work: Path) -> dict:
 
 
 def run_tapmp(ssp: Path, stop: float, factor: float, work: Path) -> dict:
-    """tapmp run --real-time FACTOR on the paper scenario; run.json's "real_time"."""
+    """tapmp run --real-time FACTOR on the paper scenario (without the option if ``factor`` is None); run.json's
+    "real_time"."""
     out = work / "run"
     done = subprocess.run([sys.executable, "-c", "import sys; from orchestrator.cli import main; sys.exit(main())", "run",
                            str(ROOT / "scenarios" / "paper_simulation.toml"),
                            "--ssp", str(ssp), "--set", f"stop_time={stop!r}", "--out", str(out), "--no-progress",
-                           "--real-time", repr(factor)], cwd=ROOT, capture_output=True, text=True, timeout=900)
+                           *(["--real-time", repr(factor)] if factor else [])], cwd=ROOT, capture_output=True, text=True, timeout=900)
     if done.returncode != 0 and "--real-time" in done.stderr and "unrecognized" in done.stderr:
         raise NotAvailable("this tapmp has no `tapmp run --real-time`")
     if done.returncode != 0:
         raise RuntimeError(f"tapmp run failed: {done.stderr.strip().splitlines()[-1:]}")
+    if not factor:
+        return {"reports": "nothing on real time without --real-time"}
     real_time = json.loads((out / "run.json").read_text()).get("real_time")
     if not real_time:
         raise RuntimeError("tapmp run --real-time wrote no \"real_time\" into run.json")
@@ -120,9 +126,10 @@ def run_tapmp(ssp: Path, stop: float, factor: float, work: Path) -> dict:
 
 def one(tool: str, ssp: Path, factor: float, args, tmp: Path) -> dict:
     """One tool at one factor: its row (probe statistics, what the tool reports, wall seconds), or why not."""
-    work = tmp / f"{tool}_{factor:g}"
+    label = f"{factor:g}" if factor else "free"
+    work = tmp / f"{tool}_{label}"
     work.mkdir()
-    record = (Path(args.records) if args.records else work) / f"{tool}_{factor:g}.txt"
+    record = (Path(args.records) if args.records else work) / f"{tool}_{label}.txt"
     record.parent.mkdir(parents=True, exist_ok=True)
     probed = with_probe(ssp, build_probe(work / "TAPMP_Probe.fmu", record), work / "TAPMP_probe.ssp")
     stop = args.oms_stop_time if tool == "OMSimulator" else args.stop_time
@@ -140,9 +147,16 @@ def one(tool: str, ssp: Path, factor: float, args, tmp: Path) -> dict:
     except NotAvailable as why:
         return {**row, "available": False, "why": str(why)}
     row["wall_s"] = time.perf_counter() - start
-    row["probe"] = lateness(read_record(record), factor)
+    rows = read_record(record)
+    # as fast as it can: no schedule to be late against, only the factor it reaches
+    row["probe"] = lateness(rows, factor) if factor else {"steps": len(rows), **_free(rows)}
     row["record"] = str(record) if args.records else None
     return {**row, "available": True}
+
+
+def _free(rows) -> dict:
+    """The achieved real-time factor of a run paced by nothing (simulated / wall time, first to last doStep)."""
+    return {"achieved_factor": lateness(rows, 1.0)["achieved_factor"]}
 
 
 def table(doc: dict) -> str:
@@ -150,11 +164,17 @@ def table(doc: dict) -> str:
     lines = ["| tool | factor | simulated [s] | doSteps | achieved factor (probe) | lateness p50 / p99 / max [ms] "
              "| overruns | the tool reports |", "|---|---|---|---|---|---|---|---|"]
     for r in doc["rows"]:
+        factor = f"{r['factor']:g}" if r["factor"] else "none (as fast as it can)"
         if not r["available"]:
-            lines.append(f"| {r['tool']} | {r['factor']:g} | - | - | not available | - | - | {r['why']} |")
+            lines.append(f"| {r['tool']} | {factor} | - | - | not available | - | - | {r['why']} |")
             continue
-        p, late = r["probe"], r["probe"]["lateness_s"]
-        lines.append(f"| {r['tool']} | {r['factor']:g} | {r['stop_time_s']:g} | {p['steps']} | {p['achieved_factor']:.4f} "
+        p = r["probe"]
+        if not r["factor"]:
+            lines.append(f"| {r['tool']} | {factor} | {r['stop_time_s']:g} | {p['steps']} | {p['achieved_factor']:.4f} "
+                         f"| - | - | {r['reports']} |")
+            continue
+        late = p["lateness_s"]
+        lines.append(f"| {r['tool']} | {factor} | {r['stop_time_s']:g} | {p['steps']} | {p['achieved_factor']:.4f} "
                      f"| {late['p50'] * 1e3:.3f} / {late['p99'] * 1e3:.3f} / {late['max'] * 1e3:.3f} | {p['overruns']} "
                      f"| {r['reports']} |")
     return "\n".join(lines)
@@ -178,6 +198,7 @@ def main(argv=None) -> int:
     ap.add_argument("--stop-time", type=positive, default=0.2, help="simulated seconds (default 0.2)")
     ap.add_argument("--oms-stop-time", type=positive, default=0.02, help="OMSimulator's simulated seconds (default 0.02)")
     ap.add_argument("--factors", type=positive, nargs="+", default=[1.0, 10.0], help="real-time factors (default 1 10)")
+    ap.add_argument("--free", action="store_true", help="also each tool without pacing: the factor it can reach")
     ap.add_argument("--tools", nargs="+", choices=TOOLS, default=list(TOOLS))
     ap.add_argument("--oms", default=str(OMS), help="the OMSimulator program (default ../shared/tools/...)")
     ap.add_argument("--records", help="keep each probe's record in this folder (default: deleted)")
@@ -188,12 +209,12 @@ def main(argv=None) -> int:
         return 2
     rows = []
     with tempfile.TemporaryDirectory(prefix="tapmp_rtpeers_") as tmp:
-        for factor in args.factors:
+        for factor in ([None] if args.free else []) + args.factors:
             for tool in args.tools:
                 row = one(tool, args.ssp, factor, args, Path(tmp))
                 rows.append(row)
                 said = row["why"] if not row["available"] else f"achieved {row['probe']['achieved_factor']:.4f}"
-                print(f"  {tool} x{factor:g}: {said}", file=sys.stderr)
+                print(f"  {tool} x{factor or 'free'}: {said}", file=sys.stderr)
     doc = {"command": "benchmarks/bench_real_time_peers.py " + " ".join(argv),
            "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "ssp": str(args.ssp), "step_s": STEP,
            "clock": "CLOCK_MONOTONIC (the probe FMU)",
