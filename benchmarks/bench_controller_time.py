@@ -151,7 +151,7 @@ def run(args, tmp: Path) -> dict:
             rows.append({"variant": variant, "law": law, "samples": len(ns), **stats})
             print(f"  {variant:20s} {law:7s} p50 {stats['us']['p50']:7.3f} us  max {stats['us']['max']:9.3f} us",
                   file=sys.stderr)
-    return {"command": "benchmarks/bench_controller_time.py " + " ".join(args.argv),
+    return {"command": " ".join(["benchmarks/bench_controller_time.py", *args.argv]),
             "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "machine": {"platform": platform.platform(), "processor": cpu_name(), "cores": os.cpu_count(),
                         "load_average_1min": os.getloadavg()[0]},

@@ -215,7 +215,7 @@ def main(argv=None) -> int:
                 rows.append(row)
                 said = row["why"] if not row["available"] else f"achieved {row['probe']['achieved_factor']:.4f}"
                 print(f"  {tool} x{factor or 'free'}: {said}", file=sys.stderr)
-    doc = {"command": "benchmarks/bench_real_time_peers.py " + " ".join(argv),
+    doc = {"command": " ".join(["benchmarks/bench_real_time_peers.py", *argv]),
            "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "ssp": str(args.ssp), "step_s": STEP,
            "clock": "CLOCK_MONOTONIC (the probe FMU)",
            "machine": {"platform": platform.platform(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]},
