@@ -4,8 +4,8 @@
  *
  * At each fmi2DoStep(t, h) it records t [s], h [s] and the wall time [ns] of CLOCK_MONOTONIC. That clock
  * and not CLOCK_REALTIME: only differences within one process are used (lateness against the first
- * doStep), CLOCK_MONOTONIC never jumps when the system clock is set, and it is the clock the masters'
- * own pacing reads on Linux (std::chrono::steady_clock, Python's time.monotonic).
+ * doStep), CLOCK_MONOTONIC never jumps when the system clock is set, and it is what the steady clocks a
+ * pacing loop uses read on Linux (std::chrono::steady_clock, Python's time.monotonic).
  *
  * The string parameter `file` names the file written at fmi2Terminate (or at fmi2FreeInstance if the
  * master never terminated): one line per doStep "t h wall_ns", t and h in %.17g. It is written to
