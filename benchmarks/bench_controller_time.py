@@ -44,6 +44,10 @@ LAWS = {"sc-dc": 0, "apd-dc": 1, "pid-dc": 2}   # the controller's `law` setting
 QUANTILES = {"p50": 50.0, "p99": 99.0, "p99.99": 99.99}
 
 
+class BenchError(Exception):
+    """A run that cannot be made (missing FMUs, a failed host): one line, exit code 2."""
+
+
 def recorded_inputs(fmi2_ssp: Path, path: Path) -> int:
     """The controller's 15 inputs at every step of the paper scenario on ``fmi2_ssp`` (2.5 s, h = 1e-4 s)
     written to ``path`` as rows of doubles; returns the number of rows."""
@@ -64,7 +68,7 @@ def recorded_inputs(fmi2_ssp: Path, path: Path) -> int:
     source = {n: (f"trajectory.{n}" if n.endswith("_d") else f"plant.{n}") for n in INPUTS}
     missing = [c for c in source.values() if c not in columns]
     if missing:
-        raise SystemExit(f"error: the reference run has no column {missing[0]} (columns: {', '.join(columns[:8])}, ...)")
+        raise BenchError(f"the reference run has no column {missing[0]} (columns: {', '.join(columns[:8])}, ...)")
     table = np.ascontiguousarray(rows[:, [columns.index(source[n]) for n in INPUTS]], dtype=np.float64)
     table.tofile(path)
     return len(table)
@@ -108,13 +112,12 @@ def statistics(ns: np.ndarray) -> dict:
 
 
 def native_fmus(native: Path) -> dict[str, Path]:
-    """{variant: FMU path} from a folder laid out as build/native/ (SystemExit naming what is missing)."""
+    """{variant: FMU path} from a folder laid out as build/native/ (BenchError naming what is missing)."""
     fmus = {}
     for variant, (_, family, model) in VARIANTS.items():
         fmu = native / family / f"{model}.fmu"
         if not fmu.is_file():
-            raise SystemExit(f"error: --native = {native} has no {family}/{model}.fmu: run `tapmp build` first or pass "
-                             "--build")
+            raise BenchError(f"--native = {native} has no {family}/{model}.fmu: run `tapmp build` first or pass --build")
         fmus[variant] = fmu
     return fmus
 
@@ -145,7 +148,7 @@ def run(args, tmp: Path) -> dict:
             done = subprocess.run([str(exe), mode, str(path), str(inputs), str(args.samples), str(LAWS[law]), str(out)],
                                   capture_output=True, text=True)
             if done.returncode != 0:
-                raise SystemExit(f"error: {variant} {law}: the C host failed: {done.stderr.strip()}")
+                raise BenchError(f"{variant} {law}: the C host failed: {done.stderr.strip()}")
             ns = np.fromfile(out, dtype=np.int64)
             stats = statistics(ns)
             rows.append({"variant": variant, "law": law, "samples": len(ns), **stats})
@@ -192,7 +195,7 @@ def positive_int(text: str) -> int:
     except ValueError:
         n = 0
     if not 1 <= n <= 1_000_000_000:
-        raise argparse.ArgumentTypeError(f"--samples = {text} is invalid: allowed is an integer in [1, 1000000000]")
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: allowed is an integer in [1, 1000000000]")
     return n
 
 
@@ -208,8 +211,12 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "controller_time.json")
     args = ap.parse_args(argv)
     args.argv = argv
-    with tempfile.TemporaryDirectory(prefix="tapmp_ctime_") as tmp:
-        doc = run(args, Path(tmp))
+    try:
+        with tempfile.TemporaryDirectory(prefix="tapmp_ctime_") as tmp:
+            doc = run(args, Path(tmp))
+    except BenchError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     args.json.parent.mkdir(parents=True, exist_ok=True)
     part = args.json.with_name(args.json.name + ".part")
     part.write_text(json.dumps(doc, indent=1) + "\n")

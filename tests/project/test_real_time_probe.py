@@ -135,3 +135,17 @@ def test_the_host_refuses_bad_input_with_one_line_and_exit_2_writing_nothing(hos
     assert done.returncode == 2
     assert done.stderr.startswith("controller_time: " + message.format(**names)), done.stderr
     assert len(done.stderr.splitlines()) == 1 and not (tmp_path / "ns.bin").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--samples", "0"], "error: argument --samples: '0' is invalid: allowed is an integer in [1, 1000000000]"),
+    (["--native", "{tmp}"], "error: --native = {tmp} has no fmi2/TAPMP_Controller.fmu: run `tapmp build` first or "
+                            "pass --build"),
+])
+def test_bench_controller_time_refuses_bad_input_with_exit_2_and_writes_no_json(tmp_path, args, message):
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_controller_time.py"),
+                           *(a.format(tmp=tmp_path) for a in args), "--json", str(tmp_path / "t.json")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1].endswith(message.format(tmp=tmp_path))  # argparse: "PROG: error: ..."
+    assert not (tmp_path / "t.json").exists()
