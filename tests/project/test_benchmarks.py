@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytestmark = pytest.mark.slow  # every benchmark script in its smoke mode
@@ -186,3 +187,60 @@ def test_bench_quick_start_prints_the_build_time_and_the_load(tmp_path):
     assert out.splitlines()[0] == f"bash build_fmus.sh --host on {os.cpu_count()} cores"
     rows = table(out, "cache ")
     assert [r[0] for r in rows] == ["warm"] and all(re.fullmatch(NUMBER, v) for v in rows[0][1:])
+
+
+def test_bench_controller_time_writes_ordered_positive_statistics_for_every_variant_and_law(native_built, tmp_path):
+    native = native_built["fmi2"]["ssp"].parent.parent
+    out = bench("bench_controller_time.py", "--native", native, "--samples", "2000", "--json", tmp_path / "t.json",
+                tmp_path=tmp_path)
+    report = json.loads((tmp_path / "t.json").read_text())
+    variants = ["FMI 2.0 CS", "FMI 3.0 CS", "FMI 3.0 event mode", "FMI 3.0 clocked", "law alone"]
+    assert [(r["variant"], r["law"]) for r in report["rows"]] == [(v, law) for v in variants
+                                                                 for law in ("sc-dc", "apd-dc", "pid-dc")]
+    assert report["samples"] == 2000 and report["cycle_us"] == 100.0 and report["clock"] == "CLOCK_MONOTONIC"
+    for r in report["rows"]:
+        us = r["us"]
+        assert r["samples"] == 2000
+        assert all(0 < v < float("inf") for v in us.values())
+        assert us["p50"] <= us["p99"] <= us["p99.99"] <= us["max"]
+        assert r["of_cycle"]["max"] == pytest.approx(us["max"] / 100.0)
+        assert 0 <= r["over_cycle"] <= 2000
+    assert len([line for line in out.splitlines() if line.startswith("| FMI ") or line.startswith("| law ")]) == 15
+
+
+@pytest.mark.interop
+@pytest.mark.needs_shared("tools/OMSimulator/bin/OMSimulator")
+def test_bench_real_time_peers_measures_every_tool_with_one_probe_stamp_per_dostep(native_built, tmp_path):
+    from tests.support.shared import shared
+    out = bench("bench_real_time_peers.py", "--ssp", native_built["fmi2"]["ssp"], "--stop-time", "0.02",
+                "--oms-stop-time", "0.005", "--factors", "1", "--free", "--records", tmp_path / "records",
+                "--json", tmp_path / "p.json", "--oms", shared("tools/OMSimulator/bin/OMSimulator"), tmp_path=tmp_path)
+    report = json.loads((tmp_path / "p.json").read_text())
+    tools = ["OMSimulator", "Ecos", "libcosim", "tapmp"]
+    assert [(r["tool"], r["factor"]) for r in report["rows"]] == [(t, f) for f in (None, 1.0) for t in tools]
+    for r in report["rows"]:
+        if r["tool"] == "tapmp" and r["factor"]:
+            continue
+        assert r["available"], r
+        stamps = np.loadtxt(r["record"], ndmin=2)
+        t, h, wall = stamps[:, 0], stamps[:, 1], stamps[:, 2]
+        # one line per doStep: each starts where the one before ended, over the simulated horizon
+        assert len(stamps) == r["probe"]["steps"]
+        np.testing.assert_allclose(t[1:], t[:-1] + h[:-1], rtol=0, atol=1e-12)
+        assert t[0] == 0.0 and t[-1] + h[-1] == pytest.approx(r["stop_time_s"], abs=STEP_TOLERANCE)
+        assert np.all(np.diff(wall) >= 0) and np.all(h > 0)
+        assert r["probe"]["achieved_factor"] > 0
+        if r["factor"]:
+            late = r["probe"]["lateness_s"]
+            assert late["p50"] <= late["p99"] <= late["p999"] <= late["max"]
+            assert 0 <= r["probe"]["overruns"] < len(stamps)
+    tapmp = report["rows"][-1]
+    if not tapmp["available"]:  # before `tapmp run --real-time` exists: said so, not measured
+        assert tapmp["why"] == "this tapmp has no `tapmp run --real-time`"
+        assert "| tapmp | 1 | - | - | not available |" in out
+    else:
+        assert set(tapmp["run_json"]) >= {"factor", "lateness_s", "achieved_factor", "overruns"}
+    assert out.count("\n| ") == 1 + len(report["rows"])  # the table's header and one row per run
+
+
+STEP_TOLERANCE = 1.1e-4  # a tool may stop one macro step short of a horizon its summed clock does not reach
