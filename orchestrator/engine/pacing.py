@@ -181,17 +181,34 @@ def _unlock_memory(measure: dict) -> None:
         _libc().munlockall()
 
 
-def _thread_measures(pacing: Pacing, measures: dict) -> tuple:
-    """In the stepping thread: pin it to the last CPU it may run on, and SCHED_FIFO if asked;
-    returns what undoes them."""
-    undo = []
+def _reader_affinity(measures: dict) -> tuple:
+    """On the recording (calling) thread: keep it off the CPU the stepping thread will have, the
+    last one it may run on, so that the two never share a CPU; returns (that CPU or None, what undoes it)."""
     try:
         cpus = sorted(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, {cpus[-1]})  # pid 0: this thread only; the reader stays free
-        undo.append(lambda: os.sched_setaffinity(0, set(cpus)))
-        measures["cpu_affinity"] = {"applied": True, "detail": f"stepping thread on CPU {cpus[-1]} of {cpus}"}
     except (OSError, AttributeError) as err:
-        measures["cpu_affinity"] = {"applied": False, "detail": f"sched_setaffinity refused: {err}"}
+        measures["cpu_affinity"] = {"applied": False, "detail": f"sched_getaffinity unavailable: {err}"}
+        return None, ()
+    if len(cpus) < 2:
+        measures["cpu_affinity"] = {"applied": False, "detail": f"one CPU allowed ({cpus}): nothing to pin"}
+        return None, ()
+    os.sched_setaffinity(0, set(cpus[:-1]))  # pid 0: this thread only
+    return cpus[-1], (lambda: os.sched_setaffinity(0, set(cpus)),)
+
+
+def _thread_measures(pacing: Pacing, cpu, measures: dict) -> tuple:
+    """In the stepping thread: pin it to ``cpu`` (None: not pinned) and SCHED_FIFO if asked; returns
+    what undoes them."""
+    undo = []
+    if cpu is not None:
+        try:
+            cpus = os.sched_getaffinity(0)
+            os.sched_setaffinity(0, {cpu})
+            undo.append(lambda: os.sched_setaffinity(0, cpus))
+            measures["cpu_affinity"] = {"applied": True, "detail": f"stepping thread on CPU {cpu}, the "
+                                        "recording thread on the others"}
+        except OSError as err:
+            measures["cpu_affinity"] = {"applied": False, "detail": f"sched_setaffinity refused: {err}"}
     if pacing.rt_priority is None:
         measures["sched_fifo"] = {"applied": False, "detail": "not asked for (--rt-priority N): a thread "
                                   "spinning at real-time priority can starve the machine's other work"}
@@ -234,10 +251,11 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
     ring = np.empty((RING_SLOTS, SLOT_STEPS, len(sim.columns)))
     produced, consumed = c_int64(0), c_int64(0)
     measures = {"mlockall": _lock_memory()}
+    cpu, undo_reader = _reader_affinity(measures)
     outcome = {}
 
     def stepping():
-        undo = _thread_measures(pacing, measures)
+        undo = _thread_measures(pacing, cpu, measures)
         try:
             outcome["state"] = core.advance_paced(sim.k, n, pace, ring, SLOT_STEPS, produced, consumed)
             outcome["end"] = stepper_core.load().tapmp_pace_finish(ctypes.addressof(pace))
@@ -262,6 +280,8 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
         stop.value = 1
         thread.join()
         _unlock_memory(measures["mlockall"])
+        for step in undo_reader:
+            step()
     if "error" in outcome:
         raise outcome["error"]
     s = outcome["state"]
