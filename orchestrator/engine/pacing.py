@@ -92,7 +92,7 @@ class Pace(Structure):
     """stepper.c's tapmp_pace: the schedule of a paced run and its statistics."""
     _fields_ = [("policy", c_int32), ("started", c_int32), ("period_ns", c_double), ("spin_ns", c_int64),
                 ("t0_wall", c_int64), ("k0", c_int64), ("dropped", c_int64), ("release", c_int64),
-                ("end", c_int64), ("due", c_int64), ("steps", c_int64), ("overruns", c_int64),
+                ("end", c_int64), ("due", c_int64), ("finish", c_int64), ("steps", c_int64), ("overruns", c_int64),
                 ("longest_run", c_int64), ("current_run", c_int64), ("n_first", c_int64),
                 ("first_k", c_int64 * FIRST_OVERRUNS), ("first_late", c_int64 * FIRST_OVERRUNS),
                 ("ring_waits", c_int64), ("late", _Hist), ("exec", _Hist),
@@ -258,7 +258,6 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
         undo = _thread_measures(pacing, cpu, measures)
         try:
             outcome["state"] = core.advance_paced(sim.k, n, pace, ring, SLOT_STEPS, produced, consumed)
-            outcome["end"] = stepper_core.load().tapmp_pace_finish(ctypes.addressof(pace))
         except BaseException as err:  # handed to the calling thread
             outcome["error"] = err
         finally:
@@ -288,7 +287,7 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
     if s.outcome != stepper_core.DONE and s.rows:  # the unfinished block's rows
         consume(ring[taken % RING_SLOTS, :s.rows])
     sim.k = s.k
-    stats = statistics(pace, pacing, h, outcome["end"], measures, worst, trace if pacing.trace else None)
+    stats = statistics(pace, pacing, h, pace.finish, measures, worst, trace if pacing.trace else None)
     try:
         if s.outcome == stepper_core.OVERRUN:
             step = int(pace.first_k[0])

@@ -96,6 +96,7 @@ typedef struct {
     int64_t release;               /* the earliest start of the next step [ns] */
     int64_t end;                   /* completion of the last paced step [ns] */
     int64_t due;                   /* deadline of the last paced step [ns] */
+    int64_t finish;                /* when tapmp_advance_paced returned [ns] (after the last deadline if DONE) */
     int64_t steps, overruns, longest_run, current_run;
     int64_t n_first;               /* overruns listed in first_k, first_late */
     int64_t first_k[FIRST_OVERRUNS], first_late[FIRST_OVERRUNS];
@@ -555,18 +556,14 @@ int tapmp_advance_paced(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, do
         int64_t m = n_steps - done < block ? n_steps - done : block;
         int r = tapmp_advance(p, s, m, ring + (size_t)(j % n_slots) * (size_t)block * (size_t)n_cols, n_cols);
         done += s->rows;
-        if (r != DONE)
+        if (r != DONE) {
+            p->pace->finish = now_ns();
             return r;
+        }
         __atomic_store_n(produced, j + 1, __ATOMIC_RELEASE);
     }
+    if (p->pace->started)  /* a run ends no earlier than its last deadline */
+        wait_until(p->pace->due, p->pace->spin_ns);
+    p->pace->finish = now_ns();  /* here, not in Python: the GIL may keep this thread waiting */
     return DONE;
-}
-
-/* Wait for the deadline of the last paced step (a run ends no earlier than it); returns
- * CLOCK_MONOTONIC [ns] then. */
-int64_t tapmp_pace_finish(tapmp_pace *pc)
-{
-    if (pc->started)
-        wait_until(pc->due, pc->spin_ns);
-    return now_ns();
 }

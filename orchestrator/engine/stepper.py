@@ -100,8 +100,6 @@ def load():
         lib.tapmp_advance_paced.restype = c_int32
         lib.tapmp_advance_paced.argtypes = [POINTER(_Plan), POINTER(_State), c_int64, c_void_p, c_int32, c_int64,
                                             c_int32, c_void_p, c_void_p]
-        lib.tapmp_pace_finish.restype = c_int64
-        lib.tapmp_pace_finish.argtypes = [c_void_p]
         _LIB = lib
     return _LIB
 
