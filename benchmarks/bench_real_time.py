@@ -13,7 +13,8 @@ Usage (from the repository root):
 
 Prints a table: per case the lateness percentiles and maximum [us] (completion minus deadline;
 negative: early), the execution time p99 [us], the overruns, the longest run of them, the achieved
-real-time factor and whether SCHED_FIFO was applied; with the load average before the cases.
+real-time factor, whether SCHED_FIFO was applied and how often the stepping waited for the recording
+thread (ring waits); with the load average before the cases.
 """
 
 import argparse
@@ -76,14 +77,15 @@ def main() -> int:
     def us(v):
         return f"{v * 1e6:.1f}"
     print(f"{'machine':<7}  {'factor':>6}  {'sched':>8}  {'steps':>6}  {'late p50 [us]':>13}  {'p99':>8}  "
-          f"{'p99.9':>8}  {'max':>8}  {'exec p99 [us]':>13}  {'overruns':>8}  {'longest':>7}  {'achieved':>8}")
+          f"{'p99.9':>8}  {'max':>8}  {'exec p99 [us]':>13}  {'overruns':>8}  {'longest':>7}  {'achieved':>8}  "
+          f"{'ring waits':>10}")
     for loaded, factor, priority, rt in rows:
         late = rt["lateness_s"]
         fifo = rt["measures"]["sched_fifo"]
         sched = f"fifo {priority}" if fifo["applied"] else ("other" if priority is None else "refused")
         print(f"{'loaded' if loaded else 'idle':<7}  {factor:>6g}  {sched:>8}  {rt['steps']:>6}  {us(late['p50']):>13}  "
               f"{us(late['p99']):>8}  {us(late['p999']):>8}  {us(late['max']):>8}  {us(rt['execution_s']['p99']):>13}  "
-              f"{rt['overruns']:>8}  {rt['longest_overrun_run']:>7}  {rt['achieved_factor']:>8.4f}")
+              f"{rt['overruns']:>8}  {rt['longest_overrun_run']:>7}  {rt['achieved_factor']:>8.4f}  {rt['ring_waits']:>10}")
     return 0
 
 

@@ -37,9 +37,11 @@ from .errors import CoSimulationError
 from . import stepper as stepper_core
 
 OVERRUN_POLICIES = ("continue", "skip", "abort")
-# Sleep until this long before a release, then spin (stepper.c wait_until). Measured on the 2-core
-# VM of docs/performance.md ("Real time"): clock_nanosleep woke p99 ~ 70 us late when idle.
-SPIN_MARGIN_S = 200e-6
+# Sleep until this long before a release, then spin (stepper.c wait_until). Measured on the 2-core VM
+# of docs/performance.md ("Real time"): at SCHED_FIFO clock_nanosleep woke 37 us late at the median,
+# 47 us at p90. Below the 100 us servo period on purpose: a thread that spins its whole period at
+# SCHED_FIFO runs into the kernel's real-time throttling (50 ms taken away every second).
+SPIN_MARGIN_S = 60e-6
 HIST_BINS, FIRST_OVERRUNS = 1024, 16
 RING_SLOTS, SLOT_STEPS = 64, 250  # ring of 16,000 steps: 1.6 s of a 0.1 ms run at factor 1
 MAX_WINDOWS = 2000                # points of the lateness-over-time series
