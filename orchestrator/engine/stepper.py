@@ -17,6 +17,10 @@ concurrent processes build it once. If it cannot be built, the master says so in
 on stderr and steps in Python. A cache folder or library another user could have written is
 refused before anything is loaded (ctoolchain.CacheTrustError, not a fallback: the run
 stops with one line naming the path). ``TAPMP_STEPPER=python`` selects the Python loop.
+
+A paced (real-time) run is one call, ``tapmp_advance_paced``, on a thread of its own without the GIL:
+each step kept to the wall clock, the rows into a ring of blocks that the caller reads meanwhile
+(orchestrator.engine.pacing).
 """
 
 import ctypes
