@@ -71,7 +71,8 @@ def test_a_paced_run_takes_its_wall_time_and_gives_the_unpaced_rows(native_built
     # it cannot end before its last deadline, 0.2 s after it started; the upper bound allows a loaded machine
     assert 0.2 <= wall < 0.2 + 3.0
     assert 0.2 <= stats["wall_time_s"] <= wall
-    assert stats["achieved_factor"] == pytest.approx(0.2 / stats["wall_time_s"]) and stats["achieved_factor"] <= 1.0
+    assert stats["achieved_factor"] == pytest.approx(0.2 / stats["wall_time_s"])
+    assert stats["achieved_factor"] <= 1.0 + 1e-12
     assert stats["steps"] == 2000 and stats["factor"] == 1.0 and stats["overrun_policy"] == "continue"
     assert stats["period_s"] == pytest.approx(1e-4)
     assert stats["measures"]["mlockall"]["applied"] in (True, False) and stats["measures"]["mlockall"]["detail"]
@@ -153,9 +154,9 @@ def test_abort_stops_at_the_first_overrun_naming_the_step(native_built, monkeypa
 
 def test_a_stop_ends_a_paced_run_between_two_steps(native_built):
     ssp = native_built["fmi2"]["ssp"]
-    rows, stats, wall, error, k = paced(ssp, 20000, Pacing(1.0), stop_after=3)  # 2 s, stopped at once
+    rows, stats, _, error, k = paced(ssp, 20000, Pacing(1.0), stop_after=3)  # 2 s, stopped at once
     assert error is None and 0 < k < 20000 and len(rows) == k == stats["steps"]
-    assert wall < 1.5
+    assert rows.tobytes() == unpaced(ssp, k).tobytes()
 
 
 @pytest.mark.parametrize("which", ["ssp", "clocked_ssp"])
