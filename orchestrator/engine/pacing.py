@@ -178,8 +178,8 @@ def _lock_memory() -> dict:
         return {"applied": False, "detail": f"mlockall unavailable: {err}"}
 
 
-def _unlock_memory(measure: dict) -> None:
-    if measure["applied"]:
+def _unlock_memory(measure: dict | None) -> None:
+    if measure and measure["applied"]:
         _libc().munlockall()
 
 
@@ -194,7 +194,11 @@ def _reader_affinity(measures: dict) -> tuple:
     if len(cpus) < 2:
         measures["cpu_affinity"] = {"applied": False, "detail": f"one CPU allowed ({cpus}): nothing to pin"}
         return None, ()
-    os.sched_setaffinity(0, set(cpus[:-1]))  # pid 0: this thread only
+    try:
+        os.sched_setaffinity(0, set(cpus[:-1]))  # pid 0: this thread only
+    except OSError as err:
+        measures["cpu_affinity"] = {"applied": False, "detail": f"sched_setaffinity refused: {err}"}
+        return None, ()
     return cpus[-1], (lambda: os.sched_setaffinity(0, set(cpus)),)
 
 
@@ -252,8 +256,8 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
     pace.stop = ctypes.addressof(stop)
     ring = np.empty((RING_SLOTS, SLOT_STEPS, len(sim.columns)))
     produced, consumed = c_int64(0), c_int64(0)
-    measures = {"mlockall": _lock_memory()}
-    cpu, undo_reader = _reader_affinity(measures)
+    measures = {}
+    cpu, undo_reader = None, ()
     outcome = {}
 
     def stepping():
@@ -269,6 +273,8 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
     thread = threading.Thread(target=stepping, name="tapmp-paced-stepping", daemon=True)
     taken = 0
     try:
+        measures["mlockall"] = _lock_memory()
+        cpu, undo_reader = _reader_affinity(measures)  # before the thread starts: it reads cpu
         thread.start()
         while thread.is_alive():
             if stopped():
@@ -279,8 +285,9 @@ def run_paced(sim, n: int, pacing: Pacing, consume, stopped) -> dict:
         taken = _take(ring, produced, consumed, taken, n, consume)
     finally:
         stop.value = 1
-        thread.join()
-        _unlock_memory(measures["mlockall"])
+        if thread.ident is not None:  # started
+            thread.join()
+        _unlock_memory(measures.get("mlockall"))
         for step in undo_reader:
             step()
     if "error" in outcome:
