@@ -122,5 +122,6 @@ def real_time_args(sp) -> None:
                     "priority N (1-99) if the system allows it (not by default: a thread spinning at real-time "
                     "priority can starve the machine's other work)")
     sp.add_argument("--spin-margin", metavar="US", help="with --real-time: sleep until US microseconds before "
-                    "each step's start, then spin (default 60: above this VM's usual wake-up latency, below the 100 us "
-                    "servo period, so that a SCHED_FIFO thread sleeps in every period)")
+                    "each step's start, then spin (default 60: above the usual wake-up latency of a kernel without real-time "
+                    "preemption, below the 100 us servo period, so that a SCHED_FIFO thread sleeps in every period; "
+                    "docs/performance.md, Real time)")
