@@ -104,3 +104,24 @@ def scenario_args(sp) -> None:
                     "(a failed or interrupted one is replaced without it)")
     recording_args(sp)
     progress_arg(sp)
+
+
+def real_time_args(sp) -> None:
+    """--real-time [FACTOR] and what goes with it (tapmp run)."""
+    sp.add_argument("--real-time", nargs="?", const="1", metavar="FACTOR", help="keep every step to the wall "
+                    "clock: FACTOR simulated seconds per second (no value: 1, the wall clock; 0.5 half speed; 10 ten "
+                    "times faster); run.json gets the steps' lateness and execution time under real_time, and "
+                    "real_time.png is drawn (docs/performance.md, Real time). Needs the compiled stepping core")
+    sp.add_argument("--overrun", choices=("continue", "skip", "abort"), help="with --real-time, after a step "
+                    "finished late: continue (default; keep the schedule, late steps back to back until caught up), "
+                    "skip (start the next step at the next slot still ahead; the run takes longer) or abort (stop "
+                    "the run, failed)")
+    sp.add_argument("--real-time-trace", action="store_true", help="with --real-time: also write every step's "
+                    "lateness and execution time into real_time_trace.csv")
+    sp.add_argument("--rt-priority", metavar="N", help="with --real-time: run the stepping thread at SCHED_FIFO "
+                    "priority N (1-99) if the system allows it (not by default: a thread spinning at real-time "
+                    "priority can starve the machine's other work)")
+    sp.add_argument("--spin-margin", metavar="US", help="with --real-time: sleep until US microseconds before "
+                    "each step's start, then spin (default 60: above the usual wake-up latency of a kernel without real-time "
+                    "preemption, below the 100 us servo period, so that a SCHED_FIFO thread sleeps in every period; "
+                    "docs/performance.md, Real time)")

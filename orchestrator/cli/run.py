@@ -6,7 +6,7 @@ from pathlib import Path
 from ..errors import UsageError
 from .common import (compare_runs, jobs, load_scenario, names, result_base, ssp_of, warn_if_implausible,
                      warn_if_unstable)
-from .options import PATHS_HELP, RELATIVE, jobs_arg, scenario_args
+from .options import PATHS_HELP, RELATIVE, jobs_arg, real_time_args, scenario_args
 
 MODE_SHAPES = ((1, 1, 1), (1, 0, -1), (1, -2, 1))  # the motors' shares of each mode (tapmp.modal.MODES)
 PLOT_SIGNALS = ("e1..e3 tracking error of each motor [µm] (also q1_err..q3_err), es1..es3 synchronization "
@@ -21,19 +21,27 @@ def add_run(sub) -> None:
                        "results.csv (or results.mat), run.json and metrics.json into its output folder, by default "
                        "<output>/<law>, e.g. results/paper_simulation/sc-dc.", epilog=PATHS_HELP)
     scenario_args(r)
+    real_time_args(r)
     r.set_defaults(func=cmd_run)
 
 
 def cmd_run(args) -> int:
     """`tapmp run`: one scenario into its output folder; its errors and moves printed."""
+    pacing = pacing_of(args)
     scenario = load_scenario(args)
+    if pacing is not None:
+        check_compiled_core(scenario)
     warn_if_implausible(scenario)
     warn_if_unstable(scenario)
     out = Path(args.out) if args.out else result_base(scenario) / scenario.law
     from ..tool.estimate import check_output_size
     check_output_size([scenario], out, scenario.name)
-    m = _run_one(scenario, ssp_of(args, scenario), out, args.overwrite, not args.no_progress, scenario.name)
+    m = _run_one(scenario, ssp_of(args, scenario), out, args.overwrite, not args.no_progress, scenario.name, pacing)
     print(f"{scenario.name} ({scenario.law}): results in {out}")
+    if pacing is not None:
+        from ..tool.folders import read_json
+        for line in real_time_lines(read_json(out / "run.json")["real_time"]):
+            print(line)
     print("tracking MAE [um]: " + ", ".join(f"{v:.4f}" for v in m["tracking_mae_um"]))
     print("sync MAE [um]:     " + ", ".join(f"{v:.4f}" for v in m["sync_mae_um"]))
     if "tracking_mean_um" in m:
@@ -46,14 +54,83 @@ def cmd_run(args) -> int:
     return 0
 
 
-def _run_one(scenario, ssp, out, overwrite, progress, label):
+def _run_one(scenario, ssp, out, overwrite, progress, label, pacing=None):
     from ..tool.progress import progress_bar
     from ..tool.results import run_scenario
     update, close = progress_bar(label, progress)
     try:
-        return run_scenario(scenario, ssp, out, overwrite, update)
+        return run_scenario(scenario, ssp, out, overwrite, update, pacing=pacing)
     finally:
         close()
+
+
+def pacing_of(args):
+    """The engine.pacing.Pacing of --real-time and its options, None without it; UsageError for an
+    option without --real-time or a value that is not allowed."""
+    extra = [name for name, given in (("--overrun", args.overrun), ("--real-time-trace", args.real_time_trace),
+                                      ("--rt-priority", args.rt_priority), ("--spin-margin", args.spin_margin))
+             if given not in (None, False)]
+    if args.real_time is None:
+        if extra:
+            raise UsageError(f"{extra[0]} is for a paced run: it goes with --real-time [FACTOR]")
+        return None
+    import math
+    from ..engine.pacing import SPIN_MARGIN_S, Pacing
+
+    def number(name, text, allowed):
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value) or not allowed(value):
+            raise UsageError(f"{name} = {text!r} is invalid: allowed is {ALLOWED[name]}")
+        return value
+    factor = number("--real-time", args.real_time, lambda v: v > 0)
+    margin = SPIN_MARGIN_S if args.spin_margin is None else \
+        number("--spin-margin", args.spin_margin, lambda v: 0 <= v <= 100000) * 1e-6
+    priority = None
+    if args.rt_priority is not None:
+        priority = int(number("--rt-priority", args.rt_priority, lambda v: v == int(v) and 1 <= v <= 99))
+    return Pacing(factor, args.overrun or "continue", margin, args.real_time_trace, priority)
+
+
+ALLOWED = {"--real-time": "a finite number > 0 (simulated seconds per wall second: 1 the wall clock, 0.5 half "
+                          "speed, 10 ten times faster)",
+           "--spin-margin": "a number of microseconds in [0, 100000]",
+           "--rt-priority": "an integer in [1, 99]"}
+
+
+def check_compiled_core(scenario) -> None:
+    """UsageError unless ``scenario`` would step in the compiled stepping core (real time needs it)."""
+    import os
+    from ..engine import stepper
+    why = None
+    if os.environ.get("TAPMP_STEPPER") == "python":
+        why = "TAPMP_STEPPER=python selects the Python loop"
+    elif scenario.plant_interface == "me":
+        why = "a Model Exchange plant (plant_interface = \"me\") steps in the Python loop"
+    elif not stepper.available(quiet=True):
+        why = "it cannot be built or loaded on this machine"
+    if why:
+        raise UsageError(f"real time (--real-time) needs the compiled stepping core: {why}")
+
+
+def real_time_lines(rt: dict) -> list[str]:
+    """The summary of a paced run's statistics (run.json "real_time"): a few lines."""
+    def us(v):
+        return "n/a" if v is None else f"{v * 1e6:.1f}"
+    late, run = rt["lateness_s"], rt["execution_s"]
+    measures = "; ".join(f"{name} {'applied' if m['applied'] else 'not applied'} ({m['detail']})"
+                         for name, m in rt["measures"].items())
+    return [f"real time: factor {rt['factor']:g} (period {rt['period_s'] * 1e6:g} us), overrun policy "
+            f"{rt['overrun_policy']}, {rt['steps']} steps, achieved factor "
+            f"{rt['achieved_factor'] or 0:.4g}",
+            f"  lateness [us] (completion - deadline, > 0 overrun): p50 {us(late['p50'])}, p99 {us(late['p99'])}, "
+            f"p99.9 {us(late['p999'])}, max {us(late['max'])}; execution [us]: p50 {us(run['p50'])}, "
+            f"p99 {us(run['p99'])}, max {us(run['max'])}",
+            f"  overruns: {rt['overruns']} (longest run {rt['longest_overrun_run']}, slots dropped "
+            f"{rt['dropped_slots']})",
+            f"  measures: {measures}"]
 
 
 def mode_means(m: dict) -> list[float]:

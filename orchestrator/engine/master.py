@@ -536,35 +536,57 @@ class CoSimulation:
             s = self._core.advance(self.k, rows[self.filled:], len(rows) - self.filled)
             self.filled += s.rows
             self.k = s.k
-            if s.outcome == stepper_core.SUSPECT_OUTPUT and s.mid:
-                # at an event inside the macro step: the C check is the Python check, value by value
-                self._check_outputs(s.t)
-                raise CoSimulationError(f"the compiled core stopped at t = {s.t:.9g} s on outputs that the "
-                                        "Python check accepts")
-            elif s.outcome == stepper_core.SUSPECT_OUTPUT:
+            if s.outcome == stepper_core.SUSPECT_OUTPUT and not s.mid:
                 self._check_outputs(self.time)  # raises as step() does, unless only the C check was stricter
                 rows[self.filled] = self.row()
                 self.filled += 1
-            elif s.outcome == stepper_core.FAIL_EVENT:
-                unit = self._row_units[s.unit]
-                what, function = stepper_core.EVENT_CALLS[s.call]
-                err = None
-                if s.status > 1:  # as fmpy raises, or as _call words a returned status
-                    err = (FMICallException(function, s.status) if function else
-                           f"status {_STATUS[s.status] if s.status < 6 else s.status}")
-                self._fail(unit, what, s.t, err)
-            elif s.outcome == stepper_core.EARLY_RETURN:
-                self._early_return(self._row_units[s.unit], s.early, s.target)
-            elif s.outcome == stepper_core.NOT_SETTLED:
-                unit = self._row_units[s.unit]
-                raise unit.not_settled_error()
-            elif s.outcome == stepper_core.FAIL_CALL:
-                unit, t = self._row_units[s.unit], s.t
-                self._step_failed(unit, t, s.n_log, s.status)
-                raise CoSimulationError(f"{unit.name}: {stepper_core.CALLS[s.call]} failed at t = {t:.6g} s: "
-                                        f"status {_STATUS[s.status] if 0 <= s.status < 6 else s.status}",
-                                        unit.name, t, list(self.log))
+            elif s.outcome != stepper_core.DONE:
+                self.raise_outcome(s)
         return self.filled
+
+    def compiled_core(self, why: str):
+        """The compiled stepping core this co-simulation steps with; CoSimulationError naming ``why``
+        (what needs it) if it steps in Python."""
+        if self._core is None:
+            reason = ("a Model Exchange FMU steps in Python" if self.model_exchange else
+                      "the inputs are perturbed" if self._offsets else
+                      "TAPMP_STEPPER or stepper = 'python'" if self.stepper == "python" else
+                      "it is unavailable on this machine")
+            raise CoSimulationError(f"{why} needs the compiled stepping core, and this run steps in Python "
+                                    f"({reason})")
+        return self._core
+
+    def raise_outcome(self, s) -> None:
+        """Raise what :meth:`step` raises for the compiled core's failed outcome ``s`` (its state, after
+        :attr:`k` was set to s.k); a SUSPECT_OUTPUT that the Python check accepts raises too."""
+        if s.outcome == stepper_core.SUSPECT_OUTPUT and s.mid:
+            # at an event inside the macro step: the C check is the Python check, value by value
+            self._check_outputs(s.t)
+            raise CoSimulationError(f"the compiled core stopped at t = {s.t:.9g} s on outputs that the "
+                                    "Python check accepts")
+        elif s.outcome == stepper_core.SUSPECT_OUTPUT:
+            self._check_outputs(self.time)
+            raise CoSimulationError(f"the compiled core stopped at t = {self.time:.9g} s on outputs that the "
+                                    "Python check accepts")
+        elif s.outcome == stepper_core.FAIL_EVENT:
+            unit = self._row_units[s.unit]
+            what, function = stepper_core.EVENT_CALLS[s.call]
+            err = None
+            if s.status > 1:  # as fmpy raises, or as _call words a returned status
+                err = (FMICallException(function, s.status) if function else
+                       f"status {_STATUS[s.status] if s.status < 6 else s.status}")
+            self._fail(unit, what, s.t, err)
+        elif s.outcome == stepper_core.EARLY_RETURN:
+            self._early_return(self._row_units[s.unit], s.early, s.target)
+        elif s.outcome == stepper_core.NOT_SETTLED:
+            unit = self._row_units[s.unit]
+            raise unit.not_settled_error()
+        elif s.outcome == stepper_core.FAIL_CALL:
+            unit, t = self._row_units[s.unit], s.t
+            self._step_failed(unit, t, s.n_log, s.status)
+            raise CoSimulationError(f"{unit.name}: {stepper_core.CALLS[s.call]} failed at t = {t:.6g} s: "
+                                    f"status {_STATUS[s.status] if 0 <= s.status < 6 else s.status}",
+                                    unit.name, t, list(self.log))
 
     def _check_outputs(self, t: float) -> None:
         """Raise DivergenceError if an output is not finite or leaves a bound of :attr:`check`."""

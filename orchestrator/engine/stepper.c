@@ -17,11 +17,21 @@
  * It never decides what a failure means: on a failed call, a suspect output, an unannounced
  * early return or discrete states that do not settle it stops and reports where, and the
  * Python master raises exactly the error its own loop raises.
- * Times are those of orchestrator.engine.clocks, to the bit. No allocation, no I/O. */
+ * Times are those of orchestrator.engine.clocks, to the bit. No allocation, no I/O.
+ *
+ * Paced (real-time) runs, orchestrator.engine.pacing: with plan->pace set, every macro step is
+ * released no earlier than its release time on CLOCK_MONOTONIC and its completion is compared
+ * with its deadline t0_wall + j h / factor (j: paced steps so far plus the slots dropped; an
+ * absolute grid, no drift). Statistics go into the pace record, nothing per step into Python;
+ * tapmp_advance_paced runs a whole paced run into a ring of row blocks that another thread reads,
+ * so Python never runs between steps. */
+#define _POSIX_C_SOURCE 200809L  /* clock_nanosleep */
+#include <errno.h>
 #include <math.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <time.h>
 
 typedef int (*get2_t)(void *, const uint32_t *, size_t, double *);
 typedef int (*set2_t)(void *, const uint32_t *, size_t, const double *);
@@ -58,11 +68,48 @@ typedef struct {
 } tapmp_unit;
 
 enum { CLOCK_EXACT = 0, CLOCK_ACCUMULATED = 1, CLOCK_NANOSECONDS = 2 };
-enum { DONE = 0, FAIL_CALL = 1, SUSPECT_OUTPUT = 2, FAIL_EVENT = 3, EARLY_RETURN = 4, NOT_SETTLED = 5 };
+enum { DONE = 0, FAIL_CALL = 1, SUSPECT_OUTPUT = 2, FAIL_EVENT = 3, EARLY_RETURN = 4, NOT_SETTLED = 5,
+       OVERRUN = 6, STOPPED = 7 };
 enum { CALL_SET = 0, CALL_STEP = 1, CALL_GET = 2 };
 /* FAIL_EVENT calls, in the order _handle_events makes them */
 enum { EV_ENTER = 0, EV_CLOCK = 1, EV_SET = 2, EV_UPDATE = 3, EV_GET = 4, EV_STEP_MODE = 5 };
 enum { MAX_UPDATE_ROUNDS = 100 };  /* instance.Unit.update_discrete_states */
+
+enum { POLICY_CONTINUE = 0, POLICY_SKIP = 1, POLICY_ABORT = 2 };
+enum { HIST_BINS = 1024, FIRST_OVERRUNS = 16 };
+
+/* A log-linear histogram of signed durations [ns]: |v| < 16 ns one bin per ns, above 16 linear
+ * bins per power of two (relative width <= 1/16), negative and non-negative values apart. */
+typedef struct {
+    int64_t n, min, max;
+    int64_t neg[HIST_BINS], pos[HIST_BINS];
+} tapmp_hist;
+
+typedef struct {
+    int32_t policy;                /* POLICY_* */
+    int32_t started;               /* 0 until the first paced step sets t0_wall */
+    double period_ns;              /* h / factor [ns] */
+    int64_t spin_ns;               /* sleep until this long before a release, then spin */
+    int64_t t0_wall;               /* CLOCK_MONOTONIC [ns] of communication point k0 */
+    int64_t k0;                    /* the communication point pacing started at */
+    int64_t dropped;               /* grid slots dropped (policy skip) */
+    int64_t release;               /* the earliest start of the next step [ns] */
+    int64_t end;                   /* completion of the last paced step [ns] */
+    int64_t due;                   /* deadline of the last paced step [ns] */
+    int64_t finish;                /* when tapmp_advance_paced returned [ns] (after the last deadline if DONE) */
+    int64_t steps, overruns, longest_run, current_run;
+    int64_t n_first;               /* overruns listed in first_k, first_late */
+    int64_t first_k[FIRST_OVERRUNS], first_late[FIRST_OVERRUNS];
+    int64_t ring_waits;            /* times the stepping waited for the reader of the ring */
+    tapmp_hist late, exec;
+    int64_t window, n_windows;     /* worst lateness per window of steps */
+    int64_t *worst;                /* n_windows, filled with INT64_MIN by the caller */
+    int64_t trace_n;               /* per-step arrays (0: none) */
+    int64_t *trace_late, *trace_exec;
+    int32_t n_inject;              /* test hook: busy-wait inject_ns[i] after step inject_k[i] */
+    const int64_t *inject_k, *inject_ns;
+    volatile const int32_t *stop;  /* set by another thread: return STOPPED before the next step */
+} tapmp_pace;
 
 typedef struct {
     tapmp_unit *units;
@@ -80,6 +127,7 @@ typedef struct {
     int32_t event_mode;            /* cut macro steps at events, handle them (master._step_events) */
     int32_t n_event;
     const int32_t *event_order;    /* the event units, indices into units in step order */
+    tapmp_pace *pace;              /* NULL: as fast as possible */
 } tapmp_plan;
 
 typedef struct {
@@ -331,6 +379,99 @@ static int step_events(const tapmp_plan *p, tapmp_state *s, double t, double h, 
     }
 }
 
+static int64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+/* Until CLOCK_MONOTONIC reaches target [ns]: sleep to spin_ns before it, then spin. The spin is
+ * there because a sleeping thread wakes up tens of microseconds late on a kernel without
+ * real-time preemption (docs/performance.md, "Real time"), a good part of the 100 us servo cycle;
+ * spinning the last stretch trades CPU for a release within a few hundred ns. */
+static void wait_until(int64_t target, int64_t spin_ns)
+{
+    int64_t wake = target - spin_ns;
+    if (now_ns() < wake) {
+        struct timespec ts = {(time_t)(wake / 1000000000), (long)(wake % 1000000000)};
+        while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR)
+            ;
+    }
+    while (now_ns() < target)
+        ;
+}
+
+static int hist_bin(int64_t u)
+{
+    if (u < 16)
+        return (int)u;
+    int e = 63 - __builtin_clzll((unsigned long long)u);  /* 2^e <= u, e >= 4 */
+    int b = 16 + (e - 4) * 16 + (int)((u >> (e - 4)) & 15);
+    return b < HIST_BINS ? b : HIST_BINS - 1;
+}
+
+static void hist_add(tapmp_hist *h, int64_t v)
+{
+    if (h->n == 0 || v < h->min)
+        h->min = v;
+    if (h->n == 0 || v > h->max)
+        h->max = v;
+    h->n++;
+    if (v < 0)
+        h->neg[hist_bin(-v)]++;
+    else
+        h->pos[hist_bin(v)]++;
+}
+
+static int64_t deadline(const tapmp_pace *pc, int64_t j)
+{
+    return pc->t0_wall + (int64_t)llround((double)j * pc->period_ns);  /* from t0_wall: no drift */
+}
+
+/* After step k -> k + 1 started at start [ns]: its lateness and execution time into the
+ * statistics, the next release by the overrun policy. Returns 1 if the run must stop (abort). */
+static int paced_step_done(tapmp_pace *pc, int64_t k, int64_t start)
+{
+    for (int32_t i = 0; i < pc->n_inject; i++)  /* the test hook: this step takes longer */
+        if (pc->inject_k[i] == k + 1)
+            wait_until(now_ns() + pc->inject_ns[i], INT64_MAX);
+    int64_t done = now_ns(), j = k + 1 - pc->k0 + pc->dropped, due = deadline(pc, j);
+    int64_t late = done - due, n = pc->steps++;
+    pc->end = done;
+    pc->due = due;
+    hist_add(&pc->late, late);
+    hist_add(&pc->exec, done - start);
+    if (n < pc->trace_n) {
+        pc->trace_late[n] = late;
+        pc->trace_exec[n] = done - start;
+    }
+    if (pc->window > 0 && n / pc->window < pc->n_windows && late > pc->worst[n / pc->window])
+        pc->worst[n / pc->window] = late;
+    pc->release = due;  /* continue: a late step's successor starts at once */
+    if (late <= 0) {
+        pc->current_run = 0;
+        return 0;
+    }
+    pc->overruns++;
+    if (++pc->current_run > pc->longest_run)
+        pc->longest_run = pc->current_run;
+    if (pc->n_first < FIRST_OVERRUNS) {
+        pc->first_k[pc->n_first] = k + 1;
+        pc->first_late[pc->n_first++] = late;
+    }
+    if (pc->policy == POLICY_SKIP) {  /* the next slot of the grid still in the future */
+        int64_t m = (int64_t)ceil((double)(done - pc->t0_wall) / pc->period_ns) - j;
+        if (m < 1)
+            m = 1;
+        while (deadline(pc, j + m) < done)
+            m++;
+        pc->dropped += m;
+        pc->release = deadline(pc, j + m);
+    }
+    return pc->policy == POLICY_ABORT;
+}
+
 /* Step from s->k at most n_steps times, storing a row of n_cols doubles per completed step
  * into rows (row-major). Returns s->outcome. */
 int tapmp_advance(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *rows, int32_t n_cols)
@@ -338,8 +479,22 @@ int tapmp_advance(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *
     s->rows = 0;
     s->outcome = DONE;
     s->mid = 0;
+    tapmp_pace *pc = p->pace;
     for (int64_t n = 0; n < n_steps; n++) {
-        int64_t k = s->k;
+        int64_t k = s->k, start = 0;
+        if (pc) {
+            if (*pc->stop) {
+                s->outcome = STOPPED;
+                return STOPPED;
+            }
+            if (!pc->started) {
+                pc->started = 1;
+                pc->k0 = k;
+                pc->t0_wall = pc->release = now_ns();
+            }
+            wait_until(pc->release, pc->spin_ns);
+            start = now_ns();
+        }
         double t, h;
         if (p->clock == CLOCK_ACCUMULATED) {
             t = s->acc_t;
@@ -358,6 +513,7 @@ int tapmp_advance(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *
         s->k = k + 1;
         if (p->clock == CLOCK_ACCUMULATED)
             s->acc_t += p->h;
+        int abort = pc ? paced_step_done(pc, k, start) : 0;
         if (outputs_suspect(p)) {
             s->outcome = SUSPECT_OUTPUT;
             return SUSPECT_OUTPUT;
@@ -371,6 +527,43 @@ int tapmp_advance(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *
                 row[c++] = u->out[j];
         }
         s->rows++;
+        if (abort) {
+            s->outcome = OVERRUN;
+            return OVERRUN;
+        }
     }
+    return DONE;
+}
+
+/* A whole paced run of n_steps: rows into a ring of n_slots blocks of `block` rows each, block j
+ * into slot j % n_slots, published by storing j + 1 into *produced once it is whole; a reader on
+ * another thread stores into *consumed the blocks it has taken. A full ring waits for the reader
+ * (counted in pace->ring_waits: the steps it delays are late like any other). Returns the outcome
+ * of the step that stopped it (the rows of that unfinished block: s->rows) or DONE. */
+int tapmp_advance_paced(const tapmp_plan *p, tapmp_state *s, int64_t n_steps, double *ring, int32_t n_slots,
+                        int64_t block, int32_t n_cols, int64_t *produced, int64_t *consumed)
+{
+    int64_t done = 0;
+    while (done < n_steps) {
+        int64_t j = *produced;
+        if (j - __atomic_load_n(consumed, __ATOMIC_ACQUIRE) >= n_slots) {
+            p->pace->ring_waits++;
+            while (j - __atomic_load_n(consumed, __ATOMIC_ACQUIRE) >= n_slots && !*p->pace->stop) {
+                struct timespec ts = {0, 20000};
+                nanosleep(&ts, NULL);
+            }
+        }
+        int64_t m = n_steps - done < block ? n_steps - done : block;
+        int r = tapmp_advance(p, s, m, ring + (size_t)(j % n_slots) * (size_t)block * (size_t)n_cols, n_cols);
+        done += s->rows;
+        if (r != DONE) {
+            p->pace->finish = now_ns();
+            return r;
+        }
+        __atomic_store_n(produced, j + 1, __ATOMIC_RELEASE);
+    }
+    if (p->pace->started)  /* a run ends no earlier than its last deadline */
+        wait_until(p->pace->due, p->pace->spin_ns);
+    p->pace->finish = now_ns();  /* here, not in Python: the GIL may keep this thread waiting */
     return DONE;
 }

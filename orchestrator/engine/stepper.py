@@ -17,6 +17,10 @@ concurrent processes build it once. If it cannot be built, the master says so in
 on stderr and steps in Python. A cache folder or library another user could have written is
 refused before anything is loaded (ctoolchain.CacheTrustError, not a fallback: the run
 stops with one line naming the path). ``TAPMP_STEPPER=python`` selects the Python loop.
+
+A paced (real-time) run is one call, ``tapmp_advance_paced``, on a thread of its own without the GIL:
+each step kept to the wall clock, the rows into a ring of blocks that the caller reads meanwhile
+(orchestrator.engine.pacing).
 """
 
 import ctypes
@@ -30,7 +34,7 @@ STEPPERS = ("auto", "compiled", "python")
 # No -ffast-math, no contraction: the core only copies and compares doubles, and must keep them.
 CFLAGS = ["-O2", "-std=c99", "-ffp-contract=off", "-Wall"]  # exported for ctypes: no hidden visibility
 
-DONE, FAIL_CALL, SUSPECT_OUTPUT, FAIL_EVENT, EARLY_RETURN, NOT_SETTLED = 0, 1, 2, 3, 4, 5
+DONE, FAIL_CALL, SUSPECT_OUTPUT, FAIL_EVENT, EARLY_RETURN, NOT_SETTLED, OVERRUN, STOPPED = 0, 1, 2, 3, 4, 5, 6, 7
 CALLS = ("setReal", "doStep", "getReal")
 # FAIL_EVENT: the call as CoSimulation._handle_events names it, and fmpy's name of the function that
 # raises FMICallException above Warning (None: a direct ctypes call whose status the master words)
@@ -97,6 +101,9 @@ def load():
                                     "is compiled again)") from None
         lib.tapmp_advance.restype = c_int32
         lib.tapmp_advance.argtypes = [POINTER(_Plan), POINTER(_State), c_int64, c_void_p, c_int32]
+        lib.tapmp_advance_paced.restype = c_int32
+        lib.tapmp_advance_paced.argtypes = [POINTER(_Plan), POINTER(_State), c_int64, c_void_p, c_int32, c_int64,
+                                            c_int32, c_void_p, c_void_p]
         _LIB = lib
     return _LIB
 
@@ -133,7 +140,8 @@ class _Plan(Structure):
                 ("clock", c_int32), ("t0", c_double), ("h", c_double), ("t0_ns", c_int64), ("h_ns", c_int64),
                 ("n_env", c_int32), ("env_unit", c_void_p), ("env_index", c_void_p), ("env_limit", c_void_p),
                 ("log_count", c_void_p), ("log_errors", c_void_p),
-                ("event_mode", c_int32), ("n_event", c_int32), ("event_order", c_void_p)]
+                ("event_mode", c_int32), ("n_event", c_int32), ("event_order", c_void_p),
+                ("pace", c_void_p)]  # engine.pacing.Pace, or None
 
 
 class _State(Structure):
@@ -204,6 +212,24 @@ class CompiledStepper:
     def advance(self, k: int, rows, n: int) -> _State:
         """Step from communication point ``k`` at most ``n`` times into ``rows`` (a C-contiguous
         float64 array of at least n rows); returns the state (k reached, rows stored, outcome)."""
+        return self._call(k, lambda s: self.lib.tapmp_advance(ctypes.byref(self.plan), ctypes.byref(s), n,
+                                                              rows.ctypes.data, rows.shape[1]))
+
+    def advance_paced(self, k: int, n: int, pace, ring, block: int, produced, consumed) -> _State:
+        """A paced run of ``n`` steps from ``k`` (orchestrator.engine.pacing): each step kept to the
+        wall-clock schedule of ``pace`` (a pacing.Pace), the rows into ``ring`` (C-contiguous float64,
+        slots x block x columns) block by block, ``produced`` / ``consumed`` (c_int64) the blocks
+        written and taken. Without the GIL: another thread reads the ring meanwhile."""
+        self.plan.pace = ctypes.addressof(pace)
+        try:
+            return self._call(k, lambda s: self.lib.tapmp_advance_paced(
+                ctypes.byref(self.plan), ctypes.byref(s), n, ring.ctypes.data, ring.shape[0], block,
+                ring.shape[2], ctypes.addressof(produced), ctypes.addressof(consumed)))
+        finally:
+            self.plan.pace = None
+
+    def _call(self, k: int, run) -> _State:
+        """``run(state)`` from communication point ``k``, the event units' state handed over both ways."""
         s = self.state
         s.k = k
         if self.clock.kind == "accumulated":
@@ -212,7 +238,7 @@ class CompiledStepper:
             c = self.cunits[i]
             c.next_event, c.clock_k, c.n_events = u.next_event, u.clock_k, u.n_events
         try:
-            self.lib.tapmp_advance(ctypes.byref(self.plan), ctypes.byref(s), n, rows.ctypes.data, rows.shape[1])
+            run(s)
         finally:
             for i, u in self.event_units:
                 c = self.cunits[i]

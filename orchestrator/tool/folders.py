@@ -48,6 +48,7 @@ FORMATS = {"csv": "results.csv", "mat": "results.mat"}  # scenario key format / 
 RESULT_FORMATS = tuple(FORMATS)  # the allowed values of a scenario's format and of --format
 PART_FILE = "results.part.npy"  # a MAT run's rows while it runs (writers.MatBlocks)
 RUN_FILES = (*FORMATS.values(), PART_FILE, "run.json", "metrics.json")
+REAL_TIME_FILES = ("real_time.png", "real_time_trace.csv")  # a paced run's figure, its per-step trace if asked
 COMPARISON_JSON = "comparison.json"  # marks a comparison folder (kind "comparison")
 LOCK_FILE = ".tapmp.lock"  # in every output folder while a tapmp writer holds it
 
@@ -241,7 +242,7 @@ def tapmp_names(kind: str) -> frozenset:
     folder per compared run."""
     if kind == "run":
         figs = [f"run_{stem}.{ext}" for stem in FIGURE_STEMS for ext in _FIGURE_EXTS]
-        return frozenset((*RUN_FILES, *figs, *(f"signals.{ext}" for ext in _FIGURE_EXTS)))
+        return frozenset((*RUN_FILES, *REAL_TIME_FILES, *figs, *(f"signals.{ext}" for ext in _FIGURE_EXTS)))
     figs = [f"{stem}.{ext}" for stem in (*FIGURE_STEMS, "signals") for ext in _FIGURE_EXTS]
     return frozenset((COMPARISON_JSON, "comparison.md", *figs))
 

@@ -11,6 +11,11 @@ or a study's request_stop) ends a run at the next step boundary (run.json: statu
 "interrupted", the signal's name, exit code 128 + its number); a failed write (e.g. a
 full disk) ends it with ResultsWriteError, the result file cut back to its last whole
 block of rows; a failure of the co-simulation keeps the whole rows before it.
+
+A paced run (``pacing``, engine.pacing: `tapmp run --real-time`) steps on a thread of its own and
+hands its rows to this one, which records them in the same blocks of BLOCK steps as any run, so
+its result files and metrics are the unpaced run's to the bit; run.json gets its statistics under
+"real_time", also when it fails, and real_time.png (realtime_plots.py) is drawn beside.
 """
 
 import functools
@@ -27,8 +32,8 @@ from ..engine.master import CoSimulation
 from ..engine.options import RunOptions
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
-from .folders import (FORMATS, MANIFEST, PART_FILE, ResultsWriteError, check_output, output_lock, prepare_output,
-                      record_files, stream_record, write_json, write_result)
+from .folders import (FORMATS, MANIFEST, PART_FILE, ResultsWriteError, atomic_file, check_output, output_lock,
+                      prepare_output, record_files, stream_record, write_json, write_result)
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 from .stops import StopRequest, stop_scope
@@ -61,7 +66,7 @@ def _versions() -> dict:
 
 def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = False,
                  progress=None, stop_token: str | None = None, keep_rows: list | None = None,
-                 keep_bytes: int = 0, loaded=None) -> dict:
+                 keep_bytes: int = 0, loaded=None, pacing=None) -> dict:
     """Run one scenario; write run.json, metrics.json and results.csv or results.mat
     (``scenario.format``) into ``out`` (prepare_output: a completed run there is kept
     unless ``overwrite``, a failed or interrupted one is replaced).
@@ -84,11 +89,13 @@ def run_scenario(scenario: Scenario, ssp: Path, out: Path, overwrite: bool = Fal
 
     ``loaded`` (engine.loaded.LoadedFMUs, e.g. a study worker's): take the FMUs loaded from it
     and give them back reset (the same rows as FMUs loaded for this run alone).
+
+    ``pacing`` (engine.pacing.Pacing): keep the steps to the wall clock (the module docstring).
     """
     check_output(out, overwrite, unmarked_only=True)  # before the lock file is made: a refused folder is left as it was
     with output_lock(out):
         out = prepare_output(out, overwrite)
-        return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes, loaded)
+        return _run_locked(scenario, ssp, out, progress, stop_token, keep_rows, keep_bytes, loaded, pacing)
 
 
 def run_scenario_held(scenario: Scenario, ssp: Path, out: Path, progress=None, stop_token: str | None = None,
@@ -111,7 +118,7 @@ def run_options(scenario: Scenario) -> RunOptions:
 
 
 def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, keep_rows=None,
-                keep_bytes: int = 0, loaded=None) -> dict:
+                keep_bytes: int = 0, loaded=None, pacing=None) -> dict:
     """run_scenario's body, in the locked and prepared output folder ``out``."""
     fmt = getattr(scenario, "format", "csv")
     info = {"kind": "run", "format": fmt, "results_file": FORMATS[fmt],
@@ -143,7 +150,9 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
             with CoSimulation(ssp, scenario.parameters(), run_options(scenario), loaded=loaded) as sim:
                 info["guids"] = sim.guids
                 info["columns"] = list(sim.columns)  # on record with the result file (opened)
-                stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes, opened)
+                stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes, opened, pacing,
+                                  info)
+            written |= _real_time_files(out, info)
             result = stats.result()
             if "not_computed" in result:
                 print(f"note: metrics not computed: {result['not_computed']}", file=sys.stderr)
@@ -154,6 +163,9 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
                         real_time_factor=wall / (scenario.stop_time - scenario.start_time))
             write_result(out / "run.json", info)
         except BaseException as err:
+            if getattr(err, "real_time", None) is not None:
+                info["real_time"] = err.real_time
+            written |= _real_time_files(out, info, quiet=True)
             record(set(info[MANIFEST]) | written)
             _record_failure(out / "run.json", info, err, sim, start)
             raise
@@ -169,8 +181,32 @@ def _recorded(block: np.ndarray, first: int, every: int, n: int) -> np.ndarray:
     return block[(steps % every == 0) | (steps == n)]
 
 
+def _real_time_files(out: Path, info: dict, quiet: bool = False) -> set:
+    """A paced run's trace (if kept) into real_time_trace.csv and its figure real_time.png; the names
+    written. ``quiet``: a failed run's, whose own error is the one to raise."""
+    rt = info.get("real_time")
+    if rt is None:
+        return set()
+    names = set()
+    try:
+        trace = rt.pop("trace", None)
+        if trace is not None:
+            with atomic_file(out / "real_time_trace.csv") as f:
+                f.write("step,lateness_s,execution_s\n")
+                for i, (late, run) in enumerate(zip(trace["lateness_ns"].tolist(), trace["execution_ns"].tolist())):
+                    f.write(f"{i + 1},{late * 1e-9!r},{run * 1e-9!r}\n")  # step i + 1 reaches t0 + (i + 1) h
+            names.add("real_time_trace.csv")
+        from .realtime_plots import plot_real_time
+        plot_real_time(rt, out / "real_time.png", info.get("scenario", {}).get("start_time", 0.0))
+        names.add("real_time.png")
+    except Exception:
+        if not quiet:
+            raise
+    return names
+
+
 def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: StopRequest, progress,
-              keep_rows: list | None = None, keep_bytes: int = 0, opened=None):
+              keep_rows: list | None = None, keep_bytes: int = 0, opened=None, pacing=None, info=None):
     """The step loop: rows to the result file in whole blocks, metrics over every step;
     ``opened(writer)`` is called once the result file (``writer.path``) is made, before its first row;
     returns the metrics.ErrorStatistics. Stops at a block boundary when ``stop`` is set.
@@ -189,6 +225,24 @@ def _simulate(sim: CoSimulation, scenario: Scenario, out: Path, fmt: str, stop: 
                                         metrics.move_spec(sim.parameters, scenario.settling_bands))
         buffer[0] = sim.row()
         filled, k = 1, 0
+
+        def take(rows) -> None:  # a paced run's rows, into the blocks of an unpaced one
+            nonlocal filled, first
+            i = 0
+            while i < len(rows):
+                m = min(BLOCK - filled, len(rows) - i)
+                buffer[filled:filled + m] = rows[i:i + m]
+                filled, i = filled + m, i + m
+                if filled == BLOCK:
+                    writer.write(_recorded(buffer, first, every, n))
+                    stats.add(buffer)
+                    first, filled = first + BLOCK, 0
+                    if progress:
+                        progress(first - 1, n)
+        if pacing is not None and n:
+            from ..engine.pacing import run_paced
+            info["real_time"] = run_paced(sim, n, pacing, take, lambda: stop.signal is not None)
+            k = n
         while k < n:
             if stop.signal is not None:
                 stop.check(sim.time)

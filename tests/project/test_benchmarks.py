@@ -244,3 +244,17 @@ def test_bench_real_time_peers_measures_every_tool_with_one_probe_stamp_per_dost
 
 
 STEP_TOLERANCE = 1.1e-4  # a tool may stop one macro step short of a horizon its summed clock does not reach
+
+
+def test_bench_real_time_prints_every_case(native_built, tmp_path):
+    out = bench("bench_real_time.py", "--ssp", native_built["fmi2"]["ssp"], "--seconds", "0.02", "--load", "1",
+                tmp_path=tmp_path)
+    rows = table(out, "machine")
+    assert [(r[0], r[1], r[2]) for r in rows] == [(m, f, "other") for m in ("idle", "loaded") for f in ("1", "10")]
+    for r in rows:
+        late = [float(v) for v in r[4:8]]
+        assert late == sorted(late) and int(r[3]) == 200 * int(r[1])  # p50 <= p99 <= p99.9 <= max; the steps
+        assert 0 < float(r[11]) <= int(r[1]) and int(r[9]) >= int(r[10]) >= 0
+    m = re.search(rf"^recording a block of 1000 rows .*: min ({NUMBER}) ms, median ({NUMBER}) ms, max ({NUMBER}) ms "
+                  r"of 10 blocks$", out, re.M)
+    assert m and 0 < float(m.group(1)) <= float(m.group(2)) <= float(m.group(3))
