@@ -4,8 +4,7 @@
 tags it py3-none-<platform tag> (ctoolchain.prebuilt.WHEEL_TAGS). Without it the wheel (and the
 sdist) holds the sources only, py3-none-any, and compiles on first use.
 
-A platform wheel imports the project to compile it, so it is built with the project's
-dependencies installed and without build isolation: `python build_wheels.py` builds them all.
+`python build_wheels.py` builds them all.
 Everything else (metadata, packages, package data) is in pyproject.toml.
 """
 
@@ -13,13 +12,14 @@ import os
 import sys
 from pathlib import Path
 
-from setuptools import setup
+from setuptools import Distribution, setup
 from setuptools.command.bdist_wheel import bdist_wheel
 from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))  # the sources being built, not an installed tapmp
-from ctoolchain.prebuilt import WHEEL_TAGS  # noqa: E402 (ctoolchain needs nothing beyond the standard library)
+from ctoolchain import ZIGLANG  # noqa: E402 (ctoolchain needs nothing beyond the standard library)
+from ctoolchain.prebuilt import WHEEL_TAGS  # noqa: E402
 
 TARGET = os.environ.get("TAPMP_WHEEL_PLATFORM", "").strip()
 if TARGET and TARGET not in WHEEL_TAGS:
@@ -63,15 +63,23 @@ class PlatformWheel(bdist_wheel):
     """bdist_wheel tagged py3-none-<tag of TAPMP_WHEEL_PLATFORM>: the libraries are loaded with
     ctypes/cffi's ABI mode, so the wheel depends on the platform but on no Python ABI."""
 
-    def finalize_options(self):
-        super().finalize_options()
-        if TARGET:
-            self.root_is_pure = False
-
     def get_tag(self):
         if not TARGET:
             return super().get_tag()
         return "py3", "none", WHEEL_TAGS[TARGET]
 
 
-setup(cmdclass={"build_py": BuildWithLibraries, "bdist_wheel": PlatformWheel})
+class PlatformDistribution(Distribution):
+    """A distribution with platform code: its packages go into the wheel's root as platlib, not as
+    purelib under .data (what setuptools does for a pure distribution with root_is_pure off)."""
+
+    def has_ext_modules(self):
+        return True
+
+
+# A platform wheel's build needs the compiler, which pip installs into the isolated build
+# environment (setuptools asks for setup_requires in get_requires_for_build_wheel); the compile
+# itself imports nothing beyond the standard library.
+setup(cmdclass={"build_py": BuildWithLibraries, "bdist_wheel": PlatformWheel},
+      distclass=PlatformDistribution if TARGET else Distribution,
+      setup_requires=[ZIGLANG] if TARGET else [])
