@@ -150,7 +150,8 @@ def test_the_aarch64_wheels_libraries_load_under_qemu_and_compute_what_the_x86_6
     assert max(abs(r[0]) for r in rows["x86_64-linux"]) > 1e-3  # the motors moved [m]: this compares something
 
 
-def test_without_any_compiler_the_wheel_runs_a_case_and_a_fresh_dask_workers_first_case(venv, tmp_path):
+def test_without_any_compiler_the_wheel_runs_a_case_and_a_fresh_dask_workers_first_case(venv, native_built,
+                                                                                         tmp_path):
     pip(venv, "uninstall", "-y", "ziglang")
     site = site_of(venv, tmp_path)
     env, compiler_log = shim_path(tmp_path)  # every system compiler name records its call and fails
@@ -161,8 +162,9 @@ def test_without_any_compiler_the_wheel_runs_a_case_and_a_fresh_dask_workers_fir
     env.pop("PYTHONPATH", None)
     work = tmp_path / "work"
     work.mkdir()
-    from orchestrator.builder.build_native import build_native  # the client's FMUs, built by this checkout
-    ssp = build_native(tmp_path / "fmus" / "native", families=("fmi2",), log=lambda *_: None, windows=False)["fmi2"]["ssp"]
+    ssp = native_built["fmi2"]["ssp"]  # the client's FMUs, built by this checkout, laid out as --fmus-dir reads them
+    (tmp_path / "fmus").mkdir()
+    (tmp_path / "fmus" / "native").symlink_to(ssp.parents[1], target_is_directory=True)
 
     def run(*args, **kwargs):
         return subprocess.run([str(venv / "bin" / args[0]), *args[1:]], cwd=work, env=kwargs.get("env", env),
@@ -224,7 +226,8 @@ def test_without_any_compiler_the_wheel_runs_a_case_and_a_fresh_dask_workers_fir
     assert len((out / "study.csv").read_text().splitlines()) == 3  # header + both cases
     assert "stepping in Python" not in (tmp_path / "worker.log").read_text()
     assert not compiler_log.exists(), compiler_log.read_text()  # nothing compiled anything
-    assert not list(cache.rglob("*.so")) and not (tmp_path / "xdg").exists()  # nor put a library into the cache
+    assert not list(cache.rglob("*.so"))  # nor put a library into the cache (nor Zig's: there is no Zig)
+    assert not (tmp_path / "xdg" / "tapmp").exists() and not (tmp_path / "xdg" / "zig").exists()
 
     # without the shipped library (a wheel of another platform, an sdist) and without a compiler: one line each
     no_cc = {k: v for k, v in env.items() if k != "CC"}
