@@ -80,3 +80,10 @@ def test_the_c_model_shipped_beside_its_sources_comes_before_the_cache_and_nothi
     monkeypatch.setattr(cmodel, "C_DIR", package)
     assert cmodel.library_path() == shipped
     assert not log.exists() and not (tmp_path / "cache").exists()
+
+
+def test_the_compiler_named_in_the_no_compiler_message_is_the_one_the_package_depends_on():
+    import tomllib
+    from ctoolchain import ZIGLANG
+    root = Path(__file__).resolve().parents[2]
+    assert ZIGLANG in tomllib.loads((root / "pyproject.toml").read_text())["project"]["dependencies"]
