@@ -37,6 +37,7 @@ PLATFORMS = {
     "x86_64-darwin": "x86_64-macos.11.0",
     "aarch64-darwin": "aarch64-macos.11.0",
 }
+ZIGLANG = "ziglang==0.17.1"  # the compiler pyproject.toml depends on
 HOST = "x86_64-linux"  # the platform the builds run on, and the pythonfmu family's (binaries/linux64)
 SUFFIX = {"linux": ".so", "windows": ".dll", "darwin": ".dylib"}
 # No -ffast-math and no fused multiply-add: the C model must give the Python model's doubles.
@@ -57,6 +58,11 @@ def check_platform(platform: str) -> str:
     if platform not in PLATFORMS:
         raise ValueError(f"platform = {platform!r} is invalid: allowed are {', '.join(PLATFORMS)}")
     return platform
+
+
+def _has_ziglang() -> bool:
+    import importlib.util
+    return importlib.util.find_spec("ziglang") is not None
 
 
 def zig_command() -> list[str]:
@@ -132,6 +138,9 @@ def compile_c(sources, output: Path, platform: str = HOST, *, shared: bool = Tru
     # libm, libdl and libpthread are part of the C runtime on Windows and macOS
     args += [f"-l{lib}" for lib in libs if kind == "linux" or lib not in ("m", "dl", "pthread")]
     label = what or output.name
+    if cmd[1:3] == ["-m", "ziglang"] and not _has_ziglang():  # say how to get a compiler, not Python's traceback
+        raise ToolchainError(f"{label} ({platform}): no C compiler: the ziglang package is not installed "
+                             f"(pip install {ZIGLANG}){' or set CC to a C compiler' if platform == HOST else ''}")
     # In a private folder: the linker's by-products (a DLL's import library) stay there, and
     # the output appears under its name only when complete.
     with tempfile.TemporaryDirectory(prefix="tapmp_cc_") as tmp:

@@ -7,8 +7,11 @@ and the library ``lib`` (ABI mode: no compiler needed to load it). The declarati
 from ``tapmp_model.h`` itself (:func:`cdef_text`), so nothing is mirrored by hand.
 
 The library is, in this order:
-* bundled next to the sources (``tapmp/c/tapmp_model-<hash>.so``, written into the
-  pythonfmu FMUs' resources at build time): an FMU never compiles at run time;
+* shipped next to the sources (``tapmp/c/tapmp_model-<hash>-<platform>.so``, ``.dll`` or
+  ``.dylib``): compiled into a binary wheel for its platform when the wheel is built (setup.py),
+  and written into the pythonfmu FMUs' resources at build time, so neither an installed wheel
+  nor an FMU compiles at run time. It is trusted like the package's code beside it
+  (ctoolchain.prebuilt);
 * compiled on first use by the project's toolchain (ctoolchain: zig cc, or $CC) into
   the cache folder ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
   under a file lock so that concurrent processes (a study's workers) build it once. The cache
@@ -80,22 +83,29 @@ def source_hash() -> str:
     return hashlib.sha256(data).hexdigest()[:16]
 
 
-def bundled_name() -> str:
-    """File name of the prebuilt x86_64 Linux library of these sources (in tapmp/c/)."""
-    return f"tapmp_model-{source_hash()}.so"
+LIBRARY_STEM = "tapmp_model"  # the shipped library is tapmp/c/tapmp_model-<source_hash>-<platform><suffix>
 
 
-def compile_library(output: Path) -> Path:
-    """Compile tapmp_model.c, tapmp_loop.c and tapmp_filter.c into the shared library ``output`` with the native FMUs' flags
+def bundled_name(platform: str | None = None) -> str:
+    """File name of the prebuilt library of these sources for ``platform`` (default: this
+    process's, else x86_64-linux) in tapmp/c/: a binary wheel's, or an FMU's resources'."""
+    from ctoolchain import HOST
+    from ctoolchain.prebuilt import host_platform, prebuilt_name
+    return prebuilt_name(LIBRARY_STEM, source_hash(), platform or host_platform() or HOST)
+
+
+def compile_library(output: Path, platform: str | None = None) -> Path:
+    """Compile tapmp_model.c, tapmp_loop.c and tapmp_filter.c into the shared library ``output``
+    for ``platform`` (default: the host, ctoolchain.HOST) with the native FMUs' flags
     (ctoolchain.CFLAGS) but exported symbols; CModelError if the compiler fails."""
-    from ctoolchain import CFLAGS, ToolchainError, compile_c
+    from ctoolchain import CFLAGS, HOST, ToolchainError, compile_c
     # -fvisibility=hidden keeps an FMU's model functions private; here Python must call them
     flags = [f for f in CFLAGS if not f.startswith("-fvisibility")]
     with tempfile.TemporaryDirectory(prefix="tapmp_settings_") as generated:
         Path(generated, SETTINGS_HEADER).write_text(settings_header())
         try:
-            return compile_c([SOURCE, LOOP_SOURCE, FILTER_SOURCE], output, flags=flags, includes=[C_DIR, Path(generated)], libs=["m"],
-                             what="the C model")
+            return compile_c([SOURCE, LOOP_SOURCE, FILTER_SOURCE], output, platform or HOST, flags=flags,
+                             includes=[C_DIR, Path(generated)], libs=["m"], what="the C model")
         except ToolchainError as err:
             raise CModelError(str(err)) from None
 
@@ -119,9 +129,10 @@ def _cached_library() -> Path:
 
 
 def library_path() -> Path:
-    """The bundled library of these sources if present, else the cache's (built if needed)."""
-    bundled = C_DIR / bundled_name()
-    return bundled if bundled.is_file() else _cached_library()
+    """The shipped library of these sources for this platform if present (a binary wheel's, an
+    FMU's), else the cache's (compiled there if needed)."""
+    from ctoolchain.prebuilt import find_prebuilt
+    return find_prebuilt(C_DIR, LIBRARY_STEM, source_hash()) or _cached_library()
 
 
 _LOADED = None

@@ -67,7 +67,7 @@ def cmd_build(args) -> int:
     build_native(out / "native", platforms=built, log=log)
     from ..engine import stepper
     if stepper.available():  # else a note says why; runs then step in Python
-        print(f"compiled stepping core in {stepper.library_path()}")
+        print(f"compiled stepping core in {stepper.build()}")  # the shipped one in a binary wheel
     if set(built) != set(PLATFORMS):
         print(f"the native FMUs hold binaries for {', '.join(p for p in PLATFORMS if p in built)} only (and their "
               f"C sources); `tapmp build --all-platforms` adds {', '.join(p for p in PLATFORMS if p not in built)} "

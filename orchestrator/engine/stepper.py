@@ -10,7 +10,8 @@ or suspect output, which the master reports with the same error as its Python lo
 nextEventTime, clock tick index and events handled, is handed over at every call:
 tests/engine/master/test_stepper_events.py).
 
-The C file is compiled on first use (or by ``tapmp build``) into a cache folder outside
+A binary wheel ships the core compiled for its platform beside stepper.c (setup.py); else the
+C file is compiled on first use (or by ``tapmp build``) into a cache folder outside
 the package: ``$TAPMP_CACHE``, else ``$XDG_CACHE_HOME/tapmp``, else ``~/.cache/tapmp``,
 named after a hash of the source and the compiler command, under a file lock so that
 concurrent processes build it once. If it cannot be built, the master says so in one line
@@ -73,9 +74,14 @@ def library_path() -> Path:
 
 
 def build() -> Path:
-    """Build the compiled core into the cache unless it is there; returns its path.
-    A file lock makes concurrent builds (a study's workers) wait for the first one."""
+    """The core shipped in a binary wheel for this platform (ctoolchain.prebuilt), else the cache's,
+    built unless it is there; returns its path. A file lock makes concurrent builds (a study's
+    workers) wait for the first one."""
     from ctoolchain import build_cached
+    from ctoolchain.prebuilt import digest, find_prebuilt
+    shipped = find_prebuilt(SOURCE.parent, "tapmp_stepper", digest([SOURCE], CFLAGS))
+    if shipped:
+        return shipped
     path = library_path()
     try:
         return build_cached(path, lambda tmp: compile_core(SOURCE, tmp))
