@@ -23,6 +23,8 @@ def add_study(sub) -> None:
                     "scheduler and for its first worker [s] (default 60)")
     st.add_argument("--max-cases", type=int, metavar="N", help="run a study of more than 100000 cases (up to N)")
     st.add_argument("--out", help="output folder (overrides the study's 'output')")
+    st.add_argument("--batch-size", type=int, default=0, metavar="N", help="cases per Dask task (default 0: "
+                    "about 1 s of work per task from the cases' steps, at least 4 tasks per worker, at most 200)")
     fmu_args(st)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--retry-failed", action="store_true", help="with --resume: run the cases whose row says "
@@ -60,6 +62,9 @@ def cmd_study(args) -> int:
     if args.retry_failed and not (args.resume and not study.tune):
         raise StudyError("--retry-failed goes with --resume, for a grid or Monte Carlo study: it runs the cases "
                          "whose row in study.csv says failed again")
+    if args.batch_size < 0:
+        raise StudyError(f"--batch-size = {args.batch_size} is invalid: allowed is an integer >= 1, or 0 for the "
+                         "automatic size")
     if not args.worker_timeout > 0:
         raise StudyError(f"--worker-timeout = {args.worker_timeout:g} is invalid: allowed is a number > 0 [s]")
     if not study.tune:
@@ -97,7 +102,7 @@ def cmd_study(args) -> int:
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
                           not args.no_progress, command, args.write_docs, remote, max_cases, case_list,
-                          args.retry_failed, reference)
+                          args.retry_failed, reference, args.batch_size)
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped
@@ -117,7 +122,8 @@ def cmd_study(args) -> int:
         print(f"{study.name}: {s['cases']} evaluations ({s['wall_time_s']:.1f} s): {counts} -> "
               f"{s['out'] / 'study.csv'}")
     else:
-        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s): {counts} -> "
+        batches = f", batches of {s['batch_size']}" if s["ran"] else ""
+        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s{batches}): {counts} -> "
               f"{s['out'] / 'study.csv'}")
     return 1 if c["failed"] else 0
 

@@ -134,6 +134,24 @@ def wait_for_workers(client, timeout: float, address: str) -> None:
                          "--worker-timeout") from None
 
 
+def reaches_workers(client, timeout: float = 5.0) -> bool:
+    """Whether this client can open a connection to a connected worker's address within
+    ``timeout`` [s] (else results travel through the scheduler)."""
+    from distributed.comm import connect
+    workers = list(client.scheduler_info().get("workers", {}))
+    if not workers:
+        return False
+
+    async def probe():
+        comm = await connect(workers[0], timeout=timeout)
+        await comm.close()
+    try:
+        client.sync(probe)
+    except Exception:  # refused, unreachable, timed out: through the scheduler then
+        return False
+    return True
+
+
 async def _problem_here(plugin: "StudyPlugin", dask_worker=None) -> str | None:
     """StudyPlugin.problem on this worker, in a thread (it may compile the C model, and the
     worker's event loop must keep answering the scheduler meanwhile)."""
@@ -377,6 +395,8 @@ def shipping(client, ssp: Path, address: str, data: bool, timeout: float):
     registered (with the SSP's bytes if ``data``) and removed at the end. Yields the
     Shipping the CaseRunner uses."""
     wait_for_workers(client, timeout, address)
+    # rows straight from the worker that holds them, if this client reaches the workers (not behind a port forward)
+    client.direct_to_workers = reaches_workers(client)
     plugin = study_plugin(ssp if data else None)
     name = f"{PLUGIN_PREFIX}{plugin.sha256[:12] or 'paths'}-{os.urandom(4).hex()}"  # one per study run
     plugin.topic = name
