@@ -122,8 +122,7 @@ def cmd_study(args) -> int:
         print(f"{study.name}: {s['cases']} evaluations ({s['wall_time_s']:.1f} s): {counts} -> "
               f"{s['out'] / 'study.csv'}")
     else:
-        batches = f", batches of {s['batch_size']}" if s["ran"] else ""
-        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s{batches}): {counts} -> "
+        print(f"{study.name}: {s['cases']} cases ({s['ran']} run now, {s['wall_time_s']:.1f} s): {counts} -> "
               f"{s['out'] / 'study.csv'}")
     return 1 if c["failed"] else 0
 

@@ -74,7 +74,7 @@ def _run_cases(study: Study, case_list: list, ssp: Path, client, out: Path, resu
     runner = CaseRunner(client, study.base_scenario(), ssp, out, table, study.keep_results, progress, study.name,
                         ship, batch_size)
     try:
-        rows = runner.run(case_list)
+        rows = runner.run(case_list, announce=progress)
     finally:
         table.close()
     wall = time.perf_counter() - start

@@ -444,7 +444,7 @@ def rows_of_batch(batch: list, result) -> list[dict]:
     if isinstance(result, tuple) and len(result) == 3 and isinstance(result[1], BaseException):
         error = reason(result[1])  # (type, exception, traceback) of a task that erred (KilledWorker, ...)
     elif isinstance(result, BaseException):
-        error = f"cancelled by Dask ({reason(result)}: its worker and its result were lost)"
+        error = "cancelled by Dask (its worker and its result were lost)"
     else:
         error = f"the worker sent {type(result).__name__} instead of the batch's {len(batch)} rows"
     return [{"status": "failed", "error": error} for _ in batch]
@@ -509,8 +509,9 @@ class CaseRunner:
             return self.batch_size
         return batch_size(n_cases, case_seconds(self.base_scenario.n_steps), self.threads)
 
-    def run(self, cases: list, reject_unstable: bool = False) -> list:
-        """Rows of ``cases`` in their order; cases that have a row already are not run again."""
+    def run(self, cases: list, reject_unstable: bool = False, announce: bool = False) -> list:
+        """Rows of ``cases`` in their order; cases that have a row already are not run again.
+        ``announce``: say on stderr how the cases travel (batch size, tasks, worker threads)."""
         from dask.distributed import as_completed
         from ..tool.progress import Progress
         from .batches import split, window
@@ -525,6 +526,11 @@ class CaseRunner:
             bar(len(rows))
         self.threads = sum(self.client.nthreads().values())
         self.used_batch_size = self.size_for(len(todo))
+        if announce and todo:
+            tasks = -(-len(todo) // self.used_batch_size)
+            print(f"{self.desc}: {len(todo)} cases in batches of {self.used_batch_size} ({tasks} Dask tasks, "
+                  f"{self.threads} worker threads{'' if self.batch_size else ', automatic size'})", file=sys.stderr,
+                  flush=True)
         pending = iter(split(todo, self.used_batch_size))
         futures = {}  # future -> its batch (list of cases)
         done = as_completed(with_results=True, raise_errors=False)
