@@ -23,6 +23,7 @@ MAX_BATCH = 200  # cases per batch at most: the rows of one batch are what a kil
 # and metrics.json) and a part per macro step of the co-simulation [s].
 CASE_S = 0.03
 STEP_S = 6e-6
+BATCH_FILES_BYTES = 64 * 2**20  # kept result files sent back per batch at most (estimated) [bytes]
 WINDOW_PER_THREAD = 2  # batches in flight per worker thread: one running, one queued on the worker
 
 
@@ -59,13 +60,13 @@ def batch_key(ids: list) -> str:
 
 def run_batch(tasks: list, common: dict) -> list:
     """Run the cases of one batch in this process (a Dask worker), one after another; returns
-    their rows in order. ``tasks``: per case {"changes", "case_dir", "gain_files"}; ``common``:
+    their rows in order. ``tasks``: per case {"changes", "case_dir", "gain_files", "publish"}; ``common``:
     the keyword arguments every case shares (study.run_case's base, ssp, keep_results,
     reject_unstable, stop_token, plugin). A case that fails is its row (run_case never raises for
     a case), so it fails alone; after a stop the remaining cases return "interrupted" at once."""
     from .study import run_case
-    return [run_case(changes=t["changes"], case_dir=t["case_dir"], gain_files=t["gain_files"], **common)
-            for t in tasks]
+    return [run_case(changes=t["changes"], case_dir=t["case_dir"], gain_files=t["gain_files"],
+                     publish=t.get("publish"), **common) for t in tasks]
 
 
 def batches_of(n: int, size: int) -> int:

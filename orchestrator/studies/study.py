@@ -156,7 +156,7 @@ def case_value(row) -> float:
 
 def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results: bool = False,
              reject_unstable: bool = False, stop_token: str | None = None, gain_files: dict | None = None,
-             plugin: str = "") -> dict:
+             plugin: str = "", publish: dict | None = None) -> dict:
     """Run one case in this process (a Dask worker): returns its row as plain data.
 
     base: the base scenario as scenario_data; changes: dotted keys; gain_files: {path: preset
@@ -169,7 +169,10 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     scheduler (Dask's Reschedule) while it is retired. Never raises for a failing case: the row's status is
     "diverged" (the run left the envelope or stopped being finite), "failed" with the error,
     or "rejected" (not run) when reject_unstable and the stability check finds the loop not
-    stable. The row carries the full metrics under "metrics" (not a CSV column). After
+    stable. ``publish`` ({"url", "case", "ssp"}): the case runs in a worker-local temporary folder
+    and its files are written to URL/CASE/ by the worker (orchestrator.studies.publish), none come
+    back; a case whose files cannot be written there is failed. The row carries the full metrics
+    under "metrics" (not a CSV column). After
     stops.request_stop(stop_token) (the study was stopped) the case ends at a step boundary,
     or does not start, with status "interrupted" (never a study.csv row).
     """
@@ -195,9 +198,9 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
                                  "it is not a worker of this study's scheduler")
             if ssp is None:
                 ssp = shipped.ssp_path()
-            if case_dir is None:
-                folder = case_folder()
-                case_dir = folder / "case"
+        if case_dir is None:  # data mode, or files published by this worker: a worker-local folder
+            folder = case_folder()
+            case_dir = folder / "case"
         scenario = case_scenario(base, changes, gain_files or {})
         report = cached_check(scenario)
         row["spectral_radius"] = report.spectral_radius
@@ -222,7 +225,10 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
             row["status"] = "diverged"
     if folder is not None:
         try:
-            row["files"] = pack_folder(Path(case_dir))
+            if publish:
+                _publish(row, Path(case_dir), publish)
+            else:
+                row["files"] = pack_folder(Path(case_dir))
         finally:
             remove_case_folder(folder)
     row["flag"] = case_flag(row.get("spectral_radius"), row.get("saturation_fraction_max"))
@@ -236,6 +242,18 @@ def replace_fields(scenario: Scenario, **fields) -> Scenario:
     from ..tool.config import build
     from ..tool.scenario import ScenarioError
     return build(dataclasses.replace, ScenarioError, scenario, **fields)
+
+
+def _publish(row: dict, folder: Path, publish: dict) -> None:
+    """Write the case's files to publish["url"] (publish.publish_folder); on failure the row is
+    failed, naming the location (its password hidden) and the error."""
+    from .publish import publish_folder, shown
+    if not folder.is_dir():
+        return
+    try:
+        row["published_bytes"] = publish_folder(folder, publish["url"], publish["case"], publish["ssp"])
+    except Exception as err:  # the location refused them: this case failed, the study goes on
+        row.update(status="failed", error=f"its files could not be written to {shown(publish['url'])}: {reason(err)}")
 
 
 def with_record_every(scenario: Scenario, every: int) -> Scenario:
@@ -466,12 +484,13 @@ class CaseRunner:
     Interrupted by SIGTERM), the running cases are asked to stop at their next step boundary
     (stops.request_stop on every worker) and waited for, so they free their FMUs and temporary
     folders before the workers go, and the rows of the batches done meanwhile are recorded.
-    ``batch_size``: cases per task, 0 for the rule of batches.batch_size.
+    ``batch_size``: cases per task, 0 for the rule of batches.batch_size. ``results_url``: the
+    workers write the case files there (orchestrator.studies.publish), none come to the client.
     """
 
     def __init__(self, client, base: Scenario, ssp: Path, out: Path, table: StudyTable,
                  keep_results: bool, progress: bool = True, desc: str = "cases", ship: Shipping | None = None,
-                 batch_size: int = 0):
+                 batch_size: int = 0, results_url: str = ""):
         self.client = client
         self.base_scenario = base
         self.base = scenario_data(base)
@@ -483,6 +502,7 @@ class CaseRunner:
         self.desc = desc
         self.ship = ship or Shipping()
         self.batch_size = batch_size
+        self.results_url = results_url
         self.used_batch_size = 0  # the size of the last run's batches (cases per task)
         self.token = f"study-{os.getpid()}-{os.urandom(8).hex()}"
         self.bytes_received = 0  # compressed case files received (data mode) [bytes]
@@ -492,11 +512,14 @@ class CaseRunner:
     def _submit(self, batch: list, reject_unstable: bool, gain_files: dict):
         from .batches import batch_key, run_batch
         data = self.ship.data
+        local = not (data or self.results_url)  # the worker writes the case's folder at the client's path
         tasks = []
         for case in batch:
             path = case["changes"].get("gains_file")
             tasks.append({"changes": case["changes"], "gain_files": {path: gain_files[path]} if path else None,
-                          "case_dir": None if data else str(self.out / "cases" / case["case"])})
+                          "case_dir": str(self.out / "cases" / case["case"]) if local else None,
+                          "publish": {"url": self.results_url, "case": case["case"], "ssp": self.ssp}
+                          if self.results_url else None})
         common = {"base": self.base, "ssp": None if data else self.ssp, "keep_results": self.keep_results,
                   "reject_unstable": reject_unstable, "stop_token": self.token, "plugin": self.ship.plugin}
         return self.client.submit(run_batch, tasks, common, pure=False, key=batch_key([c["case"] for c in batch]))
@@ -504,10 +527,14 @@ class CaseRunner:
     def size_for(self, n_cases: int) -> int:
         """Cases per batch for ``n_cases`` cases: the runner's batch_size, else the rule of
         batches.batch_size from the base scenario's steps and the worker threads connected now."""
-        from .batches import batch_size, case_seconds
+        from .batches import BATCH_FILES_BYTES, batch_size, case_seconds
         if self.batch_size:
             return self.batch_size
-        return batch_size(n_cases, case_seconds(self.base_scenario.n_steps), self.threads)
+        size = batch_size(n_cases, case_seconds(self.base_scenario.n_steps), self.threads)
+        if self.keep_results and self.ship.data and not self.results_url:  # result files come back: bound a batch's
+            from ..tool.estimate import output_estimate
+            size = min(size, max(1, BATCH_FILES_BYTES // max(output_estimate([self.base_scenario])[0], 1)))
+        return size
 
     def run(self, cases: list, reject_unstable: bool = False, announce: bool = False) -> list:
         """Rows of ``cases`` in their order; cases that have a row already are not run again.

@@ -186,3 +186,19 @@ def test_bench_quick_start_prints_the_build_time_and_the_load(tmp_path):
     assert out.splitlines()[0] == f"bash build_fmus.sh --host on {os.cpu_count()} cores"
     rows = table(out, "cache ")
     assert [r[0] for r in rows] == ["warm"] and all(re.fullmatch(NUMBER, v) for v in rows[0][1:])
+
+
+def test_bench_study_scale_prints_cases_per_second_cpu_per_case_and_the_batch_size(native_built, tmp_path):
+    out = bench("bench_study_scale.py", "--ssp", native_built["fmi2"]["ssp"], "--short", "24", "--paper", "8",
+                "--short-stop", "0.01", "--paper-stop", "0.02", tmp_path=tmp_path)
+    found = re.findall(rf"^\| (short|paper) \| (\d+) \| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| (\d+) \| ({NUMBER}) "
+                       rf"\| ({NUMBER}) \| ({NUMBER}) \| {NUMBER} \|$", out, re.M)
+    assert [f[:3] for f in found] == [("short", "24", "0.01"), ("paper", "8", "0.02")], out
+    for _, n, _, wall, rate, batch, main_ms, process_ms, worker_ms in found:
+        # the automatic size: n / (4 batches x 2 workers), less than a second of work
+        assert int(batch) == int(n) // 8
+        n, wall, rate = int(n), float(wall), float(rate)  # rate = n / the wall time, printed rounded to 0.1 s
+        assert n / (wall + 0.05) <= rate * 1.01 and (wall <= 0.05 or rate <= n / (wall - 0.05) * 1.01)
+        assert 0 < float(main_ms) <= float(process_ms) and float(worker_ms) > 0
+    estimates = re.findall(r"^\| (short|paper) \| [\d.]+ \| \d+ \| \d+ \| the (?:client|workers) \|$", out, re.M)
+    assert estimates == ["short", "paper"], out

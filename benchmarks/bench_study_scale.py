@@ -1,0 +1,135 @@
+"""Study throughput at scale on the local cluster `tapmp study --workers N` starts (a Dask
+LocalCluster: the scheduler in this process, N single-threaded worker processes under nannies):
+many short cases and many paper cases, in batches (orchestrator.studies.batches). Not part of
+the tests; smoke-run by tests/project/test_benchmarks.py.
+
+Usage (from the repository root, after bash build_fmus.sh --host or tapmp build):
+
+    .venv/bin/python benchmarks/bench_study_scale.py [--workers 2] [--short 10000] [--paper 1000]
+                                                     [--short-stop 0.05] [--paper-stop 0.5] [--ssp FILE]
+                                                     [--batch-size 0]
+
+For each study (a grid of the paper scenario over gain_overrides.D, every case completing) it warms
+the workers up (one small study, not timed), runs the cases with run_study (as `tapmp study`
+does) into a temporary folder and prints one row: cases, wall time (first submission to the last
+row; the study's figures are not timed), cases/s, the batch size used, and the CPU per case [ms]
+of the client's main thread (submitting, writing study.csv), of the whole client process (with
+the LocalCluster's scheduler and Dask's event loop) and of the workers (with their nannies), read
+before and after with the load average. Then the estimate for 50 workers from these per-case
+costs: each worker gives 1 / (worker wall per case) cases/s, the client and scheduler at most
+1 / (client process CPU per case), whichever is smaller.
+"""
+
+import argparse
+import os
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as every tapmp command (cli.single_threaded_blas)
+
+from orchestrator.builder.families import DEFAULT_FAMILY, resolve_ssp  # noqa: E402
+from orchestrator.studies.run import run_study  # noqa: E402
+from orchestrator.studies.study import close_client, load_study, open_client  # noqa: E402
+
+
+def process_cpu() -> float:
+    """User + system CPU [s] of this process (every thread: the scheduler's too)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def workers_cpu(client) -> float:
+    """User + system CPU [s] of every worker process and its nanny."""
+    import psutil  # a dependency of dask.distributed
+    total = 0.0
+    for pid in client.run(os.getpid).values():
+        try:
+            proc = psutil.Process(pid)
+            procs = [proc, proc.parent()]  # the worker and its nanny
+        except psutil.NoSuchProcess:
+            continue
+        for p in procs:
+            t = p.cpu_times()
+            total += t.user + t.system
+    return total
+
+
+def study_file(folder: Path, name: str, n: int, stop_time: float) -> Path:
+    """A grid study of ``n`` cases of ``stop_time`` [s] on the paper scenario (D from 400 to 1399 N s/m...)."""
+    values = ", ".join(f"{400.0 + 1000.0 * i / n:.6f}" for i in range(n))
+    path = folder / f"{name}.toml"
+    path.write_text(f'[study]\nname = "{name}"\nbase = "{ROOT / "scenarios" / "paper_simulation.toml"}"\n'
+                    f'output = "{folder / name}"\n[set]\nstop_time = {stop_time}\n'
+                    f'[grid]\n"gain_overrides.D" = [{values}]\n')
+    return path
+
+
+def measure(client, ssp: Path, folder: Path, name: str, n: int, stop_time: float, batch_size: int) -> dict:
+    """One study of ``n`` cases of ``stop_time`` [s]: its row's numbers."""
+    study = load_study(study_file(folder, name, n, stop_time))
+    load = os.getloadavg()[0]
+    w0, p0, t0 = workers_cpu(client), process_cpu(), time.thread_time()
+    summary = run_study(study, ssp, client, folder / name, progress=False, batch_size=batch_size)
+    t1, p1, w1 = time.thread_time(), process_cpu(), workers_cpu(client)
+    done = summary["counts"]["completed"]
+    if done != n:
+        raise SystemExit(f"{name}: {done} of {n} cases completed: {summary['counts']}")
+    wall = summary["wall_time_s"]  # first submission to the last row
+    return {"name": name, "cases": n, "stop": stop_time, "wall": wall, "rate": n / wall,
+            "batch": summary["batch_size"], "main_ms": 1e3 * (t1 - t0) / n, "process_ms": 1e3 * (p1 - p0) / n,
+            "worker_ms": 1e3 * (w1 - w0) / n, "load": load}
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--short", type=int, default=10_000, help="short cases (default 10000)")
+    p.add_argument("--paper", type=int, default=1_000, help="paper cases (default 1000)")
+    p.add_argument("--short-stop", type=float, default=0.05, help="stop time of a short case [s]")
+    p.add_argument("--paper-stop", type=float, default=0.5, help="stop time of a paper case [s]")
+    p.add_argument("--batch-size", type=int, default=0, help="cases per task (default 0: the automatic size)")
+    p.add_argument("--ssp", help="SSP file (default: the built SSP of the native family)")
+    args = p.parse_args()
+    ssp = resolve_ssp(args.ssp, DEFAULT_FAMILY)
+    if not ssp.exists():
+        print(f"error: {ssp} does not exist: run `bash build_fmus.sh --host` first", file=sys.stderr)
+        return 2
+    print(f"{ssp.relative_to(ROOT) if ssp.is_relative_to(ROOT) else ssp}, {os.cpu_count()} cores, LocalCluster "
+          f"of {args.workers} workers")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="tapmp_scale_") as tmp:
+        client = open_client(workers=args.workers)
+        try:
+            client.wait_for_workers(args.workers, timeout=120)
+            measure(client, ssp, Path(tmp), "warm", 4 * args.workers, 0.01, 1)  # imports, FMUs loaded: not timed
+            for name, n, stop in (("short", args.short, args.short_stop), ("paper", args.paper, args.paper_stop)):
+                if n:
+                    rows.append(measure(client, ssp, Path(tmp), name, n, stop, args.batch_size))
+        finally:
+            close_client(client)
+    print("| study | cases | stop time [s] | wall [s] | cases/s | batch size | client main thread [ms/case] "
+          "| client process [ms/case] | workers [ms/case] | load average |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['name']} | {r['cases']} | {r['stop']:g} | {r['wall']:.1f} | {r['rate']:.1f} | {r['batch']} "
+              f"| {r['main_ms']:.2f} | {r['process_ms']:.2f} | {r['worker_ms']:.1f} | {r['load']:.2f} |")
+    print()
+    print("| study | worker wall per case [ms] | limit of the client process [cases/s] | estimate, 50 workers "
+          "[cases/s] | limited by |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        per_case = 1e3 * args.workers * r["wall"] / r["cases"]  # each worker busy the whole wall time
+        client_limit = 1e3 / r["process_ms"]
+        workers_limit = 50 * 1e3 / per_case
+        print(f"| {r['name']} | {per_case:.1f} | {client_limit:.0f} | {min(client_limit, workers_limit):.0f} "
+              f"| {'the workers' if workers_limit < client_limit else 'the client'} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
