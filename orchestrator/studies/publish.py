@@ -63,12 +63,14 @@ def _write(fs, path: str, data: bytes) -> None:
 def check_location(url: str) -> None:
     """Make the folder ``url`` and write, rename and remove a file there; StudyError naming the
     location (its password hidden) and the reason if any step fails."""
-    fs, root = _fs(url)
-    probe = f"{root.rstrip('/')}/.tapmp-probe-{os.urandom(4).hex()}"
     try:
+        fs, root = _fs(url)  # a server is connected to here (ftp: log in)
+        probe = f"{root.rstrip('/')}/.tapmp-probe-{os.urandom(4).hex()}"
         fs.makedirs(root, exist_ok=True)
         _write(fs, probe, b"tapmp\n")
         fs.rm(probe)
+    except StudyError:
+        raise
     except Exception as err:
         raise StudyError(f"--results-url {shown(url)}: cannot write there ({type(err).__name__}: "
                          f"{' '.join(str(err).split())})") from None
