@@ -13,9 +13,10 @@ For each study (a grid of the paper scenario over gain_overrides.D, every case c
 the workers up (one small study, not timed), runs the cases with run_study (as `tapmp study`
 does) into a temporary folder and prints one row: cases, wall time (first submission to the last
 row; the study's figures are not timed), cases/s, the batch size used, and the CPU per case [ms]
-of the client's main thread (submitting, writing study.csv), of the whole client process (with
-the LocalCluster's scheduler and Dask's event loop) and of the workers (with their nannies), read
-before and after with the load average. Then the estimate for 50 workers from these per-case
+of the client listing and validating the cases before the run (study.cases), of the client's
+thread running them (submitting, collecting, writing study.csv), of the whole client process
+meanwhile (with the LocalCluster's scheduler and Dask's event loop) and of the workers (with
+their nannies), with the load average before. Then the estimate for 50 workers from these per-case
 costs: each worker gives 1 / (worker wall per case) cases/s, the client and scheduler at most
 1 / (client process CPU per case), whichever is smaller.
 """
@@ -34,6 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as every tapmp command (cl
 
 from orchestrator.builder.families import DEFAULT_FAMILY, resolve_ssp  # noqa: E402
 from orchestrator.studies.run import run_study  # noqa: E402
+from orchestrator.studies.study import cases as case_list  # noqa: E402
 from orchestrator.studies.study import close_client, load_study, open_client  # noqa: E402
 
 
@@ -73,15 +75,18 @@ def measure(client, ssp: Path, folder: Path, name: str, n: int, stop_time: float
     """One study of ``n`` cases of ``stop_time`` [s]: its row's numbers."""
     study = load_study(study_file(folder, name, n, stop_time))
     load = os.getloadavg()[0]
-    w0, p0, t0 = workers_cpu(client), process_cpu(), time.thread_time()
-    summary = run_study(study, ssp, client, folder / name, progress=False, batch_size=batch_size)
-    t1, p1, w1 = time.thread_time(), process_cpu(), workers_cpu(client)
+    w0, t0 = workers_cpu(client), time.thread_time()
+    cases = case_list(study)  # as `tapmp study` lists and validates them before a cluster starts
+    t1 = time.thread_time()
+    summary = run_study(study, ssp, client, folder / name, progress=False, batch_size=batch_size, case_list=cases)
+    w1 = workers_cpu(client)
     done = summary["counts"]["completed"]
     if done != n:
         raise SystemExit(f"{name}: {done} of {n} cases completed: {summary['counts']}")
     wall = summary["wall_time_s"]  # first submission to the last row
     return {"name": name, "cases": n, "stop": stop_time, "wall": wall, "rate": n / wall,
-            "batch": summary["batch_size"], "main_ms": 1e3 * (t1 - t0) / n, "process_ms": 1e3 * (p1 - p0) / n,
+            "batch": summary["batch_size"], "list_ms": 1e3 * (t1 - t0) / n,
+            "main_ms": 1e3 * summary["client_cpu_s"] / n, "process_ms": 1e3 * summary["client_process_cpu_s"] / n,
             "worker_ms": 1e3 * (w1 - w0) / n, "load": load}
 
 
@@ -112,12 +117,13 @@ def main() -> int:
                     rows.append(measure(client, ssp, Path(tmp), name, n, stop, args.batch_size))
         finally:
             close_client(client)
-    print("| study | cases | stop time [s] | wall [s] | cases/s | batch size | client main thread [ms/case] "
-          "| client process [ms/case] | workers [ms/case] | load average |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| study | cases | stop time [s] | wall [s] | cases/s | batch size | client, listing [ms/case] "
+          "| client, running: main thread [ms/case] | client process [ms/case] | workers [ms/case] | load average |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['name']} | {r['cases']} | {r['stop']:g} | {r['wall']:.1f} | {r['rate']:.1f} | {r['batch']} "
-              f"| {r['main_ms']:.2f} | {r['process_ms']:.2f} | {r['worker_ms']:.1f} | {r['load']:.2f} |")
+              f"| {r['list_ms']:.2f} | {r['main_ms']:.2f} | {r['process_ms']:.2f} | {r['worker_ms']:.1f} "
+              f"| {r['load']:.2f} |")
     print()
     print("| study | worker wall per case [ms] | limit of the client process [cases/s] | estimate, 50 workers "
           "[cases/s] | limited by |")

@@ -22,7 +22,8 @@ def run_study(study: Study, ssp: Path, client, out: Path | None = None, resume: 
               retry_failed: bool = False, reference: dict | None = None, batch_size: int = 0,
               results_url: str = "") -> dict:
     """Run a study on a Dask client; returns a summary (counts by status, paths, wall time,
-    bytes of case files received). The output folder is locked for the whole study
+    bytes of case files received, the batch size, the CPU of the thread that ran the cases and
+    of this whole process meanwhile [s]). The output folder is locked for the whole study
     (results.OutputInUseError if in use).
     write_docs: a tuning writes its presets and comparison into its write_to folder (else out/tuning).
     remote: for a client of a running scheduler, {"address": str, "data": bool (False: the workers
@@ -95,4 +96,5 @@ def _run_cases(study: Study, case_list: list, ssp: Path, client, out: Path, resu
     unstable = sum("unstable" in str(r.get("flag") or "").split("+") for r in rows)
     return {"out": out, "cases": len(case_list), "ran": len(case_list) - done_before, "counts": counts,
             "unstable": unstable, "wall_time_s": wall, "figures": figures, "bytes_received": runner.bytes_received,
-            "batch_size": runner.used_batch_size}
+            "batch_size": runner.used_batch_size, "client_cpu_s": runner.thread_cpu_s,
+            "client_process_cpu_s": runner.process_cpu_s}

@@ -508,6 +508,8 @@ class CaseRunner:
         self.bytes_received = 0  # compressed case files received (data mode) [bytes]
         self.retired = 0  # workers retired by the study's check (remote.retired_since) warned of so far
         self.threads = 0  # worker threads connected at the last look
+        self.thread_cpu_s = 0.0  # CPU of the thread running the cases (submitting, recording rows) [s]
+        self.process_cpu_s = 0.0  # CPU of this whole process meanwhile (Dask's event loop, a local scheduler) [s]
 
     def _submit(self, batch: list, reject_unstable: bool, gain_files: dict):
         from .batches import batch_key, run_batch
@@ -539,6 +541,15 @@ class CaseRunner:
     def run(self, cases: list, reject_unstable: bool = False, announce: bool = False) -> list:
         """Rows of ``cases`` in their order; cases that have a row already are not run again.
         ``announce``: say on stderr how the cases travel (batch size, tasks, worker threads)."""
+        thread0, process0 = time.thread_time(), time.process_time()
+        try:
+            return self._run(cases, reject_unstable, announce)
+        finally:
+            self.thread_cpu_s += time.thread_time() - thread0
+            self.process_cpu_s += time.process_time() - process0
+
+    def _run(self, cases: list, reject_unstable: bool, announce: bool) -> list:
+        """run's body."""
         from dask.distributed import as_completed
         from ..tool.progress import Progress
         from .batches import split, window

@@ -191,8 +191,8 @@ def test_bench_quick_start_prints_the_build_time_and_the_load(tmp_path):
 def test_bench_study_scale_prints_cases_per_second_cpu_per_case_and_the_batch_size(native_built, tmp_path):
     out = bench("bench_study_scale.py", "--ssp", native_built["fmi2"]["ssp"], "--short", "24", "--paper", "8",
                 "--short-stop", "0.01", "--paper-stop", "0.02", tmp_path=tmp_path)
-    found = re.findall(rf"^\| (short|paper) \| (\d+) \| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| (\d+) \| ({NUMBER}) "
-                       rf"\| ({NUMBER}) \| ({NUMBER}) \| {NUMBER} \|$", out, re.M)
+    found = re.findall(rf"^\| (short|paper) \| (\d+) \| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| (\d+) \| {NUMBER} "
+                       rf"\| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| {NUMBER} \|$", out, re.M)
     assert [f[:3] for f in found] == [("short", "24", "0.01"), ("paper", "8", "0.02")], out
     for _, n, _, wall, rate, batch, main_ms, process_ms, worker_ms in found:
         # the automatic size: n / (4 batches x 2 workers), less than a second of work
