@@ -16,9 +16,10 @@ row; the study's figures are not timed), cases/s, the batch size used, and the C
 of the client listing and validating the cases before the run (study.cases), of the client's
 thread running them (submitting, collecting, writing study.csv), of the whole client process
 meanwhile (with the LocalCluster's scheduler and Dask's event loop) and of the workers (with
-their nannies), with the load average before. Then the estimate for 50 workers from these per-case
-costs: each worker gives 1 / (worker wall per case) cases/s, the client and scheduler at most
-1 / (client process CPU per case), whichever is smaller.
+their nannies), with the load average before. Then the client process's CPU as a share of one
+core, and the estimate for 50 workers from the per-case costs: 50 workers, each a core of its own,
+give 50 / (workers' CPU per case) cases/s; the client's thread that runs the cases gives at most
+1 / (its CPU per case); the estimate is the smaller.
 """
 
 import argparse
@@ -125,14 +126,15 @@ def main() -> int:
               f"| {r['list_ms']:.2f} | {r['main_ms']:.2f} | {r['process_ms']:.2f} | {r['worker_ms']:.1f} "
               f"| {r['load']:.2f} |")
     print()
-    print("| study | worker wall per case [ms] | limit of the client process [cases/s] | estimate, 50 workers "
-          "[cases/s] | limited by |")
-    print("|---|---|---|---|---|")
+    print("| study | client process [% of a core] | workers' limit, 50 workers [cases/s] | client's limit "
+          "[cases/s] | estimate, 50 workers [cases/s] | limited by |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
-        per_case = 1e3 * args.workers * r["wall"] / r["cases"]  # each worker busy the whole wall time
-        client_limit = 1e3 / r["process_ms"]
-        workers_limit = 50 * 1e3 / per_case
-        print(f"| {r['name']} | {per_case:.1f} | {client_limit:.0f} | {min(client_limit, workers_limit):.0f} "
+        busy = r["process_ms"] * r["rate"] / 10.0  # [ms/case] x [cases/s] / 1000 x 100 %
+        workers_limit = 50 * 1e3 / r["worker_ms"]  # each worker a core of its own, as fast as here per case
+        client_limit = 1e3 / r["main_ms"]  # the thread that submits, collects and writes: one case after another
+        print(f"| {r['name']} | {busy:.1f} | {workers_limit:.0f} | {client_limit:.0f} "
+              f"| {min(workers_limit, client_limit):.0f} "
               f"| {'the workers' if workers_limit < client_limit else 'the client'} |")
     return 0
 

@@ -200,5 +200,6 @@ def test_bench_study_scale_prints_cases_per_second_cpu_per_case_and_the_batch_si
         n, wall, rate = int(n), float(wall), float(rate)  # rate = n / the wall time, printed rounded to 0.1 s
         assert n / (wall + 0.05) <= rate * 1.01 and (wall <= 0.05 or rate <= n / (wall - 0.05) * 1.01)
         assert 0 < float(main_ms) <= float(process_ms) and float(worker_ms) > 0
-    estimates = re.findall(r"^\| (short|paper) \| [\d.]+ \| \d+ \| \d+ \| the (?:client|workers) \|$", out, re.M)
+    estimates = re.findall(r"^\| (short|paper) \| [\d.]+ \| \d+ \| \d+ \| \d+ \| the (?:client|workers) \|$", out,
+                           re.M)
     assert estimates == ["short", "paper"], out
