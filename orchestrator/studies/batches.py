@@ -1,9 +1,9 @@
-"""Cases in batches: how many cases one Dask task runs, and the task that runs them.
+"""Cases in batches: how many cases one Dask task runs, and how many tasks are in flight.
 
-A study's cases travel to the workers in batches (one Dask task per batch, run_batch) through a
+A study's cases travel to the workers in batches (one Dask task per batch) through a
 bounded window of batches in flight (window), so that the client's cost per case (submitting,
 collecting, Dask's bookkeeping) is paid once per batch, and the scheduler never holds more than a
-few tasks per worker.
+few tasks per worker. The task itself is orchestrator.studies.study.run_batch.
 
 The batch size rule (batch_size): about TARGET_BATCH_S of work per task, from the case's expected
 cost (case_seconds: CASE_S + its macro steps x STEP_S, measured with the native FMUs), but at
@@ -12,15 +12,15 @@ slow worker does not hold the last large batch while the others idle), and at mo
 cases. A lost worker reruns at most the batches it held: about TARGET_BATCH_S each.
 """
 
-import math
 import os
 
 TARGET_BATCH_S = 1.0  # work per task [s]: Dask's per-task cost (a few ms of client and scheduler) is < 1 %
 BATCHES_PER_THREAD = 4  # at least this many batches per worker thread: the last ones balance the workers
 MAX_BATCH = 200  # cases per batch at most: the rows of one batch are what a killed worker loses
-# A case's expected cost in a worker, native FMUs on the 2-core development machine (benchmarks/
-# bench_study_scale.py prints what it measures): a fixed part (scenario, stability check, run.json
-# and metrics.json) and a part per macro step of the co-simulation [s].
+# A case's expected cost in a worker [s]: a fixed part (validating its scenario, the stability check,
+# run.json and metrics.json) and a part per macro step. Rounded up from the workers' CPU per case that
+# benchmarks/bench_study_scale.py measured with the native FMUs (about 21 ms + 5.6 us per step), so
+# that a batch stays near TARGET_BATCH_S where cases run slower (a loaded machine, the pythonfmu FMUs).
 CASE_S = 0.03
 STEP_S = 6e-6
 BATCH_FILES_BYTES = 64 * 2**20  # kept result files sent back per batch at most (estimated) [bytes]
@@ -56,19 +56,3 @@ def batch_key(ids: list) -> str:
     """The Dask key of a batch: "case-" and its case ids joined with "," and a random suffix (a
     key is never reused: a batch submitted again after a stop is a new task)."""
     return f"case-{','.join(ids)}-{os.urandom(4).hex()}"
-
-
-def run_batch(tasks: list, common: dict) -> list:
-    """Run the cases of one batch in this process (a Dask worker), one after another; returns
-    their rows in order. ``tasks``: per case {"changes", "case_dir", "gain_files", "publish"}; ``common``:
-    the keyword arguments every case shares (study.run_case's base, ssp, keep_results,
-    reject_unstable, stop_token, plugin). A case that fails is its row (run_case never raises for
-    a case), so it fails alone; after a stop the remaining cases return "interrupted" at once."""
-    from .study import run_case
-    return [run_case(changes=t["changes"], case_dir=t["case_dir"], gain_files=t["gain_files"],
-                     publish=t.get("publish"), **common) for t in tasks]
-
-
-def batches_of(n: int, size: int) -> int:
-    """How many batches ``n`` cases make in batches of ``size``."""
-    return math.ceil(n / size) if n else 0

@@ -236,6 +236,16 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     return row
 
 
+def run_batch(tasks: list, common: dict) -> list:
+    """Run the cases of one batch in this process (a Dask worker), one after another; returns
+    their rows in order. ``tasks``: per case {"changes", "case_dir", "gain_files", "publish"}; ``common``:
+    the keyword arguments every case shares (study.run_case's base, ssp, keep_results,
+    reject_unstable, stop_token, plugin). A case that fails is its row (run_case never raises for
+    a case), so it fails alone; after a stop the remaining cases return "interrupted" at once."""
+    return [run_case(changes=t["changes"], case_dir=t["case_dir"], gain_files=t["gain_files"],
+                     publish=t.get("publish"), **common) for t in tasks]
+
+
 def replace_fields(scenario: Scenario, **fields) -> Scenario:
     """A copy of ``scenario`` with top-level fields replaced and validated again, keeping the
     gains_file's values it has (Scenario.with_changes would read the file again)."""
@@ -512,7 +522,7 @@ class CaseRunner:
         self.process_cpu_s = 0.0  # CPU of this whole process meanwhile (Dask's event loop, a local scheduler) [s]
 
     def _submit(self, batch: list, reject_unstable: bool, gain_files: dict):
-        from .batches import batch_key, run_batch
+        from .batches import batch_key
         data = self.ship.data
         local = not (data or self.results_url)  # the worker writes the case's folder at the client's path
         tasks = []
