@@ -19,7 +19,7 @@ BATCHES_PER_THREAD = 4  # at least this many batches per worker thread: the last
 MAX_BATCH = 200  # cases per batch at most: the rows of one batch are what a killed worker loses
 # A case's expected cost in a worker [s]: a fixed part (validating its scenario, the stability check,
 # run.json and metrics.json) and a part per macro step. Rounded up from the workers' CPU per case that
-# benchmarks/bench_study_scale.py measured with the native FMUs (about 21 ms + 5.6 us per step), so
+# benchmarks/bench_study_scale.py measured with the native FMUs (about 20 ms + 4-6 us per step), so
 # that a batch stays near TARGET_BATCH_S where cases run slower (a loaded machine, the pythonfmu FMUs).
 CASE_S = 0.03
 STEP_S = 6e-6
