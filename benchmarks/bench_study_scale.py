@@ -7,7 +7,7 @@ Usage (from the repository root, after bash build_fmus.sh --host or tapmp build)
 
     .venv/bin/python benchmarks/bench_study_scale.py [--workers 2] [--short 10000] [--paper 1000]
                                                      [--short-stop 0.05] [--paper-stop 0.5] [--ssp FILE]
-                                                     [--batch-size 0]
+                                                     [--batch-size 0] [--remote]
 
 For each study (a grid of the paper scenario over gain_overrides.D, every case completing) it warms
 the workers up (one small study, not timed), runs the cases with run_study (as `tapmp study`
@@ -32,6 +32,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))  # --remote: throughput.py's loopback cluster
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as every tapmp command (cli.single_threaded_blas)
 
 from orchestrator.builder.families import DEFAULT_FAMILY, resolve_ssp  # noqa: E402
@@ -72,14 +73,17 @@ def study_file(folder: Path, name: str, n: int, stop_time: float) -> Path:
     return path
 
 
-def measure(client, ssp: Path, folder: Path, name: str, n: int, stop_time: float, batch_size: int) -> dict:
-    """One study of ``n`` cases of ``stop_time`` [s]: its row's numbers."""
+def measure(client, ssp: Path, folder: Path, name: str, n: int, stop_time: float, batch_size: int,
+            remote: dict | None = None) -> dict:
+    """One study of ``n`` cases of ``stop_time`` [s] (on the scheduler ``remote``, as run_study
+    takes it, if given): its row's numbers."""
     study = load_study(study_file(folder, name, n, stop_time))
     load = os.getloadavg()[0]
     w0, t0 = workers_cpu(client), time.thread_time()
     cases = case_list(study)  # as `tapmp study` lists and validates them before a cluster starts
     t1 = time.thread_time()
-    summary = run_study(study, ssp, client, folder / name, progress=False, batch_size=batch_size, case_list=cases)
+    summary = run_study(study, ssp, client, folder / name, progress=False, batch_size=batch_size, case_list=cases,
+                        remote=remote)
     w1 = workers_cpu(client)
     done = summary["counts"]["completed"]
     if done != n:
@@ -100,24 +104,40 @@ def main() -> int:
     p.add_argument("--paper-stop", type=float, default=0.5, help="stop time of a paper case [s]")
     p.add_argument("--batch-size", type=int, default=0, help="cases per task (default 0: the automatic size)")
     p.add_argument("--ssp", help="SSP file (default: the built SSP of the native family)")
+    p.add_argument("--remote", action="store_true", help="a loopback `dask scheduler` and `dask worker` processes "
+                   "instead (benchmarks/throughput.py's), the SSP and case files travelling as data, as with "
+                   "tapmp study --scheduler")
     args = p.parse_args()
     ssp = resolve_ssp(args.ssp, DEFAULT_FAMILY)
     if not ssp.exists():
         print(f"error: {ssp} does not exist: run `bash build_fmus.sh --host` first", file=sys.stderr)
         return 2
-    print(f"{ssp.relative_to(ROOT) if ssp.is_relative_to(ROOT) else ssp}, {os.cpu_count()} cores, LocalCluster "
+    kind = ("loopback scheduler and dask worker processes, data mode" if args.remote
+            else "LocalCluster")
+    print(f"{ssp.relative_to(ROOT) if ssp.is_relative_to(ROOT) else ssp}, {os.cpu_count()} cores, {kind} "
           f"of {args.workers} workers")
     rows = []
     with tempfile.TemporaryDirectory(prefix="tapmp_scale_") as tmp:
-        client = open_client(workers=args.workers)
+        cluster, remote = None, None
+        if args.remote:
+            from dask.distributed import Client
+            from throughput import LoopbackCluster
+            cluster = LoopbackCluster(args.workers, Path(tmp))
+            remote = {"address": cluster.address, "data": True, "timeout": 60.0}
+            client = Client(cluster.address, timeout=60)
+        else:
+            client = open_client(workers=args.workers)
         try:
             client.wait_for_workers(args.workers, timeout=120)
-            measure(client, ssp, Path(tmp), "warm", 4 * args.workers, 0.01, 1)  # imports, FMUs loaded: not timed
+            # imports, the SSP sent, FMUs loaded: not timed
+            measure(client, ssp, Path(tmp), "warm", 4 * args.workers, 0.01, 1, remote)
             for name, n, stop in (("short", args.short, args.short_stop), ("paper", args.paper, args.paper_stop)):
                 if n:
-                    rows.append(measure(client, ssp, Path(tmp), name, n, stop, args.batch_size))
+                    rows.append(measure(client, ssp, Path(tmp), name, n, stop, args.batch_size, remote))
         finally:
             close_client(client)
+            if cluster is not None:
+                cluster.stop()
     print("| study | cases | stop time [s] | wall [s] | cases/s | batch size | client, listing [ms/case] "
           "| client, running: main thread [ms/case] | client process [ms/case] | workers [ms/case] | load average |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
