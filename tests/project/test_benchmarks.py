@@ -188,9 +188,11 @@ def test_bench_quick_start_prints_the_build_time_and_the_load(tmp_path):
     assert [r[0] for r in rows] == ["warm"] and all(re.fullmatch(NUMBER, v) for v in rows[0][1:])
 
 
-def test_bench_study_scale_prints_cases_per_second_cpu_per_case_and_the_batch_size(native_built, tmp_path):
+@pytest.mark.parametrize("where", [[], ["--remote"]], ids=["local", "remote"])
+def test_bench_study_scale_prints_cases_per_second_cpu_per_case_and_the_batch_size(native_built, tmp_path, where):
     out = bench("bench_study_scale.py", "--ssp", native_built["fmi2"]["ssp"], "--short", "24", "--paper", "8",
-                "--short-stop", "0.01", "--paper-stop", "0.02", tmp_path=tmp_path)
+                "--short-stop", "0.01", "--paper-stop", "0.02", *where, tmp_path=tmp_path)
+    assert ("loopback scheduler" in out.splitlines()[0]) == bool(where)
     found = re.findall(rf"^\| (short|paper) \| (\d+) \| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| (\d+) \| {NUMBER} "
                        rf"\| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| {NUMBER} \|$", out, re.M)
     assert [f[:3] for f in found] == [("short", "24", "0.01"), ("paper", "8", "0.02")], out
