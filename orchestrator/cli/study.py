@@ -23,6 +23,11 @@ def add_study(sub) -> None:
                     "scheduler and for its first worker [s] (default 60)")
     st.add_argument("--max-cases", type=int, metavar="N", help="run a study of more than 100000 cases (up to N)")
     st.add_argument("--out", help="output folder (overrides the study's 'output')")
+    st.add_argument("--batch-size", type=int, default=0, metavar="N", help="cases per Dask task (default 0: "
+                    "about 1 s of work per task from the cases' steps, at least 4 tasks per worker, at most 200)")
+    st.add_argument("--results-url", metavar="PATH|URL", help="the workers write each case's files to "
+                    "PATH|URL/CASE/ themselves (an absolute path every worker sees, or an fsspec URL such as "
+                    "ftp://USER:PASSWORD@HOST/FOLDER) instead of sending them back; study.csv stays in --out")
     fmu_args(st)
     st.add_argument("--resume", action="store_true", help="run only the cases without a row in study.csv")
     st.add_argument("--retry-failed", action="store_true", help="with --resume: run the cases whose row says "
@@ -60,8 +65,16 @@ def cmd_study(args) -> int:
     if args.retry_failed and not (args.resume and not study.tune):
         raise StudyError("--retry-failed goes with --resume, for a grid or Monte Carlo study: it runs the cases "
                          "whose row in study.csv says failed again")
+    if args.batch_size < 0:
+        raise StudyError(f"--batch-size = {args.batch_size} is invalid: allowed is an integer >= 1, or 0 for the "
+                         "automatic size")
     if not args.worker_timeout > 0:
         raise StudyError(f"--worker-timeout = {args.worker_timeout:g} is invalid: allowed is a number > 0 [s]")
+    if args.results_url:  # before a cluster starts (run_study checks it again for its other callers)
+        if study.tune:
+            raise StudyError("--results-url is for a grid or Monte Carlo study: a tuning reads its cases' files")
+        from ..studies.publish import check_location
+        check_location(args.results_url)
     if not study.tune:
         check_case_count(study, max_cases)  # before the cases are listed
     if args.format or args.record_every is not None:  # scenario keys, applied like the study's [set]
@@ -73,7 +86,8 @@ def cmd_study(args) -> int:
     if not study.tune:
         from ..studies.study import cases
         case_list = cases(study, max_cases)  # every case validated before a cluster starts
-    if study.keep_results and not study.tune:  # else each case deletes its result file once scored
+    # kept results come into --out (else each case deletes its result file once scored, or --results-url holds them)
+    if study.keep_results and not study.tune and not args.results_url:
         check_output_size([study.base_scenario()] * len(case_list), out, study.name, args.workers or 1)
     # after the cases (a study file's error first), before starting a cluster; the drive's SSP if the base has it
     ssp = ssp_of(args, drive=study.base_scenario().drive is not None)
@@ -97,7 +111,7 @@ def cmd_study(args) -> int:
             say(f"{study.name}: running the cases -> {out}")
             s = run_study(study, ssp, client, out, args.resume, args.overwrite,
                           not args.no_progress, command, args.write_docs, remote, max_cases, case_list,
-                          args.retry_failed, reference)
+                          args.retry_failed, reference, args.batch_size, args.results_url or "")
         finally:
             close_client(client)
             remove_stale_folders()  # of local workers that were killed, not stopped

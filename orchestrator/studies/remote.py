@@ -2,9 +2,12 @@
 
 Two ways to give the workers what a case needs (orchestrator.studies.study.CaseRunner):
 
-* **data** (the default with ``--scheduler``): the client reads the SSP once and registers a
-  worker plugin (StudyPlugin) that carries its bytes, keyed by their SHA-256; the scheduler hands
-  the plugin to every worker, also to one that joins later. A worker writes the SSP once into its
+* **data** (the default with ``--scheduler``): the client reads the SSP and, unless the cluster
+  has it already, registers a worker plugin (SspPlugin) that carries its bytes, named by their
+  SHA-256 and left registered: a later study of the same SSP on the same cluster sends nothing
+  (ship_ssp). The scheduler hands the plugin to every worker, also to one that joins later. Each
+  study registers a small plugin of its own (StudyPlugin: the client's identity, the checks,
+  the name of the SSP's plugin), removed when it ends. A worker writes the SSP once into its
   own cache (``cache_dir()/ssp/SHA256/NAME``, atomically, under a file lock, so the worker
   processes of one machine write it once) and opens it from there. A case runs in a
   worker-local temporary folder and returns its files (run.json, metrics.json, the result file
@@ -134,10 +137,29 @@ def wait_for_workers(client, timeout: float, address: str) -> None:
                          "--worker-timeout") from None
 
 
+def reaches_workers(client, timeout: float = 5.0) -> bool:
+    """Whether this client can open a connection to a connected worker's address within
+    ``timeout`` [s] (else results travel through the scheduler)."""
+    from distributed.comm import connect
+    workers = list(client.scheduler_info().get("workers", {}))
+    if not workers:
+        return False
+
+    async def probe():
+        comm = await connect(workers[0], timeout=timeout)
+        await comm.close()
+    try:
+        client.sync(probe)
+    except Exception:  # refused, unreachable, timed out: through the scheduler then
+        return False
+    return True
+
+
 async def _problem_here(plugin: "StudyPlugin", dask_worker=None) -> str | None:
     """StudyPlugin.problem on this worker, in a thread (it may compile the C model, and the
     worker's event loop must keep answering the scheduler meanwhile)."""
     plugin.worker = str(dask_worker.address)
+    plugin.plugins = dask_worker.plugins  # the check runs in a thread, where get_worker finds none
     return await asyncio.get_running_loop().run_in_executor(None, plugin.problem)
 
 
@@ -167,22 +189,48 @@ def retired_warning(text: str) -> None:
     print(f"warning: {text}; this worker is retired from the study, its cases run on the others", file=sys.stderr)
 
 
-class StudyPlugin(WorkerPlugin):
-    """What every worker of a remote study gets: the client's identity, and in data mode the SSP's
-    bytes (``data``, named ``name``, with its SHA-256 ``sha256``). Registered by the client under a
-    name of its own (shipping); the scheduler gives it to workers that join later too."""
+class SspPlugin(WorkerPlugin):
+    """An SSP's bytes (``data``, named ``name``, with its SHA-256 ``sha256``) on every worker of a
+    cluster: registered once per cluster under ssp_plugin_name (its hash), so that every later
+    study of the same SSP finds it there and sends nothing again; the scheduler gives it to
+    workers that join later too. A worker writes the bytes into its SSP cache on first use
+    (ssp_path). ``nonce``: made when the client built it (a test sees whether it was sent again)."""
 
-    idempotent = True  # registered again with the same name: the same study data
+    idempotent = True  # registered again with the same name: the same bytes
 
-    def __init__(self, client_identity: dict, name: str = "", data: bytes | None = None):
-        self.client_identity = client_identity
+    def __init__(self, name: str, data: bytes):
         self.name = name
         self.data = data
-        self.sha256 = hashlib.sha256(data).hexdigest() if data is not None else ""
+        self.sha256 = hashlib.sha256(data).hexdigest()
+        self.nonce = os.urandom(8).hex()
+        self._path = None
+
+    def ssp_path(self, worker: str = "") -> Path:
+        """The SSP in this worker's cache, written there on first use (see cached_ssp)."""
+        if self._path is None:
+            self._path = cached_ssp(self.sha256, self.name, self.data, worker)
+        return self._path
+
+
+def ssp_plugin_name(sha256: str) -> str:
+    """The name of the SspPlugin of the SSP whose SHA-256 is ``sha256`` (the same on every study)."""
+    return f"{PLUGIN_PREFIX}ssp-{sha256}"
+
+
+class StudyPlugin(WorkerPlugin):
+    """What every worker of one remote study gets: the client's identity, and in data mode the
+    name of the SspPlugin holding its SSP (``ssp_name``). Registered by the client under a name
+    of its own for the study (shipping); the scheduler gives it to workers that join later too."""
+
+    idempotent = True  # registered again with the same name: the same study
+
+    def __init__(self, client_identity: dict, ssp_name: str = ""):
+        self.client_identity = client_identity
+        self.ssp_name = ssp_name
         self.worker = ""
         self.topic = ""  # the plugin's name, under which a worker that fails the check says so (log_event)
         self.failed = None  # on a worker: why it failed the check (setup), else None
-        self._path = None
+        self.plugins = None  # on a worker: its plugins by name (set by the check)
 
     async def setup(self, worker) -> None:
         """Check this worker (problem); if it fails, say so under ``topic`` (the client prints it)
@@ -194,7 +242,7 @@ class StudyPlugin(WorkerPlugin):
 
     def problem(self) -> str | None:
         """worker_problem of this worker against the client's identity (and its SSP cache, in data mode)."""
-        return worker_problem(self.worker, self.client_identity, self.ssp_path if self.data is not None else None)
+        return worker_problem(self.worker, self.client_identity, self.ssp_path if self.ssp_name else None)
 
     def teardown(self, worker) -> None:
         """The study ended (or the worker closes): free the FMUs its cases kept loaded in this worker
@@ -203,10 +251,13 @@ class StudyPlugin(WorkerPlugin):
         close_process_fmus()
 
     def ssp_path(self) -> Path:
-        """The SSP in this worker's cache, written there on first use (see cached_ssp)."""
-        if self._path is None:
-            self._path = cached_ssp(self.sha256, self.name, self.data, self.worker)
-        return self._path
+        """The study's SSP in this worker's cache (its SspPlugin's ssp_path); StudyError if this
+        worker has not received it."""
+        shipped = self.plugins.get(self.ssp_name) if self.plugins is not None else this_plugin(self.ssp_name)
+        if shipped is None:
+            raise StudyError(f"Dask worker {self.worker or os.uname().nodename} has not received the study's SSP "
+                             f"(plugin {self.ssp_name}): it is not a worker of this study's scheduler")
+        return shipped.ssp_path(self.worker)
 
 
 async def _retire(worker) -> None:
@@ -262,12 +313,21 @@ def cached_ssp(sha256: str, name: str, data: bytes, worker: str = "") -> Path:
     return path
 
 
-def study_plugin(ssp: Path | None) -> StudyPlugin:
-    """The plugin of a remote study: the client's identity and, for data mode (``ssp`` given), the
-    SSP's bytes read once here."""
-    if ssp is None:
-        return StudyPlugin(identity())
-    return StudyPlugin(identity(), Path(ssp).name, Path(ssp).read_bytes())
+def ship_ssp(client, ssp: Path) -> tuple[str, bool]:
+    """Make sure the cluster of ``client`` holds the SSP ``ssp``: its SspPlugin is registered
+    unless the scheduler has one of that name (the same bytes) already. Returns the plugin's
+    name and whether its bytes were sent now."""
+    data = Path(ssp).read_bytes()
+    name = ssp_plugin_name(hashlib.sha256(data).hexdigest())
+    if client.run_on_scheduler(_has_worker_plugin, name):
+        return name, False
+    client.register_plugin(SspPlugin(Path(ssp).name, data), name=name)
+    return name, True
+
+
+def _has_worker_plugin(name: str, dask_scheduler=None) -> bool:
+    """On the scheduler: whether a worker plugin ``name`` is registered."""
+    return name in dask_scheduler.worker_plugins
 
 
 def this_plugin(name: str) -> StudyPlugin | None:
@@ -368,6 +428,7 @@ class Shipping:
     plugin: str = ""
     data: bool = False
     address: str = ""
+    ssp_sent: bool = False  # data mode: the SSP's bytes were sent to the cluster for this study (else it had them)
 
 
 @contextmanager
@@ -377,13 +438,16 @@ def shipping(client, ssp: Path, address: str, data: bool, timeout: float):
     registered (with the SSP's bytes if ``data``) and removed at the end. Yields the
     Shipping the CaseRunner uses."""
     wait_for_workers(client, timeout, address)
-    plugin = study_plugin(ssp if data else None)
-    name = f"{PLUGIN_PREFIX}{plugin.sha256[:12] or 'paths'}-{os.urandom(4).hex()}"  # one per study run
+    # rows straight from the worker that holds them, if this client reaches the workers (not behind a port forward)
+    client.direct_to_workers = reaches_workers(client)
+    ssp_name, sent = ship_ssp(client, ssp) if data else ("", False)  # once per cluster (its name is its hash)
+    plugin = StudyPlugin(identity(), ssp_name)
+    name = f"{PLUGIN_PREFIX}study-{os.urandom(6).hex()}"  # one per study run
     plugin.topic = name
     check_workers(client, plugin)  # the bad ones retired before the plugin (and cases) reach any worker
     client.register_plugin(plugin, name=name)
     try:
-        yield Shipping(plugin=name, data=data, address=address)
+        yield Shipping(plugin=name, data=data, address=address, ssp_sent=sent)
     finally:
         try:
             client.unregister_worker_plugin(name)

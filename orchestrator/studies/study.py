@@ -156,7 +156,7 @@ def case_value(row) -> float:
 
 def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results: bool = False,
              reject_unstable: bool = False, stop_token: str | None = None, gain_files: dict | None = None,
-             plugin: str = "") -> dict:
+             plugin: str = "", publish: dict | None = None) -> dict:
     """Run one case in this process (a Dask worker): returns its row as plain data.
 
     base: the base scenario as scenario_data; changes: dotted keys; gain_files: {path: preset
@@ -169,7 +169,10 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
     scheduler (Dask's Reschedule) while it is retired. Never raises for a failing case: the row's status is
     "diverged" (the run left the envelope or stopped being finite), "failed" with the error,
     or "rejected" (not run) when reject_unstable and the stability check finds the loop not
-    stable. The row carries the full metrics under "metrics" (not a CSV column). After
+    stable. ``publish`` ({"url", "case", "ssp"}): the case runs in a worker-local temporary folder
+    and its files are written to URL/CASE/ by the worker (orchestrator.studies.publish), none come
+    back; a case whose files cannot be written there is failed. The row carries the full metrics
+    under "metrics" (not a CSV column). After
     stops.request_stop(stop_token) (the study was stopped) the case ends at a step boundary,
     or does not start, with status "interrupted" (never a study.csv row).
     """
@@ -195,9 +198,9 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
                                  "it is not a worker of this study's scheduler")
             if ssp is None:
                 ssp = shipped.ssp_path()
-            if case_dir is None:
-                folder = case_folder()
-                case_dir = folder / "case"
+        if case_dir is None:  # data mode, or files published by this worker: a worker-local folder
+            folder = case_folder()
+            case_dir = folder / "case"
         scenario = case_scenario(base, changes, gain_files or {})
         report = cached_check(scenario)
         row["spectral_radius"] = report.spectral_radius
@@ -206,7 +209,7 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
                        f"{report.spectral_radius:.4g})")
         else:
             if not keep_results:  # rows that would be deleted: keep the first and last only (the metrics
-                scenario = replace_fields(scenario, record_every=scenario.n_steps)  # use every step regardless)
+                scenario = with_record_every(scenario, scenario.n_steps)  # use every step regardless)
             # the FMUs stay loaded in this worker and are reset between cases (engine.loaded)
             m = run_scenario(scenario, Path(ssp), Path(case_dir), overwrite=True, stop_token=stop_token,
                              loaded=process_fmus())
@@ -222,12 +225,25 @@ def run_case(base: dict, changes: dict, ssp, case_dir: str | None, keep_results:
             row["status"] = "diverged"
     if folder is not None:
         try:
-            row["files"] = pack_folder(Path(case_dir))
+            if publish:
+                _publish(row, Path(case_dir), publish)
+            else:
+                row["files"] = pack_folder(Path(case_dir))
         finally:
             remove_case_folder(folder)
     row["flag"] = case_flag(row.get("spectral_radius"), row.get("saturation_fraction_max"))
     row["wall_time_s"] = time.perf_counter() - start
     return row
+
+
+def run_batch(tasks: list, common: dict) -> list:
+    """Run the cases of one batch in this process (a Dask worker), one after another; returns
+    their rows in order. ``tasks``: per case {"changes", "case_dir", "gain_files", "publish"}; ``common``:
+    the keyword arguments every case shares (study.run_case's base, ssp, keep_results,
+    reject_unstable, stop_token, plugin). A case that fails is its row (run_case never raises for
+    a case), so it fails alone; after a stop the remaining cases return "interrupted" at once."""
+    return [run_case(changes=t["changes"], case_dir=t["case_dir"], gain_files=t["gain_files"],
+                     publish=t.get("publish"), **common) for t in tasks]
 
 
 def replace_fields(scenario: Scenario, **fields) -> Scenario:
@@ -236,6 +252,28 @@ def replace_fields(scenario: Scenario, **fields) -> Scenario:
     from ..tool.config import build
     from ..tool.scenario import ScenarioError
     return build(dataclasses.replace, ScenarioError, scenario, **fields)
+
+
+def _publish(row: dict, folder: Path, publish: dict) -> None:
+    """Write the case's files to publish["url"] (publish.publish_folder); on failure the row is
+    failed, naming the location (its password hidden) and the error."""
+    from .publish import publish_folder, shown
+    if not folder.is_dir():
+        return
+    try:
+        row["published_bytes"] = publish_folder(folder, publish["url"], publish["case"], publish["ssp"])
+    except Exception as err:  # the location refused them: this case failed, the study goes on
+        row.update(status="failed", error=f"its files could not be written to {shown(publish['url'])}: {reason(err)}")
+
+
+def with_record_every(scenario: Scenario, every: int) -> Scenario:
+    """A copy of the validated ``scenario`` recording every ``every``-th step (1 <= every <= its
+    n_steps, valid by construction), without validating it all again (replace_fields: about 4 ms
+    of a short case's worker time)."""
+    import copy
+    out = copy.copy(scenario)
+    object.__setattr__(out, "record_every", int(every))  # object's: a pydantic dataclass validates on setattr
+    return out
 
 
 def reason(err: BaseException) -> str:
@@ -335,7 +373,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, timeou
         raise
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-    client = Client(cluster)
+    client = Client(cluster, direct_to_workers=True)  # rows fetched from the worker, not through the scheduler
     client._tapmp_cluster = cluster  # closed with the client by close_client
     client._tapmp_scratch = scratch
     return client
@@ -400,55 +438,69 @@ class StudyTable:
             self.path.unlink()
         return data[keep:].decode(errors="replace")
 
-    def add(self, case: dict, row: dict) -> None:
+    def add(self, case: dict, row: dict, flush: bool = True) -> None:
+        """Append the case's row (written to the file by flush: a batch's rows are flushed together)."""
         full = {"case": case["case"], **case["params"], **row}
         self.writer.writerow({k: ("" if full.get(k) is None else full.get(k, "")) for k in self.columns})
-        self.file.flush()
+        if flush:
+            self.file.flush()
         self.rows[case["case"]] = full
+
+    def flush(self) -> None:
+        """Hand the rows added so far to the system (a killed client loses none of them; a cut last
+        row, if the system itself stops mid-write, is dropped and its case run again by --resume)."""
+        self.file.flush()
 
     def close(self) -> None:
         self.file.close()
 
 
 STOP_WAIT_S = 60.0  # how long a stopped study waits for its running cases to end [s]
-POLL_S = 0.05  # how often the client looks for finished cases when none is ready [s]
-# How long the client waits for a finished case's row: longer means the worker holding it died,
-# and Dask runs the case again (the client watches for workers meanwhile instead of blocking) [s]
-GATHER_S = 10.0
+POLL_S = 0.05  # how often the client looks for finished batches when none is ready [s]
 # What sets the size of a case's result file (tool.estimate.output_estimate), among the keys a case changes
 TIMING_KEYS = ("start_time", "stop_time", "step", "record_every", "format")
 FILES_ALLOWANCE_BYTES = 64 * 2**20  # for run.json + metrics.json: 4.0 kB in a 0.5 s case (docs/studies.md)
 WATCH_S = 2.0  # how often it asks the scheduler whether any worker is left while it waits [s]
 
 
-def row_of(fut) -> dict:
-    """The row of a future as_completed gave back. A future whose result was lost with its
-    worker is run again by Dask: this waits for that run. A future that could not run (its
-    worker died too often, the task could not be sent) is a failed row naming what happened.
-    TimeoutError if the row does not come within GATHER_S (the worker that held it is gone)."""
-    if fut.status == "cancelled":  # Dask gave it up (its result is not waited for: it never comes)
-        return {"status": "failed", "error": "cancelled by Dask (its worker and its result were lost)"}
-    try:
-        return fut.result(timeout=GATHER_S)
-    except TimeoutError:
-        raise
-    except Exception as err:  # run_case never raises: this is Dask's (KilledWorker, cancelled, ...)
-        return {"status": "failed", "error": reason(err)}
+def rows_of_batch(batch: list, result) -> list[dict]:
+    """The rows of a batch from what as_completed(with_results=True) gave back for its task: the
+    list run_batch returned, or, for a task that could not run (its worker died too often, Dask
+    cancelled it), one failed row per case naming what happened."""
+    if isinstance(result, list) and len(result) == len(batch):
+        return result
+    if isinstance(result, tuple) and len(result) == 3 and isinstance(result[1], BaseException):
+        error = reason(result[1])  # (type, exception, traceback) of a task that erred (KilledWorker, ...)
+    elif isinstance(result, BaseException):
+        error = "cancelled by Dask (its worker and its result were lost)"
+    else:
+        error = f"the worker sent {type(result).__name__} instead of the batch's {len(batch)} rows"
+    return [{"status": "failed", "error": error} for _ in batch]
 
 
 class CaseRunner:
-    """Runs cases on a Dask client and records their rows in a StudyTable.
+    """Runs cases on a Dask client, in batches (orchestrator.studies.batches), and records their
+    rows in a StudyTable.
 
-    A case's future is released as soon as its row is recorded (and, in data mode, its files
-    written into OUTPUT/cases/CASE), so the scheduler forgets it: a worker lost afterwards never
-    runs a recorded case again. While no worker is connected the runner says so once and waits.
-    If the run is left by an exception (e.g. Interrupted by SIGTERM), the running cases are
-    asked to stop at their next step boundary (stops.request_stop on every worker) and
-    waited for, so they free their FMUs and temporary folders before the workers go.
+    Batches are submitted through a bounded window (batches.window: a few per worker thread) and
+    their rows gathered as they complete by Dask's as_completed(with_results=True) in the client's
+    event loop, straight from the worker that holds them (the client is opened with
+    direct_to_workers); the main thread takes whatever batches are done, writes their case files
+    (data mode) and appends their rows to study.csv with one flush per batch. A batch's future is
+    released as soon as its rows are recorded, so the scheduler forgets it: a worker lost
+    afterwards never runs a recorded case again, and a worker lost before reruns only its
+    batches not yet collected (Dask runs them again, once, elsewhere). While no worker is
+    connected the runner says so once and waits. If the run is left by an exception (e.g.
+    Interrupted by SIGTERM), the running cases are asked to stop at their next step boundary
+    (stops.request_stop on every worker) and waited for, so they free their FMUs and temporary
+    folders before the workers go, and the rows of the batches done meanwhile are recorded.
+    ``batch_size``: cases per task, 0 for the rule of batches.batch_size. ``results_url``: the
+    workers write the case files there (orchestrator.studies.publish), none come to the client.
     """
 
     def __init__(self, client, base: Scenario, ssp: Path, out: Path, table: StudyTable,
-                 keep_results: bool, progress: bool = True, desc: str = "cases", ship: Shipping | None = None):
+                 keep_results: bool, progress: bool = True, desc: str = "cases", ship: Shipping | None = None,
+                 batch_size: int = 0, results_url: str = ""):
         self.client = client
         self.base_scenario = base
         self.base = scenario_data(base)
@@ -459,22 +511,58 @@ class CaseRunner:
         self.progress = progress
         self.desc = desc
         self.ship = ship or Shipping()
+        self.batch_size = batch_size
+        self.results_url = results_url
+        self.used_batch_size = 0  # the size of the last run's batches (cases per task)
         self.token = f"study-{os.getpid()}-{os.urandom(8).hex()}"
         self.bytes_received = 0  # compressed case files received (data mode) [bytes]
         self.retired = 0  # workers retired by the study's check (remote.retired_since) warned of so far
+        self.threads = 0  # worker threads connected at the last look
+        self.thread_cpu_s = 0.0  # CPU of the thread running the cases (submitting, recording rows) [s]
+        self.process_cpu_s = 0.0  # CPU of this whole process meanwhile (Dask's event loop, a local scheduler) [s]
 
-    def _submit(self, case: dict, reject_unstable: bool, gain_files: dict):
-        path = case["changes"].get("gains_file")
+    def _submit(self, batch: list, reject_unstable: bool, gain_files: dict):
+        from .batches import batch_key
         data = self.ship.data
-        return self.client.submit(run_case, self.base, case["changes"], None if data else self.ssp,
-                                  None if data else str(self.out / "cases" / case["case"]), self.keep_results,
-                                  reject_unstable, self.token, {path: gain_files[path]} if path else None,
-                                  self.ship.plugin, pure=False, key=f"case-{case['case']}-{os.urandom(4).hex()}")
+        local = not (data or self.results_url)  # the worker writes the case's folder at the client's path
+        tasks = []
+        for case in batch:
+            path = case["changes"].get("gains_file")
+            tasks.append({"changes": case["changes"], "gain_files": {path: gain_files[path]} if path else None,
+                          "case_dir": str(self.out / "cases" / case["case"]) if local else None,
+                          "publish": {"url": self.results_url, "case": case["case"], "ssp": self.ssp}
+                          if self.results_url else None})
+        common = {"base": self.base, "ssp": None if data else self.ssp, "keep_results": self.keep_results,
+                  "reject_unstable": reject_unstable, "stop_token": self.token, "plugin": self.ship.plugin}
+        return self.client.submit(run_batch, tasks, common, pure=False, key=batch_key([c["case"] for c in batch]))
 
-    def run(self, cases: list, reject_unstable: bool = False) -> list:
-        """Rows of ``cases`` in their order; cases that have a row already are not run again."""
+    def size_for(self, n_cases: int) -> int:
+        """Cases per batch for ``n_cases`` cases: the runner's batch_size, else the rule of
+        batches.batch_size from the base scenario's steps and the worker threads connected now."""
+        from .batches import BATCH_FILES_BYTES, batch_size, case_seconds
+        if self.batch_size:
+            return self.batch_size
+        size = batch_size(n_cases, case_seconds(self.base_scenario.n_steps), self.threads)
+        if self.keep_results and self.ship.data and not self.results_url:  # result files come back: bound a batch's
+            from ..tool.estimate import output_estimate
+            size = min(size, max(1, BATCH_FILES_BYTES // max(output_estimate([self.base_scenario])[0], 1)))
+        return size
+
+    def run(self, cases: list, reject_unstable: bool = False, announce: bool = False) -> list:
+        """Rows of ``cases`` in their order; cases that have a row already are not run again.
+        ``announce``: say on stderr how the cases travel (batch size, tasks, worker threads)."""
+        thread0, process0 = time.thread_time(), time.process_time()
+        try:
+            return self._run(cases, reject_unstable, announce)
+        finally:
+            self.thread_cpu_s += time.thread_time() - thread0
+            self.process_cpu_s += time.process_time() - process0
+
+    def _run(self, cases: list, reject_unstable: bool, announce: bool) -> list:
+        """run's body."""
         from dask.distributed import as_completed
         from ..tool.progress import Progress
+        from .batches import split, window
 
         rows = {c["case"]: self.table.rows[c["case"]] for c in cases if c["case"] in self.table.rows}
         todo = [c for c in cases if c["case"] not in rows]
@@ -484,33 +572,44 @@ class CaseRunner:
         bar = Progress(self.desc, "case", len(cases), quiet_s=0.0, every_s=10.0) if self.progress else None
         if bar is not None:
             bar(len(rows))
-        futures = {}
+        self.threads = sum(self.client.nthreads().values())
+        self.used_batch_size = self.size_for(len(todo))
+        if announce and todo:
+            tasks = -(-len(todo) // self.used_batch_size)
+            print(f"{self.desc}: {len(todo)} cases in batches of {self.used_batch_size} ({tasks} Dask tasks, "
+                  f"{self.threads} worker threads{'' if self.batch_size else ', automatic size'})", file=sys.stderr,
+                  flush=True)
+        pending = iter(split(todo, self.used_batch_size))
+        futures = {}  # future -> its batch (list of cases)
+        done = as_completed(with_results=True, raise_errors=False)
         try:
-            for c in todo:
-                futures[self._submit(c, reject_unstable, gain_files)] = c
-            done = as_completed(list(futures))
+            def submit() -> None:  # up to the window (also while no worker is connected: the scheduler queues)
+                while len(futures) < window(self.threads):
+                    batch = next(pending, None)
+                    if batch is None:
+                        return
+                    fut = self._submit(batch, reject_unstable, gain_files)
+                    futures[fut] = batch
+                    done.add(fut)
+
+            submit()
             waiting, watched = False, time.monotonic()
             while futures:
-                batch = done.next_batch(block=False)
+                finished = done.next_batch(block=False)
                 if time.monotonic() - watched >= WATCH_S:  # also while rows come (a worker joining is checked)
-                    waiting, watched = self._watch(waiting, len(futures)), time.monotonic()
-                if not batch:
+                    waiting, watched = self._watch(waiting, len(todo) - len(rows)), time.monotonic()
+                if not finished:
                     time.sleep(POLL_S)
                     continue
-                for fut in batch:
-                    try:
-                        row = row_of(fut)
-                    except TimeoutError:  # its worker died before the row came back: Dask runs the case again
-                        done.add(fut)
-                        continue
-                    c = futures.pop(fut)
+                for fut, result in finished:
+                    batch = futures.pop(fut)
                     fut.release()
-                    if row.get("status") not in STATUSES:  # interrupted: no row, --resume runs it
-                        continue
-                    self._record(c, row)
-                    rows[c["case"]] = self.table.rows[c["case"]]
-                    if bar is not None:
-                        bar.update(1)
+                    recorded = self._record_batch(batch, rows_of_batch(batch, result))
+                    for c in recorded:
+                        rows[c["case"]] = self.table.rows[c["case"]]
+                    if bar is not None and recorded:
+                        bar.update(len(recorded))
+                submit()
             if self.ship.plugin:  # a worker retired since the last look
                 self.retired = retired_since(self.client, self.ship.plugin, self.retired)
         except BaseException as err:
@@ -523,8 +622,19 @@ class CaseRunner:
                 bar.close()
         return [rows.get(c["case"], {"case": c["case"], "status": "interrupted"}) for c in cases]
 
+    def _record_batch(self, batch: list, batch_rows: list) -> list:
+        """Record the rows of a batch (those with a study.csv status: an interrupted case has none,
+        --resume runs it) with one flush of study.csv; returns the cases recorded."""
+        recorded = []
+        for case, row in zip(batch, batch_rows):
+            if row.get("status") not in STATUSES or case["case"] in self.table.rows:
+                continue
+            self._record(case, row, flush=False)
+            recorded.append(case)
+        self.table.flush()
+        return recorded
 
-    def _record(self, case: dict, row: dict) -> None:
+    def _record(self, case: dict, row: dict, flush: bool = True) -> None:
         """The case's files into its folder (data mode), then its row into study.csv."""
         files = row.pop("files", None)
         if files:
@@ -533,7 +643,7 @@ class CaseRunner:
                                                      self._files_limit(case))
             except StudyError as err:  # the files a worker sent are refused: the case failed
                 row = {"status": "failed", "error": str(err), "worker": row.get("worker", "")}
-        self.table.add(case, row)
+        self.table.add(case, row, flush)
 
     def _files_limit(self, case: dict) -> int:
         """The most bytes a case's files may hold uncompressed: twice its result file's estimated
@@ -548,7 +658,8 @@ class CaseRunner:
         worker retired by the study's check since the last look; returns whether none is connected."""
         if self.ship.plugin:
             self.retired = retired_since(self.client, self.ship.plugin, self.retired)
-        none = not self.client.nthreads()
+        self.threads = sum(self.client.nthreads().values())
+        none = not self.threads
         if none and not waiting:
             where = f"the scheduler at {self.ship.address}" if self.ship.address else "the cluster"
             print(f"{self.desc}: no Dask worker is connected to {where}; waiting for workers ({left} cases "
@@ -557,8 +668,8 @@ class CaseRunner:
 
     def _stop(self, futures: dict, signum: int) -> None:
         """Stop the running cases (request_stop on every worker), wait up to STOP_WAIT_S for
-        them (not at all when no worker is left), and record the rows of cases that finished
-        meanwhile."""
+        them (not at all when no worker is left), and record the rows of the batches that
+        finished meanwhile (each batch's cases that ran before the stop)."""
         from dask.distributed import wait
 
         from ..tool.stops import request_stop
@@ -568,14 +679,13 @@ class CaseRunner:
                 wait(list(futures), timeout=STOP_WAIT_S)
         except Exception:
             pass  # a worker that does not answer is ended with the cluster
-        for fut, c in futures.items():
-            if fut.status == "finished" and c["case"] not in self.table.rows:
+        for fut, batch in futures.items():
+            if fut.status == "finished":
                 try:
-                    row = fut.result(timeout=GATHER_S)
-                except TimeoutError:
-                    continue  # its worker is gone: --resume runs the case
-                if row.get("status") in STATUSES:
-                    self._record(c, row)
+                    result = fut.result(timeout=STOP_WAIT_S / 6)
+                except Exception:
+                    continue  # its worker is gone: --resume runs the cases
+                self._record_batch(batch, rows_of_batch(batch, result))
 
 
 def fingerprint(study: Study, case_list: list) -> str:

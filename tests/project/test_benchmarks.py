@@ -258,3 +258,22 @@ def test_bench_real_time_prints_every_case(native_built, tmp_path):
     m = re.search(rf"^recording a block of 1000 rows .*: min ({NUMBER}) ms, median ({NUMBER}) ms, max ({NUMBER}) ms "
                   r"of 10 blocks$", out, re.M)
     assert m and 0 < float(m.group(1)) <= float(m.group(2)) <= float(m.group(3))
+
+
+@pytest.mark.parametrize("where", [[], ["--remote"]], ids=["local", "remote"])
+def test_bench_study_scale_prints_cases_per_second_cpu_per_case_and_the_batch_size(native_built, tmp_path, where):
+    out = bench("bench_study_scale.py", "--ssp", native_built["fmi2"]["ssp"], "--short", "24", "--paper", "8",
+                "--short-stop", "0.01", "--paper-stop", "0.02", *where, tmp_path=tmp_path)
+    assert ("loopback scheduler" in out.splitlines()[0]) == bool(where)
+    found = re.findall(rf"^\| (short|paper) \| (\d+) \| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| (\d+) \| {NUMBER} "
+                       rf"\| ({NUMBER}) \| ({NUMBER}) \| ({NUMBER}) \| {NUMBER} \|$", out, re.M)
+    assert [f[:3] for f in found] == [("short", "24", "0.01"), ("paper", "8", "0.02")], out
+    for _, n, _, wall, rate, batch, main_ms, process_ms, worker_ms in found:
+        # the automatic size: n / (4 batches x 2 workers), less than a second of work
+        assert int(batch) == int(n) // 8
+        n, wall, rate = int(n), float(wall), float(rate)  # rate = n / the wall time, printed rounded to 0.1 s
+        assert n / (wall + 0.05) <= rate * 1.01 and (wall <= 0.05 or rate <= n / (wall - 0.05) * 1.01)
+        assert 0 < float(main_ms) <= float(process_ms) and float(worker_ms) > 0
+    estimates = re.findall(r"^\| (short|paper) \| [\d.]+ \| \d+ \| \d+ \| \d+ \| the (?:client|workers) \|$", out,
+                           re.M)
+    assert estimates == ["short", "paper"], out

@@ -218,15 +218,23 @@ def test_resume_with_a_damaged_study_json_is_one_line(built, tmp_path, capsys, d
     assert not (tmp_path / "out" / "study.csv").exists()
 
 
-def test_a_case_future_dask_gives_up_is_a_failed_row_at_once(client):
-    """A cancelled future (Dask gave the task up, e.g. with its worker) is never waited for: its
-    result would not come, and the study would wait for it again and again; its row says so."""
+def test_a_batch_dask_gives_up_is_a_failed_row_per_case_at_once(client):
+    """A cancelled future (Dask gave the task up, e.g. with its worker) comes back from
+    as_completed at once, never waited for: its result would not come; each case of its batch
+    is a failed row saying so. A task that erred (KilledWorker) names its error in every row."""
     import time
 
-    from orchestrator.studies.study import row_of
+    from dask.distributed import as_completed
+
+    from orchestrator.studies.study import rows_of_batch
     fut = client.submit(time.sleep, 30, pure=False)
     fut.cancel()
-    assert row_of(fut) == {"status": "failed", "error": "cancelled by Dask (its worker and its result were lost)"}
+    ((_, result),) = list(as_completed([fut], with_results=True, raise_errors=False))
+    assert rows_of_batch([{"case": "c0000"}, {"case": "c0001"}], result) == [
+        {"status": "failed", "error": "cancelled by Dask (its worker and its result were lost)"}] * 2
+    erred = client.submit(math.sqrt, -1.0, pure=False)
+    ((_, result),) = list(as_completed([erred], with_results=True, raise_errors=False))
+    assert rows_of_batch([{"case": "c0000"}], result) == [{"status": "failed", "error": "ValueError: math domain error"}]
 
 
 def test_resume_without_study_json_refuses_and_leaves_the_other_studys_rows(built, tmp_path, capsys):
