@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The test command of the README, on a fresh Debian machine: bash tests/run.sh [PYTEST ARGS...]
-# (the fast subset, about 1.5 minutes on two workers: bash tests/run.sh -m "not slow"; markers in pyproject.toml)
+# (the fast subset, about 40 seconds on two workers: bash tests/run.sh -m "not slow"; markers in pyproject.toml)
 #
 # 1. Installs the Debian packages the tests need, if missing (dpkg -s): libtbb12 (Intel TBB's
 #    runtime, libtbb.so.12, for Ecos: ecospy and the ecos program), wine64 (runs the native
