@@ -95,10 +95,34 @@ def atomic_file(path: Path, mode: str = "w"):
     try:
         with os.fdopen(fd, mode) as f:
             yield f
+        _announce(path, os.stat(tmp).st_ino)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+_ANNOUNCERS = {}  # {absolute folder: announce(name, inode)} of the folders a run is writing (announcing)
+
+
+@contextmanager
+def announcing(folder: Path, announce):
+    """While the block runs, each file atomic_file or new_stream makes directly in ``folder`` (but
+    a marker: run.json, ...) is put on record by ``announce(name, inode)`` before the rename that
+    gives it its name (the inode stays). A run killed at any moment then leaves no file of its
+    names that its marker does not list as tapmp's, and the next run into the folder may replace it."""
+    key = os.path.abspath(folder)
+    _ANNOUNCERS[key] = announce
+    try:
+        yield
+    finally:
+        _ANNOUNCERS.pop(key, None)
+
+
+def _announce(path: Path, inode: int) -> None:
+    announce = _ANNOUNCERS.get(os.path.abspath(path.parent))
+    if announce is not None and path.name not in MARKERS.values():
+        announce(path.name, inode)
 
 
 def new_stream(path: Path) -> int:
@@ -109,6 +133,7 @@ def new_stream(path: Path) -> int:
     refuse_link(path)
     fd, tmp = _temporary(path)
     try:
+        _announce(path, os.fstat(fd).st_ino)
         os.replace(tmp, path)
     except BaseException:
         os.close(fd)
@@ -263,10 +288,11 @@ def file_record(path: Path) -> dict:
     return {"size": size, "sha256": digest.hexdigest()}
 
 
-def stream_record(path: Path) -> dict:
-    """The proof for a file tapmp is still writing (results.csv while a run goes on): its inode,
-    replaced by file_record when the run ends (only a killed run leaves it)."""
-    return {"writing": True, "inode": os.lstat(path).st_ino}
+def stream_record(inode: int) -> dict:
+    """The proof for a file tapmp is writing (results.csv while a run goes on, any file of a run
+    about to take its name: announcing): its inode, replaced by file_record when the run ends (only
+    a killed run leaves it)."""
+    return {"writing": True, "inode": int(inode)}
 
 
 def _valid_record(rec) -> bool:

@@ -32,8 +32,8 @@ from ..engine.master import CoSimulation
 from ..engine.options import RunOptions
 from ..engine.tempdirs import remove_stale_folders
 from .envelope import envelope
-from .folders import (FORMATS, MANIFEST, PART_FILE, ResultsWriteError, atomic_file, check_output, output_lock,
-                      prepare_output, record_files, stream_record, write_json, write_result)
+from .folders import (FORMATS, MANIFEST, PART_FILE, ResultsWriteError, announcing, atomic_file, check_output,
+                      output_lock, prepare_output, record_files, stream_record, write_json, write_result)
 from .roles import ROLES, SCENARIO_TABLES
 from .scenario import Scenario
 from .stops import StopRequest, stop_scope
@@ -132,10 +132,12 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
 
     writers = []
 
-    def opened(writer) -> None:  # the result file exists: on record before its first row (a killed run)
-        writers.append(writer)
-        info[MANIFEST][writer.path.name] = stream_record(writer.path)
+    def announce(name: str, inode: int) -> None:  # a file of the run on record before it has its name
+        info[MANIFEST][name] = stream_record(inode)
         write_result(out / "run.json", info)
+
+    def opened(writer) -> None:  # the result file's writer: its hash is the file's record at the end
+        writers.append(writer)
 
     def record(names) -> None:  # the files' records, a CSV file's as its writer hashed it
         record_files(out, info[MANIFEST], names, {w.path.name: w.record() for w in writers})
@@ -143,13 +145,13 @@ def _run_locked(scenario: Scenario, ssp: Path, out: Path, progress, stop_token, 
     start = time.perf_counter()
     stop = StopRequest()
     sim = None
-    with stop_scope(stop, stop_token):  # a signal after the last check is raised after the run
+    with stop_scope(stop, stop_token), announcing(out, announce):  # a signal after the last check: after the run
         try:
             stop.check(scenario.start_time)
             remove_stale_folders()  # of processes killed before they could remove their own
             with CoSimulation(ssp, scenario.parameters(), run_options(scenario), loaded=loaded) as sim:
                 info["guids"] = sim.guids
-                info["columns"] = list(sim.columns)  # on record with the result file (opened)
+                info["columns"] = list(sim.columns)  # on record with the result file (announce)
                 stats = _simulate(sim, scenario, out, fmt, stop, progress, keep_rows, keep_bytes, opened, pacing,
                                   info)
             written |= _real_time_files(out, info)

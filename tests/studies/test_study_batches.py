@@ -136,7 +136,7 @@ def test_resume_after_a_killed_client_runs_exactly_the_cases_without_a_row(ssp, 
 
     resumed = start(*args, "--resume", tmpdir=tmp_path / "tmp2")
     stdout, stderr = resumed.communicate(timeout=600)
-    assert resumed.returncode == 0, stderr
+    assert resumed.returncode == 0, stdout + stderr + "\n".join(l for l in (out / "study.csv").read_text().splitlines() if "failed" in l)
     assert f"200 cases ({200 - len(kept)} run now, " in stdout and "200 completed, 0 diverged, 0 failed" in stdout
     after = (out / "study.csv").read_bytes()
     assert after.startswith(before[:before.rfind(b"\n") + 1])  # the whole rows stay byte for byte
