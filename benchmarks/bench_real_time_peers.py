@@ -76,7 +76,8 @@ def run_ecos(ssp: Path, stop: float, factor: float, work: Path) -> dict:
     """ecos simulate --rtf FACTOR (-1, no pacing, if ``factor`` is None); its own last "actual RTF" line."""
     done = subprocess.run([str(ecos_program(work)), "simulate", "--path", str(ssp), "--stopTime", repr(stop),
                            "--stepSize", repr(STEP), "--rtf", repr(factor or -1.0), "--noCsv"],
-                          cwd=work, capture_output=True, text=True, timeout=900)
+                          cwd=work, capture_output=True, text=True, timeout=900,
+                          env={**os.environ, "TMPDIR": str(work)})  # Ecos unpacks the SSP into the temp folder: ours
     if done.returncode != 0:
         raise RuntimeError(f"Ecos failed: {(done.stdout + done.stderr).strip().splitlines()[-1:]}")
     actual = re.findall(r"actual RTF=([0-9.eE+-]+)", done.stdout + done.stderr)
